@@ -1,0 +1,7 @@
+"""clcsg: exact point sampling and pixel-perfect splat rendering of quadric CSG solids."""
+from .csg import Shape, contains, difference, intersection, union
+from .errors import ClcsgError
+from .quadric import Quadric
+from .solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
+
+__version__ = "0.1.0"

@@ -1,0 +1,278 @@
+"""The CSG graph: primitives, Boolean operations and transforms.
+
+A scene is a directed acyclic graph of :class:`Shape` nodes.  Leaves are :class:`Primitive`
+solids (each an intersection of quadric literals, see :mod:`clcsg.solids`); inner nodes are
+variadic :class:`Union`, :class:`Intersection`, :class:`Difference`, unary :class:`Complement`
+and :class:`Transformed` (a 4x4 affine matrix on the edge to its child).  Nodes are immutable,
+so a sub-graph may be shared by several parents.
+
+    part = clcsg.box(2).translate((0, 0, 1)) - clcsg.cylinder(2.5, 0.5)
+    scene = part | ~clcsg.sphere(3)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .quadric import Quadric, affine, check_affine
+
+
+class Shape:
+    """Base of all CSG nodes.  Combine with ``|``, ``&``, ``-``, ``~``."""
+
+    __slots__ = ()
+
+    # -- Booleans -----------------------------------------------------------------------------
+    def __or__(self, other: "Shape") -> "Shape":
+        return union(self, other)
+
+    def __and__(self, other: "Shape") -> "Shape":
+        return intersection(self, other)
+
+    def __sub__(self, other: "Shape") -> "Shape":
+        return difference(self, other)
+
+    def __invert__(self) -> "Shape":
+        return Complement(self)
+
+    # -- transforms ---------------------------------------------------------------------------
+    def transform(self, matrix) -> "Shape":
+        """Apply a 4x4 affine matrix (x -> M x)."""
+        return Transformed(self, matrix)
+
+    def translate(self, offset) -> "Shape":
+        return self.transform(affine(translation=_vec3(offset, "translation")))
+
+    def scale(self, factor) -> "Shape":
+        """Scale by a scalar or per-axis factors."""
+        f = np.broadcast_to(np.asarray(factor, dtype=np.float64), (3,))
+        return self.transform(affine(np.diag(f)))
+
+    def rotate(self, axis, degrees: float) -> "Shape":
+        """Rotate by ``degrees`` about ``axis`` (through the origin, right-hand rule)."""
+        return self.transform(affine(rotation_matrix(axis, degrees)))
+
+    def children(self) -> Sequence["Shape"]:
+        return ()
+
+
+class Primitive(Shape):
+    """A named solid (box, sphere, ...) with parameters and a color.
+
+    ``kind`` and ``params`` are what scene files store; :func:`clcsg.solids.literals` expands
+    them into the quadrics whose insides intersect to the solid.
+    """
+
+    __slots__ = ("kind", "params", "color", "_quadrics")
+
+    def __init__(self, kind: str, params: dict, color=None):
+        from .solids import literals  # the registry lives in solids.py
+
+        self.kind = kind
+        self.params = dict(params)
+        self.color = _color(color)
+        self._quadrics = tuple(literals(kind, self.params))
+
+    def quadrics(self) -> tuple[Quadric, ...]:
+        return self._quadrics
+
+    def colored(self, color) -> "Primitive":
+        return Primitive(self.kind, self.params, color)
+
+    def __repr__(self) -> str:
+        return f"{self.kind}({', '.join(f'{k}={_short(v)}' for k, v in self.params.items())})"
+
+
+class Operation(Shape):
+    __slots__ = ("operands",)
+    symbol = "?"
+
+    def __init__(self, operands: Iterable[Shape]):
+        ops = tuple(operands)
+        for o in ops:
+            if not isinstance(o, Shape):
+                raise TypeError(f"CSG operand must be a Shape, got {type(o).__name__}")
+        self.operands = ops
+
+    def children(self):
+        return self.operands
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__.lower()}({', '.join(map(repr, self.operands))})"
+
+
+class Union(Operation):
+    """Points in any operand (empty union: nothing)."""
+
+
+class Intersection(Operation):
+    """Points in all operands (needs at least one operand)."""
+
+    def __init__(self, operands):
+        super().__init__(operands)
+        if not self.operands:
+            raise ValueError("intersection needs at least one operand")
+
+
+class Difference(Operation):
+    """The first operand minus all the others."""
+
+    def __init__(self, operands):
+        super().__init__(operands)
+        if not self.operands:
+            raise ValueError("difference needs at least one operand")
+
+
+class Complement(Shape):
+    __slots__ = ("operand",)
+
+    def __init__(self, operand: Shape):
+        if not isinstance(operand, Shape):
+            raise TypeError(f"CSG operand must be a Shape, got {type(operand).__name__}")
+        self.operand = operand
+
+    def children(self):
+        return (self.operand,)
+
+    def __repr__(self) -> str:
+        return f"~{self.operand!r}"
+
+
+class Transformed(Shape):
+    __slots__ = ("operand", "matrix")
+
+    def __init__(self, operand: Shape, matrix):
+        if not isinstance(operand, Shape):
+            raise TypeError(f"CSG operand must be a Shape, got {type(operand).__name__}")
+        self.operand = operand
+        m = check_affine(matrix)
+        m.setflags(write=False)
+        self.matrix = m
+
+    def children(self):
+        return (self.operand,)
+
+    def __repr__(self) -> str:
+        return f"transform({self.operand!r})"
+
+
+def union(*shapes: Shape) -> Shape:
+    return Union(_flatten(shapes, Union))
+
+
+def intersection(*shapes: Shape) -> Shape:
+    return Intersection(_flatten(shapes, Intersection))
+
+
+def difference(first: Shape, *rest: Shape) -> Shape:
+    return Difference((first, *rest))
+
+
+def _flatten(shapes, kind):
+    out = []
+    for s in shapes:
+        if isinstance(s, (list, tuple)):
+            out.extend(_flatten(s, kind))
+        elif type(s) is kind:
+            out.extend(s.operands)
+        else:
+            out.append(s)
+    return out
+
+
+def rotation_matrix(axis, degrees: float) -> np.ndarray:
+    """3x3 rotation by ``degrees`` about ``axis`` (Rodrigues)."""
+    a = _vec3(axis, "rotation axis")
+    n = np.linalg.norm(a)
+    if n == 0.0:
+        raise ValueError("rotation axis must be non-zero")
+    x, y, z = a / n
+    t = math.radians(float(degrees))
+    c, s = math.cos(t), math.sin(t)
+    k = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+    return c * np.eye(3) + s * k + (1 - c) * np.outer((x, y, z), (x, y, z))
+
+
+def walk(shape: Shape):
+    """Every distinct node reachable from ``shape`` (each shared node once)."""
+    seen = set()
+    stack = [shape]
+    while stack:
+        s = stack.pop()
+        if id(s) in seen:
+            continue
+        seen.add(id(s))
+        yield s
+        stack.extend(s.children())
+
+
+def _vec3(v, what) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape == ():
+        a = np.full(3, float(a))
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} must be 3 finite numbers, got {np.asarray(v).tolist()}")
+    return a
+
+
+DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
+
+
+def _color(color):
+    if color is None:
+        return DEFAULT_COLOR
+    c = [float(x) for x in color]
+    if len(c) == 3:
+        c.append(1.0)
+    if len(c) != 4 or not all(0.0 <= x <= 1.0 for x in c):
+        raise ValueError(f"color must be 3 or 4 numbers in [0, 1], got {list(color)}")
+    return tuple(c)
+
+
+def _short(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return v
+
+
+def contains(shape: Shape, points) -> np.ndarray:
+    """Membership of ``points`` (..., 3) in the solid, evaluated on the graph itself.
+
+    This is the direct definition (no normalization): the reference the DNF is checked
+    against.  Points exactly on a surface count as inside.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    flat = pts.reshape(-1, 3)
+    return _contains(shape, flat).reshape(pts.shape[:-1])
+
+
+def _contains(shape: Shape, x: np.ndarray) -> np.ndarray:
+    if isinstance(shape, Primitive):
+        inside = np.ones(len(x), dtype=bool)
+        for q in shape.quadrics():
+            inside &= q.value(x) <= 0.0
+        return inside
+    if isinstance(shape, Union):
+        out = np.zeros(len(x), dtype=bool)
+        for s in shape.operands:
+            out |= _contains(s, x)
+        return out
+    if isinstance(shape, Intersection):
+        out = np.ones(len(x), dtype=bool)
+        for s in shape.operands:
+            out &= _contains(s, x)
+        return out
+    if isinstance(shape, Difference):
+        out = _contains(shape.operands[0], x)
+        for s in shape.operands[1:]:
+            out &= ~_contains(s, x)
+        return out
+    if isinstance(shape, Complement):
+        return ~_contains(shape.operand, x)
+    if isinstance(shape, Transformed):
+        inv = np.linalg.inv(shape.matrix)
+        return _contains(shape.operand, x @ inv[:3, :3].T + inv[:3, 3])
+    raise TypeError(f"not a CSG node: {type(shape).__name__}")
