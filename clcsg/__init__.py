@@ -5,3 +5,4 @@ from .quadric import Quadric
 from .solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
 
 __version__ = "0.1.0"
+from .scene import Scene, load, save
