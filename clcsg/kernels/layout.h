@@ -1,0 +1,85 @@
+/* Device buffer layout shared by every kernel; mirrored by numpy dtypes in
+ * clcsg/host/buffers.py (a test reads the buffers back through kernels/layout_check.cl).
+ *
+ * Scalars are `real`: double when the host builds with -DCLCSG_DOUBLE (devices with fp64),
+ * float otherwise.  All coordinates on the device are relative to the scene origin the host
+ * chose (the center of the scene bound), which keeps float32 precise at millimetre scale.
+ */
+#ifndef CLCSG_LAYOUT_H
+#define CLCSG_LAYOUT_H
+
+#ifdef CLCSG_DOUBLE
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double real;
+typedef double2 real2;
+typedef double3 real3;
+typedef double4 real4;
+#define REAL_MAX DBL_MAX
+#define REAL_EPS DBL_EPSILON
+#else
+typedef float real;
+typedef float2 real2;
+typedef float3 real3;
+typedef float4 real4;
+#define REAL_MAX FLT_MAX
+#define REAL_EPS FLT_EPSILON
+/* One surface sample (paper section 6): position and unit normal in device coordinates,
+ * splat radius, the literal it lies on (quadric index and sign: the solid's outward normal is
+ * sign * grad Q), its DNF term, and its clip set: clip_count literals starting at clip_first in
+ * the clip buffer (an array of literal_rec), the other literals of its term that come closer
+ * than the radius. */
+typedef struct {
+    real pos[3];
+    real normal[3];
+    real radius;
+    int quadric;
+    int sign;
+    int term;
+    int clip_first;
+    int clip_count;
+} sample_rec;
+
+#endif
+
+/* One unique quadric.  coef: the 10 coefficients of the symmetric 4x4 matrix in the order
+ * xx xy xz xw yy yz yw zz zw ww (upper triangle, row-major), so that
+ * Q(p) = xx x^2 + 2 xy x y + 2 xz x z + 2 xw x + yy y^2 + 2 yz y z + 2 yw y + zz z^2 + 2 zw z + ww.
+ * lam_min / lam_max: extreme eigenvalues of the 3x3 part A (conservative distance, eqs. 10-12). */
+typedef struct {
+    real coef[10];
+    real lam_min;
+    real lam_max;
+    float color[4];
+} quadric_rec;
+
+/* One literal of a DNF term: the solid sign * Q(p) <= 0. */
+typedef struct {
+    int quadric;
+    int sign;
+} literal_rec;
+
+/* One DNF term: literals [first, first + count) of the literal buffer, and its bound. */
+typedef struct {
+    int first;
+    int count;
+    real lo[3];
+    real hi[3];
+} term_rec;
+
+/* One surface sample (paper section 6): position and unit normal in device coordinates,
+ * splat radius, the literal it lies on (quadric index and sign: the solid's outward normal is
+ * sign * grad Q), its DNF term, and its clip set: clip_count literals starting at clip_first in
+ * the clip buffer (an array of literal_rec), the other literals of its term that come closer
+ * than the radius. */
+typedef struct {
+    real pos[3];
+    real normal[3];
+    real radius;
+    int quadric;
+    int sign;
+    int term;
+    int clip_first;
+    int clip_count;
+} sample_rec;
+
+#endif

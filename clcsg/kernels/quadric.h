@@ -1,0 +1,93 @@
+/* Quadric math shared by all kernels (paper section 3).  The float64 numpy reference is
+ * clcsg/quadric.py; tests compare the two. */
+#ifndef CLCSG_QUADRIC_H
+#define CLCSG_QUADRIC_H
+#include "layout.h"
+
+/* Private copy of a quadric's coefficients (see layout.h for the order). */
+typedef struct {
+    real xx, xy, xz, xw, yy, yz, yw, zz, zw, ww;
+} quadric;
+
+inline quadric quadric_load(__global const quadric_rec *qs, int i)
+{
+    __global const real *c = qs[i].coef;
+    quadric q = {c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9]};
+    return q;
+}
+
+inline quadric quadric_scaled(quadric q, real s)
+{
+    quadric r = {s * q.xx, s * q.xy, s * q.xz, s * q.xw, s * q.yy,
+                 s * q.yz, s * q.yw, s * q.zz, s * q.zw, s * q.ww};
+    return r;
+}
+
+/* A p (the 3x3 part times p) */
+inline real3 quadric_Ap(quadric q, real3 p)
+{
+    return (real3)(q.xx * p.x + q.xy * p.y + q.xz * p.z,
+                   q.xy * p.x + q.yy * p.y + q.yz * p.z,
+                   q.xz * p.x + q.yz * p.y + q.zz * p.z);
+}
+
+/* -b: the linear column of the matrix */
+inline real3 quadric_minus_b(quadric q) { return (real3)(q.xw, q.yw, q.zw); }
+
+/* Q(p) = p^T A p - 2 b^T p + c  (eq. 3) */
+inline real quadric_value(quadric q, real3 p)
+{
+    real3 g = quadric_Ap(q, p) + 2 * quadric_minus_b(q);
+    return dot(p, g) + q.ww;
+}
+
+/* grad Q(p) = 2 (A p - b)  (eq. 4) */
+inline real3 quadric_gradient(quadric q, real3 p)
+{
+    return 2 * (quadric_Ap(q, p) + quadric_minus_b(q));
+}
+
+/* Roots t1 <= t2 of Q(o + t v) = a t^2 + 2 h t + c (eqs. 5, 6); returns how many (0, 1, 2).
+ * q = -(h + sign(h) sqrt(h^2 - a c)), roots q / a and c / q: no cancellation, and for
+ * a -> 0 c / q is the single root of eq. 6. */
+inline int quadric_intersect(quadric q, real3 o, real3 v, real *t1, real *t2)
+{
+    real a = dot(v, quadric_Ap(q, v));
+    real h = dot(v, quadric_Ap(q, o) + quadric_minus_b(q));
+    real c = quadric_value(q, o);
+    real disc = h * h - a * c;
+    if (disc < 0) return 0;
+    real sq = sqrt(disc);
+    real qq = -(h + (h >= 0 ? sq : -sq));
+    real r1 = a != 0 ? qq / a : INFINITY;
+    real r2 = qq != 0 ? c / qq : INFINITY;
+    bool ok1 = isfinite(r1), ok2 = isfinite(r2);
+    if (ok1 && ok2) {
+        *t1 = fmin(r1, r2);
+        *t2 = fmax(r1, r2);
+        return 2;
+    }
+    if (ok1 || ok2) {
+        *t1 = ok1 ? r1 : r2;
+        *t2 = *t1;
+        return 1;
+    }
+    return 0;
+}
+
+/* Conservative signed distance d(p) (eqs. 10-12): no surface point within |d| of p,
+ * d < 0 inside.  lam_min/lam_max are the extreme eigenvalues of A. */
+inline real quadric_distance(quadric q, real lam_min, real lam_max, real3 p)
+{
+    real f = quadric_value(q, p);
+    if (f == 0) return 0;
+    real g = 2 * length(quadric_Ap(q, p) + quadric_minus_b(q));
+    bool inside = f < 0;
+    real lam = inside ? lam_max : -lam_min;
+    real af = fabs(f);
+    real disc = g * g + 4 * lam * af;
+    real t = disc >= 0 ? 2 * af / (g + sqrt(disc)) : INFINITY;
+    return inside ? -t : t;
+}
+
+#endif
