@@ -1,0 +1,364 @@
+"""OpenCL device selection, in the style of pyopencl's ``PYOPENCL_CTX``.
+
+A device is named by a *spec*:
+
+==============  =====================================================================
+spec            device
+==============  =====================================================================
+(none)          ``PYOPENCL_CTX`` if set, else the first GPU, else the first CPU
+``cpu``         the first CPU device
+``gpu``         the first GPU device
+``P:D``         device D of platform P (indices as ``clcsg devices`` lists them)
+``P``           the first device of platform P
+``oclgrind``    the Oclgrind simulator
+==============  =====================================================================
+
+``P`` and ``D`` mean what they mean in ``PYOPENCL_CTX``: an index, or else a case-insensitive
+substring of the platform / device name (``intel:0``, ``pocl``); an empty part means 0.
+
+Oclgrind (a platform whose name contains "Oclgrind") is a simulator about a thousand times
+slower than a real device.  The default, ``cpu`` and ``gpu`` never pick it; only ``oclgrind``,
+a ``P:D`` / ``P`` naming it, or ``PYOPENCL_CTX`` pointing at it do.
+
+The rule lives in the pure function :func:`choose`, which works on a list of
+:class:`DeviceInfo` and a mapping of environment variables, so it can be tested on synthetic
+device lists.  Every failure raises :class:`~clcsg.errors.DeviceError` (exit code 4) with a
+one-line message.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from dataclasses import asdict, dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import DeviceError
+
+__all__ = [
+    "Context",
+    "DeviceInfo",
+    "NO_PLATFORM",
+    "choose",
+    "default_rule",
+    "devices",
+    "get_context",
+    "list_devices",
+    "real_dtype",
+    "require_int64_atomics",
+    "select_device",
+]
+
+NO_PLATFORM = "no OpenCL platform found; install one with: pip install 'clcsg[pocl]'"
+
+#: the spec keywords (anything else is parsed as P:D or P)
+KEYWORDS = ("cpu", "gpu", "oclgrind")
+
+VALID_SPECS = "cpu, gpu, oclgrind, P:D or P (see `clcsg devices`)"
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """What clcsg needs to know about one OpenCL device (plain data, no OpenCL handles)."""
+
+    platform_index: int
+    device_index: int
+    platform: str
+    name: str
+    type: str  # 'cpu', 'gpu', 'accelerator' or 'other'
+    compute_units: int
+    fp64: bool
+    int64_atomics: bool  # cl_khr_int64_base_atomics and cl_khr_int64_extended_atomics
+    is_oclgrind: bool
+    max_mem_alloc: int  # bytes
+    global_mem: int  # bytes
+
+    @property
+    def spec(self) -> str:
+        """``"P:D"``: the spec that selects exactly this device."""
+        return f"{self.platform_index}:{self.device_index}"
+
+    def describe(self) -> str:
+        """One line: ``0:0 pthread-Intel(R) ... (cpu, Portable Computing Language)``."""
+        return f"{self.spec} {self.name} ({self.type}, {self.platform})"
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["spec"] = self.spec
+        return d
+
+
+# -- the selection rule (pure) ----------------------------------------------------------------
+
+
+def _available(infos: Sequence[DeviceInfo]) -> str:
+    return "; ".join(f"{i.spec} {i.name} ({i.type})" for i in infos) or "none"
+
+
+def default_rule(infos: Sequence[DeviceInfo]) -> int:
+    """Index (into ``infos``) of the first GPU, else the first CPU, else the first other device.
+
+    Oclgrind is never chosen.
+    """
+    if not infos:
+        raise DeviceError(NO_PLATFORM)
+    real = [k for k, i in enumerate(infos) if not i.is_oclgrind]
+    for kind in ("gpu", "cpu"):
+        for k in real:
+            if infos[k].type == kind:
+                return k
+    if real:
+        return real[0]
+    raise DeviceError(
+        "only the Oclgrind simulator is available and it is never chosen by default; "
+        "select it with --device oclgrind, or install a real device with: pip install 'clcsg[pocl]'"
+    )
+
+
+def _first_of_type(infos: Sequence[DeviceInfo], kind: str) -> int:
+    for k, i in enumerate(infos):
+        if i.type == kind and not i.is_oclgrind:
+            return k
+    hint = "; install PoCL with: pip install 'clcsg[pocl]'" if kind == "cpu" else ""
+    raise DeviceError(
+        f"device {kind!r}: no {kind.upper()} OpenCL device found (available: {_available(infos)}){hint}"
+    )
+
+
+def _match_part(part: str, names: list[tuple[int, str]], what: str, where: str, last: bool):
+    """Resolve one part of P:D: an index, else a name substring; returns the index or None."""
+    part = part.strip()
+    if part == "":
+        return names[0][0] if names else None
+    try:
+        n = int(part)
+    except ValueError:
+        pass
+    else:
+        idx = [i for i, _ in names]
+        if n in idx:
+            return n
+        valid = ", ".join(map(str, idx)) or "none"
+        raise DeviceError(f"{where}: {what.format(n)} is out of range (valid: {valid}; see `clcsg devices`)")
+    hits = [i for i, name in names if part.lower() in name.lower()]
+    if not hits:
+        return None
+    # pyopencl picks the last platform and the first device whose name matches
+    return hits[-1] if last else hits[0]
+
+
+def _parse_pd(infos: Sequence[DeviceInfo], text: str, where: str) -> int:
+    """Index into ``infos`` of the device that ``P:D`` / ``P`` in ``text`` names."""
+    text = text.split(",")[0]  # PYOPENCL_CTX allows "P:D1,D2"; clcsg uses one device
+    parts = text.split(":")
+    if len(parts) > 2:
+        raise DeviceError(f"{where}: expected P:D or P; valid choices: {VALID_SPECS}")
+    platforms: dict[int, str] = {}
+    for i in infos:
+        platforms.setdefault(i.platform_index, i.platform)
+    p = _match_part(parts[0], sorted(platforms.items()), "platform index {}", where, last=True)
+    if p is None:
+        raise DeviceError(
+            f"{where}: no platform matches {parts[0].strip()!r}; valid choices: {VALID_SPECS}; "
+            f"platforms: {', '.join(f'{k} {v}' for k, v in sorted(platforms.items()))}"
+        )
+    on_p = [(k, i) for k, i in enumerate(infos) if i.platform_index == p]
+    if len(parts) == 1:
+        return on_p[0][0]
+    names = [(i.device_index, i.name) for _, i in on_p]
+    d = _match_part(parts[1], names, f"device index {{}} on platform {p}", where, last=False)
+    if d is None:
+        raise DeviceError(
+            f"{where}: no device on platform {p} matches {parts[1].strip()!r}; "
+            f"devices there: {_available([i for _, i in on_p])}; valid choices: {VALID_SPECS}"
+        )
+    return next(k for k, i in on_p if i.device_index == d)
+
+
+def choose(infos: Sequence[DeviceInfo], spec: str | None = None, env: Mapping[str, str] | None = None) -> int:
+    """Index into ``infos`` of the device that ``spec`` selects (the rule, without OpenCL).
+
+    ``spec`` is None (default rule), ``cpu``, ``gpu``, ``oclgrind``, ``P:D`` or ``P``.
+    ``env`` supplies ``PYOPENCL_CTX`` for the default (an empty value counts as unset).
+    Raises :class:`DeviceError`.
+    """
+    if not infos:
+        raise DeviceError(NO_PLATFORM)
+    env = {} if env is None else env
+    if spec is None or not str(spec).strip():
+        ctx = env.get("PYOPENCL_CTX", "").strip()
+        if ctx:
+            return _parse_pd(infos, ctx, f"PYOPENCL_CTX={ctx!r}")
+        return default_rule(infos)
+    s = str(spec).strip()
+    key = s.lower()
+    if key in ("cpu", "gpu"):
+        return _first_of_type(infos, key)
+    if key == "oclgrind":
+        for k, i in enumerate(infos):
+            if i.is_oclgrind:
+                return k
+        raise DeviceError(f"device 'oclgrind': Oclgrind is not installed (available: {_available(infos)})")
+    try:
+        return _parse_pd(infos, s, f"device {s!r}")
+    except DeviceError as e:
+        if "no platform matches" in str(e):
+            raise DeviceError(
+                f"unknown device {s!r}; valid choices: {VALID_SPECS}; available: {_available(infos)}"
+            ) from None
+        raise
+
+
+# -- OpenCL enumeration ---------------------------------------------------------------------
+
+
+def _cl():
+    try:
+        import pyopencl as cl
+    except Exception as e:  # pragma: no cover - broken installation
+        raise DeviceError(
+            f"cannot import pyopencl ({type(e).__name__}: {e}); install with: pip install 'clcsg[pocl]'"
+        ) from e
+    return cl
+
+
+def _type_name(t: int, cl) -> str:
+    dt = cl.device_type
+    if t & dt.GPU:
+        return "gpu"
+    if t & dt.CPU:
+        return "cpu"
+    if t & dt.ACCELERATOR:
+        return "accelerator"
+    return "other"
+
+
+def _info(p_idx: int, platform, d_idx: int, dev, cl) -> DeviceInfo:
+    ext = set(dev.extensions.split())
+    try:
+        dfp = int(dev.double_fp_config)
+    except Exception:
+        dfp = 0
+    return DeviceInfo(
+        platform_index=p_idx,
+        device_index=d_idx,
+        platform=platform.name.strip(),
+        name=dev.name.strip(),
+        type=_type_name(int(dev.type), cl),
+        compute_units=int(dev.max_compute_units),
+        fp64=("cl_khr_fp64" in ext) or dfp != 0,
+        int64_atomics={"cl_khr_int64_base_atomics", "cl_khr_int64_extended_atomics"} <= ext,
+        is_oclgrind="oclgrind" in platform.name.lower(),
+        max_mem_alloc=int(dev.max_mem_alloc_size),
+        global_mem=int(dev.global_mem_size),
+    )
+
+
+def _enumerate() -> list[tuple[DeviceInfo, object]]:
+    """Every (DeviceInfo, pyopencl.Device), in PYOPENCL_CTX order."""
+    cl = _cl()
+    try:
+        platforms = cl.get_platforms()
+    except (cl.Error, RuntimeError) as e:
+        if "PLATFORM_NOT_FOUND" in str(e) or "no CL platforms" in str(e):
+            raise DeviceError(NO_PLATFORM) from None
+        first = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise DeviceError(f"cannot list OpenCL platforms: {first}") from None
+    if not platforms:
+        raise DeviceError(NO_PLATFORM)
+    out = []
+    for p_idx, platform in enumerate(platforms):
+        try:
+            devs = platform.get_devices()
+        except (cl.Error, RuntimeError):  # DEVICE_NOT_FOUND: a platform without devices
+            continue
+        for d_idx, dev in enumerate(devs):
+            out.append((_info(p_idx, platform, d_idx, dev, cl), dev))
+    if not out:
+        raise DeviceError(f"OpenCL platforms found ({', '.join(p.name for p in platforms)}) but no devices; "
+                          "install one with: pip install 'clcsg[pocl]'")
+    return out
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every OpenCL device, in ``P:D`` order.  Raises :class:`DeviceError` if there is none."""
+    return [info for info, _ in _enumerate()]
+
+
+#: ``clcsg.devices()``
+devices = list_devices
+
+
+def _select(spec: str | None):
+    found = _enumerate()
+    k = choose([i for i, _ in found], spec, os.environ)
+    return found[k]
+
+
+def select_device(spec: str | None = None):
+    """The ``pyopencl.Device`` that ``spec`` names (see the module docstring)."""
+    return _select(spec)[1]
+
+
+# -- contexts ---------------------------------------------------------------------------------
+
+
+class Context:
+    """An OpenCL context and profiling command queue on one device."""
+
+    def __init__(self, device, info: DeviceInfo):
+        cl = _cl()
+        self.device = device
+        self.info = info
+        try:
+            self.ctx = cl.Context([device])
+            self.queue = cl.CommandQueue(
+                self.ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE
+            )
+        except cl.Error as e:
+            raise DeviceError(f"cannot create an OpenCL context on {info.describe()}: {e}") from None
+
+    @property
+    def real_dtype(self):
+        return real_dtype(self)
+
+    def __repr__(self) -> str:
+        return f"<clcsg Context {self.info.describe()}>"
+
+
+_contexts: dict = {}
+_lock = threading.Lock()
+
+
+def get_context(spec: str | None = None) -> Context:
+    """The :class:`Context` of the device ``spec`` selects; one per device, reused."""
+    info, dev = _select(spec)
+    key = (info.platform_index, info.device_index, info.name)
+    with _lock:
+        c = _contexts.get(key)
+        if c is None:
+            c = _contexts[key] = Context(dev, info)
+        return c
+
+
+def _info_of(context) -> DeviceInfo:
+    if isinstance(context, DeviceInfo):
+        return context
+    return context.info
+
+
+def require_int64_atomics(context, what: str) -> None:
+    """Raise :class:`DeviceError` unless the device has 64-bit integer atomics."""
+    info = _info_of(context)
+    if not info.int64_atomics:
+        raise DeviceError(
+            f"device {info.describe()} lacks cl_khr_int64_extended_atomics, needed by {what} "
+            "(pick another with --device; see `clcsg devices`)"
+        )
+
+
+def real_dtype(context):
+    """``numpy.float64`` if the device has fp64, else ``numpy.float32``."""
+    return np.float64 if _info_of(context).fp64 else np.float32

@@ -1,0 +1,296 @@
+"""The ``clcsg`` command line: in-process through ``main`` and as ``python -m clcsg``."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+
+import clcsg
+from clcsg import cli
+from clcsg.errors import SceneError, UsageError
+from clcsg.scene import Scene
+
+
+def run(capsys, *argv):
+    code = cli.main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def run_module(*argv, env=None):
+    e = dict(os.environ)
+    e.update(env or {})
+    return subprocess.run(
+        [sys.executable, "-m", "clcsg", *argv], capture_output=True, text=True, timeout=120, env=e
+    )
+
+
+def demo_scene() -> Scene:
+    part = (clcsg.box(2) - clcsg.cylinder(3, 0.5)) | clcsg.sphere(1, center=(3, 0, 0))
+    return Scene(part, source="demo")
+
+
+# -- parse_floats -------------------------------------------------------------------------------
+
+
+def test_parse_floats():
+    assert cli.parse_floats("1,2,3", 3, "--eye") == (1.0, 2.0, 3.0)
+    assert cli.parse_floats(" -1, 2.5e1 ,3 ", 3, "--eye") == (-1.0, 25.0, 3.0)
+    assert cli.parse_floats("1 2", 2, "--size") == (1.0, 2.0)
+
+
+@pytest.mark.parametrize("text", ["1,2", "1,2,3,4", "1,x,3", "1,nan,3", "inf,0,0", "", "1,,2"])
+def test_parse_floats_rejects(text):
+    with pytest.raises(UsageError, match="^--target: ") as e:
+        cli.parse_floats(text, 3, "--target")
+    assert e.value.exit_code == 2
+
+
+def test_negative_vectors_need_no_equals_sign():
+    assert cli.join_negative_vectors(["info", "s.json", "--bound", "-1,-1,-1,1,1,1"]) == [
+        "info",
+        "s.json",
+        "--bound=-1,-1,-1,1,1,1",
+    ]
+    assert cli.join_negative_vectors(["--term-limit", "-1"]) == ["--term-limit", "-1"]
+    assert cli.join_negative_vectors(["--", "--bound", "-1,0"]) == ["--", "--bound", "-1,0"]
+
+
+# -- help, errors, exit codes -------------------------------------------------------------------
+
+
+def test_help(capsys):
+    code, out, _ = run(capsys, "--help")
+    assert code == 0
+    for name in cli.COMMANDS:
+        assert name in out
+    assert "examples:" in out
+
+
+@pytest.mark.parametrize("name", list(cli.COMMANDS))
+def test_subcommand_help(capsys, name):
+    code, out, _ = run(capsys, name, "--help")
+    assert code == 0
+    assert "--device" in out and "PYOPENCL_CTX" in out
+    assert "examples:" in out
+
+
+def test_no_command_is_usage_error(capsys):
+    code, _, err = run(capsys)
+    assert code == 2 and "usage:" in err
+
+
+def test_unknown_option(capsys):
+    code, _, err = run(capsys, "devices", "--frobnicate")
+    assert code == 2 and "Traceback" not in err
+
+
+def test_version(capsys):
+    code, out, _ = run(capsys, "--version")
+    assert code == 0 and clcsg.__version__ in out
+
+
+def test_error_handling(capsys, monkeypatch):
+    def boom(args):
+        raise SceneError("scene.json: node 3: radius must be > 0")
+
+    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.add_devices_parser, boom))
+    code, out, err = run(capsys, "devices")
+    assert code == 3
+    assert err == "clcsg: error: scene.json: node 3: radius must be > 0\n"
+
+    def bug(args):
+        raise ZeroDivisionError("division by zero")
+
+    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.add_devices_parser, bug))
+    code, out, err = run(capsys, "devices")
+    assert code == 1
+    assert err == (
+        "clcsg: internal error: ZeroDivisionError: division by zero (run with --debug for the traceback)\n"
+    )
+    with pytest.raises(ZeroDivisionError):
+        cli.main(["--debug", "devices"])
+    with pytest.raises(ZeroDivisionError):
+        cli.main(["devices", "--debug"])
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.add_devices_parser, interrupted))
+    code, out, err = run(capsys, "devices")
+    assert code == 130
+
+
+# -- devices ------------------------------------------------------------------------------------
+
+
+def test_devices(capsys, monkeypatch):
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    code, out, err = run(capsys, "devices")
+    assert code == 0, err
+    infos = clcsg.devices()
+    for i in infos:
+        assert i.spec in out and i.name in out
+    marked = [line for line in out.splitlines() if re.match(r"^\*\s+\d+:\d+\s", line)]
+    assert len(marked) == 1
+    from clcsg.host.device import choose
+
+    assert infos[choose(infos, None, {})].spec in marked[0]
+    assert "64-bit atomics" in out and "fp64" in out
+
+
+def test_devices_json(capsys):
+    code, out, _ = run(capsys, "devices", "--json", "--device", "0:0")
+    assert code == 0
+    rows = json.loads(out)
+    assert rows[0]["selected"] and rows[0]["spec"] == "0:0"
+    assert {"platform_index", "device_index", "name", "type", "fp64", "int64_atomics", "is_oclgrind"} <= set(rows[0])
+
+
+def test_bad_device_in_process(capsys):
+    code, out, err = run(capsys, "devices", "--device", "nonsense")
+    assert code == 4
+    assert err.count("\n") == 1 and err.startswith("clcsg: error: unknown device 'nonsense'")
+
+
+def test_bad_pyopencl_ctx_still_lists(capsys, monkeypatch):
+    monkeypatch.setenv("PYOPENCL_CTX", "77:0")
+    code, out, err = run(capsys, "devices")
+    assert code == 4
+    assert "0:0" in out and "PYOPENCL_CTX='77:0'" in err
+
+
+def test_python_m_devices():
+    r = run_module("devices")
+    assert r.returncode == 0, r.stderr
+    assert "P:D" in r.stdout and "*" in r.stdout
+    assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("name", ["", *cli.COMMANDS])
+def test_python_m_help(name):
+    r = run_module(*([name] if name else []), "--help")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("usage: clcsg")
+
+
+@pytest.mark.parametrize("argv", [["devices", "--device", "9:9"], ["info", "x.json", "--device", "tpu"]])
+def test_python_m_bad_device(argv, tmp_path):
+    r = run_module(*argv)
+    assert r.returncode == 4
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("clcsg: error: ")
+    assert "Traceback" not in r.stderr
+
+
+# -- info ---------------------------------------------------------------------------------------
+
+
+def test_scene_info_programmatic():
+    info = cli.scene_info(demo_scene(), device="0:0")
+    s = info["stats"]
+    assert s["primitives"] == 3 and s["unique_quadrics"] == 10
+    assert s["terms"] == len(info["term_bounds"]) == 2
+    assert info["term_sizes"] == {"min": 1, "mean": 4.0, "max": 7}
+    assert info["bound"] == [[-1.0, -1.0, -1.0], [4.0, 1.0, 1.0]]
+    assert info["device"]["spec"] == "0:0"
+    json.dumps(info)
+    text = cli.format_info(info)
+    for key in ("primitives:", "unique quadrics:", "DNF terms:", "term sizes:", "term bounds:", "scene bound:"):
+        assert key in text
+    assert "2 with disjoint literal boxes" in text
+
+
+def test_scene_info_bound_override_and_many_terms():
+    spheres = clcsg.union(*[clcsg.sphere(0.4, center=(i, 0, 0)) for i in range(25)])
+    info = cli.scene_info(spheres, bound=[[-1, -1, -1], [30, 1, 1]])
+    assert info["stats"]["terms"] == 25
+    assert info["user_bound_from"] == "--bound"
+    text = cli.format_info(info)
+    assert "... and 5 more" in text
+    assert "(from --bound)" in text
+
+
+def test_scene_info_unbounded_needs_bound():
+    with pytest.raises(SceneError, match="unbounded"):
+        cli.scene_info(~clcsg.sphere(1))
+    info = cli.scene_info(~clcsg.sphere(1), bound=[[-2, -2, -2], [2, 2, 2]])
+    assert info["bound"] == [[-2.0] * 3, [2.0] * 3]
+
+
+@pytest.fixture
+def scene_loader(monkeypatch):
+    """``clcsg.scene.load`` returning demo_scene() for '*.demo' paths (the file formats are
+    tested elsewhere; this tests the CLI around the loader)."""
+    import clcsg.scene
+
+    real = clcsg.scene.load
+
+    def load(path):
+        if str(path).endswith(".demo"):
+            return demo_scene()
+        return real(path)
+
+    monkeypatch.setattr(clcsg.scene, "load", load)
+
+
+def test_info_text(capsys, scene_loader):
+    code, out, err = run(capsys, "info", "part.demo")
+    assert code == 0, err
+    assert "DNF terms:" in out and "2 after pruning" in out
+    assert "scene bound:" in out and "(4, 1, 1)" in out
+
+
+def test_info_json_and_options(capsys, scene_loader):
+    code, out, err = run(capsys, "info", "part.demo", "--json", "--term-limit", "1000", "--bound", "-5,-5,-5,5,5,5")
+    assert code == 0, err
+    info = json.loads(out)
+    assert info["stats"]["terms"] == 2
+    assert info["user_bound"] == [[-5.0] * 3, [5.0] * 3]
+
+
+def test_info_term_limit(capsys, scene_loader):
+    code, out, err = run(capsys, "info", "part.demo", "--term-limit", "1")
+    assert code == 5
+    assert err.startswith("clcsg: error: ") and "limit" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    "bound", ["1,2,3", "0,0,0,1,1,nan", "0,0,0,1,1,inf", "1,1,1,0,0,0", "a,b,c,d,e,f"]
+)
+def test_info_bad_bound(capsys, scene_loader, bound):
+    code, out, err = run(capsys, "info", "part.demo", "--bound", bound)
+    assert code == 2
+    assert err.startswith("clcsg: error: --bound: ") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv", [["--term-limit", "0"], ["--term-limit", "x"], ["--bound"]])
+def test_info_bad_options(capsys, scene_loader, argv):
+    code, _, err = run(capsys, "info", "part.demo", *argv)
+    assert code == 2 and "Traceback" not in err
+
+
+def test_info_missing_file(capsys):
+    code, _, err = run(capsys, "info", "no/such/scene.json")
+    assert code == 3
+    assert err == "clcsg: error: no/such/scene.json: no such file\n"
+
+
+def test_info_json_file(capsys, tmp_scene):
+    path = tmp_scene(demo_scene())
+    code, out, err = run(capsys, "info", str(path))
+    assert code == 0, err
+    assert "2 after pruning" in out
+
+
+def test_python_m_info_json_file(tmp_scene):
+    path = tmp_scene(demo_scene())
+    r = run_module("info", str(path), "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["stats"]["terms"] == 2
+    r = run_module("info", str(path), "--bound", "1,2")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
