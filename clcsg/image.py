@@ -1,0 +1,91 @@
+"""The result of a render: color, depth and quadric ids per pixel, plus statistics."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import UsageError
+
+
+@dataclass
+class Image:
+    """A rendered image.
+
+    ``rgba``: (H, W, 4) uint8, row 0 at the top.  ``depth``: (H, W) float32, the distance along
+    the unit view ray to the visible surface point (+inf on background).  ``ids``: (H, W) int32,
+    the index of the visible quadric in the scene's DNF (-1 on background).  ``stats``: timings
+    in seconds and renderer counters (see :func:`clcsg.render.render`).
+    """
+
+    rgba: np.ndarray
+    depth: np.ndarray
+    ids: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def width(self) -> int:
+        return int(self.rgba.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.rgba.shape[0])
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(H, W) bool: pixels showing the surface."""
+        return self.ids >= 0
+
+    def save(self, path) -> None:
+        """Write the color image as PNG (any format Pillow knows, chosen by the extension)."""
+        from PIL import Image as PILImage
+
+        p = os.fspath(path)
+        try:
+            PILImage.fromarray(np.ascontiguousarray(self.rgba), mode="RGBA").save(p)
+        except (OSError, ValueError, KeyError) as e:
+            raise UsageError(f"{p}: cannot write image: {e}") from None
+
+    def save_depth(self, path) -> None:
+        """Write the depth as a .npy file: (H, W) float32, +inf on background."""
+        _save_npy(path, self.depth)
+
+    def save_ids(self, path) -> None:
+        """Write the quadric ids as a .npy file: (H, W) int32, -1 on background."""
+        _save_npy(path, self.ids)
+
+    def save_stats(self, path) -> None:
+        """Write the statistics as JSON."""
+        p = os.fspath(path)
+        try:
+            with open(p, "w", encoding="utf-8") as f:
+                json.dump(_jsonable(self.stats), f, indent=2, sort_keys=True)
+                f.write("\n")
+        except OSError as e:
+            raise UsageError(f"{p}: cannot write stats: {e.strerror or e}") from None
+
+
+def _save_npy(path, a) -> None:
+    p = os.fspath(path)
+    try:
+        with open(p, "wb") as f:
+            np.save(f, a)
+    except OSError as e:
+        raise UsageError(f"{p}: cannot write: {e.strerror or e}") from None
+
+
+def _jsonable(v):
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, float) and not np.isfinite(v):
+        return str(v)
+    return v
