@@ -237,10 +237,10 @@ def add_info_parser(subparsers):
         """,
         epilog="""
             examples:
-              clcsg info examples/part.json
+              clcsg info examples/bracket.json
               clcsg info model.csg --term-limit 1000000
-              clcsg info examples/part.json --bound -1,-1,-1,1,1,1
-              clcsg info examples/part.json --json > stats.json
+              clcsg info examples/bracket.json --bound -1,-1,-1,1,1,1
+              clcsg info examples/bracket.json --json > stats.json
         """,
     )
     p.add_argument("scene", metavar="SCENE", help="scene file (.json or OpenSCAD .csg)")
@@ -391,7 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
             """
             examples:
               clcsg devices                         # list OpenCL devices, '*' = default
-              clcsg info examples/part.json         # DNF statistics of a scene
+              clcsg info examples/bracket.json      # DNF statistics of a scene
               clcsg info --help                     # options of a subcommand
 
             exit codes: 0 ok, 1 internal error, 2 bad command line, 3 bad input,
