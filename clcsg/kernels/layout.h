@@ -39,6 +39,49 @@ typedef struct {
     int clip_count;
 } sample_rec;
 
+/* ---- sampler (clcsg/host/sampler.py, kernels/sampler.cl) ---------------------------------- */
+
+/* Principal frame of a quadric (clcsg/host/analysis.py): x = center + U z and
+ * Q = sum_m (lam_m z_m^2 + 2 beta_m z_m) + gamma.  U is row-major: U[3 * r + c], column c is
+ * the principal axis u_c. */
+typedef struct {
+    real U[9];
+    real center[3];
+    real lam[3];
+    real beta[3];
+    real gamma;
+} frame_rec;
+
+/* One root of the subdivision: literal `literal` (global index in the literal buffer, on
+ * quadric `quadric` with polarity `sign`) of DNF term `term`, sampled from plane `plane`
+ * (normal u_plane) on sheet `sheet` (+1 / -1; 0 for a one-sheet heightfield).  zlo / zhi:
+ * the term's bound as a box in the quadric's local coordinates. */
+typedef struct {
+    int term;
+    int literal;
+    int quadric;
+    int sign;
+    int plane;
+    int sheet;
+    real zlo[3];
+    real zhi[3];
+} task_rec;
+
+/* An axis-aligned cell [x0, x1] x [y0, y1] of a task's sampling plane. */
+typedef struct {
+    real x0, y0, x1, y1;
+    int task;
+    int level;
+} cell_rec;
+
+/* A sample as the subdivision emits it: position (device coordinates), splat radius, task. */
+typedef struct {
+    real pos[3];
+    real radius;
+    int task;
+    int pad;
+} raw_sample_rec;
+
 #endif
 
 /* One unique quadric.  coef: the 10 coefficients of the symmetric 4x4 matrix in the order
@@ -81,5 +124,48 @@ typedef struct {
     int clip_first;
     int clip_count;
 } sample_rec;
+
+/* ---- sampler (clcsg/host/sampler.py, kernels/sampler.cl) ---------------------------------- */
+
+/* Principal frame of a quadric (clcsg/host/analysis.py): x = center + U z and
+ * Q = sum_m (lam_m z_m^2 + 2 beta_m z_m) + gamma.  U is row-major: U[3 * r + c], column c is
+ * the principal axis u_c. */
+typedef struct {
+    real U[9];
+    real center[3];
+    real lam[3];
+    real beta[3];
+    real gamma;
+} frame_rec;
+
+/* One root of the subdivision: literal `literal` (global index in the literal buffer, on
+ * quadric `quadric` with polarity `sign`) of DNF term `term`, sampled from plane `plane`
+ * (normal u_plane) on sheet `sheet` (+1 / -1; 0 for a one-sheet heightfield).  zlo / zhi:
+ * the term's bound as a box in the quadric's local coordinates. */
+typedef struct {
+    int term;
+    int literal;
+    int quadric;
+    int sign;
+    int plane;
+    int sheet;
+    real zlo[3];
+    real zhi[3];
+} task_rec;
+
+/* An axis-aligned cell [x0, x1] x [y0, y1] of a task's sampling plane. */
+typedef struct {
+    real x0, y0, x1, y1;
+    int task;
+    int level;
+} cell_rec;
+
+/* A sample as the subdivision emits it: position (device coordinates), splat radius, task. */
+typedef struct {
+    real pos[3];
+    real radius;
+    int task;
+    int pad;
+} raw_sample_rec;
 
 #endif

@@ -1,0 +1,405 @@
+"""Driver of the adaptive subdivision sampler (``kernels/sampler.cl``); paper sections 3-5.
+
+Decomposition
+-------------
+Every literal b of every DNF term a is sampled on its quadric Q from each of the three
+sampling planes of Q's principal frame (``analysis.py``) and, for two-sheet heightfields,
+from both sheets.  A *task* is one (term, literal, plane, sheet); its root cell is the
+term's bound projected into the plane's local (x, y) coordinates.  Cells are axis-aligned
+rectangles of that plane (the design note's "simpler cells") instead of the paper's basic
+regions; the kernel bounds every quantity exactly over a cell, because R(x, y) is separable.
+
+Guarantee
+---------
+*Every sample lies on the CSG surface*: a sample is emitted at a point p of a cell only when
+the cell was proven to lie on the CSG surface (fill) or p is a corner with d_Q(S, p) < 0
+(single sample), and eq. 22 is negative only on the surface.
+
+*Every point x of the CSG surface, on literal b of term a, with a non-zero normal, has a sample
+on the same quadric within r*: let k be the plane whose axis has the largest |n_k| at x.  x
+projects into the root cell of task (a, b, k, sheet of x) because the term's bound contains x.
+Follow the chain of cells that contain the projection.  A cell in the chain is never dropped as
+"no surface" (the heightfield is defined at x), nor as "not owned" (at x no in-plane
+component exceeds |n_k|), nor as outside the term bound (x is inside it).  It is discarded by
+the discs only if x lies in a disc of a corner p with d_Q(S, p) > 0: the 2-D radius
+|d| / delta maps to a 3-D distance of at most |d| along the straight segment inside the cell
+(delta = sqrt(max n_i^2 + max n_j^2 + max n_k^2) / min |n_k| bounds |dp| / |dx| over the
+cell), and eq. 22 says no point of Q within |d| of p is on the surface — contradiction.  So
+the chain ends in (i) a fill, whose grid spacing sqrt(2) r / delta puts every cell point within
+r of a sample, (ii) a single sample whose radius covers the patch's whole 3-D box, or (iii) the
+floor: cells whose 3-D box is smaller than the floor (default r / 10) and still unresolved are
+dropped and counted as ``unresolved`` in the stats; the guarantee holds for every feature wider
+than the floor.  The paper makes the same trade (section 4.2).
+
+Shared surfaces (design note, "Coincident and shared surfaces") are handled inside eq. 22:
+terms that hold the sampled quadric with the same polarity are left out, terms holding it with
+the opposite polarity enter without that literal.
+
+Nothing is lost: each level runs with buffers sized from an estimate; the kernel counts past
+the capacity without writing, the host sees it, grows the buffer and re-runs the level.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+import warnings
+
+import numpy as np
+
+from ..errors import UsageError
+from ..samples import Samples
+from ..scene import as_scene
+from . import device as _device
+from .analysis import principal_frame
+from .buffers import PackedScene, SceneBuffers, pack
+from .dnf import Dnf
+from .programs import build
+
+COUNTERS = ("cells", "samples", "distance_queries", "unresolved", "discarded", "filled", "single", "split")
+
+
+#: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
+#: runtime pick one per launch size would recompile at every level
+WORK_GROUP = 64
+
+
+def launch_size(n: int) -> tuple[int]:
+    return (max(1, -(-n // WORK_GROUP)) * WORK_GROUP,)
+
+
+def frame_dtype(real) -> np.dtype:
+    return np.dtype(
+        [("U", real, 9), ("center", real, 3), ("lam", real, 3), ("beta", real, 3), ("gamma", real)],
+        align=True,
+    )
+
+
+def task_dtype(real) -> np.dtype:
+    return np.dtype(
+        [
+            ("term", np.int32), ("literal", np.int32), ("quadric", np.int32), ("sign", np.int32),
+            ("plane", np.int32), ("sheet", np.int32), ("zlo", real, 3), ("zhi", real, 3),
+        ],
+        align=True,
+    )
+
+
+def cell_dtype(real) -> np.dtype:
+    return np.dtype(
+        [("x0", real), ("y0", real), ("x1", real), ("y1", real), ("task", np.int32), ("level", np.int32)],
+        align=True,
+    )
+
+
+def raw_sample_dtype(real) -> np.dtype:
+    return np.dtype([("pos", real, 3), ("radius", real), ("task", np.int32), ("pad", np.int32)], align=True)
+
+
+def analyse(packed: PackedScene) -> tuple[np.ndarray, list]:
+    """Principal frames of all quadrics (device coordinates) as ``frame_rec`` records."""
+    frames = [principal_frame_of(m) for m in packed.local_matrices]
+    rec = np.zeros(len(frames), dtype=frame_dtype(packed.real))
+    for i, f in enumerate(frames):
+        rec["U"][i] = f.U.reshape(9)
+        rec["center"][i] = f.center
+        rec["lam"][i] = f.lam
+        rec["beta"][i] = f.beta
+        rec["gamma"][i] = f.gamma
+    return rec, frames
+
+
+def principal_frame_of(matrix):
+    from ..quadric import Quadric
+
+    return principal_frame(Quadric(matrix))
+
+
+def root_tasks(dnf: Dnf, packed: PackedScene, frames: list) -> tuple[np.ndarray, np.ndarray]:
+    """One task per (term, literal, plane, sheet) and its root cell."""
+    tasks, cells = [], []
+    lo_all = packed.terms["lo"]
+    hi_all = packed.terms["hi"]
+    literal = 0
+    for a, term in enumerate(dnf.terms):
+        lo, hi = lo_all[a].astype(np.float64), hi_all[a].astype(np.float64)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        for qi, s in term:
+            f = frames[qi]
+            z = (corners - f.center) @ f.U
+            zlo, zhi = z.min(0), z.max(0)
+            for k in range(3):
+                if f.lam[k] != 0.0:
+                    sheets = (1, -1)
+                elif f.beta[k] != 0.0:
+                    sheets = (0,)
+                else:
+                    continue  # a cylinder along u_k: plane k owns no point
+                i, j = [m for m in range(3) if m != k]
+                for sheet in sheets:
+                    tasks.append((a, literal, qi, s, k, sheet, zlo, zhi))
+                    cells.append((zlo[i], zlo[j], zhi[i], zhi[j], len(tasks) - 1, 0))
+            literal += 1
+    t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
+    for n, (a, lit, qi, s, k, sheet, zlo, zhi) in enumerate(tasks):
+        t[n] = (a, lit, qi, s, k, sheet, zlo, zhi)
+    c = np.array(cells, dtype=cell_dtype(packed.real)) if cells else np.zeros(0, cell_dtype(packed.real))
+    return t, c
+
+
+def estimate_samples(dnf: Dnf, radius: float) -> int:
+    """Rough sample count: surface area of the term boxes over the area of a splat."""
+    if not dnf.n_terms:
+        return 0
+    ext = dnf.term_bounds[:, 1] - dnf.term_bounds[:, 0]
+    area = 2 * (ext[:, 0] * ext[:, 1] + ext[:, 1] * ext[:, 2] + ext[:, 0] * ext[:, 2]).sum()
+    return int(area / (math.pi * radius * radius)) + 1
+
+
+class _Progress:
+    """A one-line progress display on stderr for long runs (only on a terminal)."""
+
+    def __init__(self, enabled):
+        self.enabled = enabled if enabled is not None else sys.stderr.isatty()
+        self.t0 = time.perf_counter()
+        self.shown = False
+
+    def level(self, level, cells, samples):
+        if not self.enabled or time.perf_counter() - self.t0 < 0.5:
+            return
+        self.shown = True
+        sys.stderr.write(f"\rsampling: level {level:3d}  {cells:10,d} cells  {samples:12,d} samples")
+        sys.stderr.flush()
+
+    def done(self):
+        if self.shown:
+            sys.stderr.write("\n")
+
+
+def sample(
+    scene,
+    radius: float,
+    device=None,
+    *,
+    floor: float | None = None,
+    term_limit: int | None = None,
+    bound=None,
+    distortion: bool = True,
+    capacity: tuple[int, int] | None = None,
+    progress: bool | None = None,
+    max_levels: int = 200,
+) -> Samples:
+    """Samples on the CSG surface of ``scene`` with the coverage guarantee for ``radius``.
+
+    ``scene``: a Shape, Scene or scene file path.  ``device``: None (default selection),
+    'cpu', 'gpu', 'P:D' or a context from :func:`clcsg.host.device.get_context`.  ``floor``:
+    size below which unresolved cells are dropped (default radius / 10).  ``distortion``:
+    use the interval distortion bound (True) or the worst case max(sqrt 3, bound) (False).
+    ``capacity``: initial (cells, samples) buffer sizes (tests force tiny ones).
+    """
+    try:
+        radius = float(radius)
+    except (TypeError, ValueError):
+        raise UsageError(f"radius must be a number, got {radius!r}") from None
+    if not (math.isfinite(radius) and radius > 0):
+        raise UsageError(f"radius must be a positive finite number, got {radius}")
+    floor = radius / 10 if floor is None else float(floor)
+    if not (math.isfinite(floor) and floor > 0):
+        raise UsageError(f"floor must be a positive finite number, got {floor}")
+    timings = {}
+    t0 = time.perf_counter()
+    sc = as_scene(scene, bound)
+    dnf = sc.normalize(term_limit)
+    timings["normalize_s"] = time.perf_counter() - t0
+
+    ctx = scene_context(device)
+    real = _device.real_dtype(ctx)
+    t1 = time.perf_counter()
+    packed = pack(dnf, real)
+    frames_rec, frames = analyse(packed)
+    tasks, roots = root_tasks(dnf, packed, frames)
+    timings["analyse_s"] = time.perf_counter() - t1
+    stats = {"radius": radius, "floor": floor, "tasks": len(tasks), **{f"dnf_{k}": v for k, v in dnf.stats.items()}}
+    if len(roots) == 0:
+        warnings.warn(f"{sc.source}: the solid has no surface; no samples", stacklevel=2)
+        return _empty(radius, dnf, packed, stats)
+
+    mask_words = max(1, (max((len(t) for t in dnf.terms), default=1) + 31) // 32)
+    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "MASK_WORDS": mask_words}
+    prg = build(ctx, "sampler.cl", defines, real)
+    raw, level_stats, totals = _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor,
+                                          capacity, estimate_samples(dnf, radius), progress, max_levels)
+    t2 = time.perf_counter()
+    timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
+    normals, masks = _finish(ctx, prg, packed, tasks, raw, mask_words)
+    samples = _assemble(raw, normals, masks, tasks, dnf, packed, radius)
+    timings["finish_s"] = time.perf_counter() - t2
+    timings["total_s"] = time.perf_counter() - t0
+    stats.update(totals)
+    stats.update(
+        samples=len(samples.positions),
+        clip_indices=int(len(samples.clip_literals)),
+        levels=len(level_stats),
+        cells_per_level=[ls["cells"] for ls in level_stats],
+        device=ctx.info.name,
+        compute_units=ctx.info.compute_units,
+        **timings,
+    )
+    samples.stats = stats
+    return samples
+
+
+def scene_context(device):
+    if device is not None and hasattr(device, "ctx"):
+        return device
+    return _device.get_context(device)
+
+
+def _empty(radius, dnf, packed, stats) -> Samples:
+    z3 = np.zeros((0, 3))
+    zi = np.zeros(0, dtype=np.int32)
+    stats.update(samples=0, clip_indices=0, levels=0, cells_per_level=[], distance_queries=0)
+    return Samples(z3, z3.copy(), np.zeros(0), zi, zi.copy(), zi.copy(), zi.copy(), zi.copy(),
+                   np.zeros((0, 2), dtype=np.int32), radius, dnf, packed, stats)
+
+
+def _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress, max_levels):
+    import pyopencl as cl
+
+    mf = cl.mem_flags
+    queue = ctx.queue
+    real = packed.real
+    scene = SceneBuffers(ctx, packed)
+    frames_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=frames_rec)
+    tasks_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
+    cdt = cell_dtype(real)
+    sdt = raw_sample_dtype(real)
+    if capacity is None:
+        cap_cells = max(4 * len(roots), 4096)
+        cap_samples = max(2 * estimate, 4096)
+    else:
+        cap_cells, cap_samples = (max(2, int(c)) for c in capacity)
+    cells_in = cl.Buffer(ctx.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=roots)
+    n_in = len(roots)
+    cells_out = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_cells * cdt.itemsize)
+    samples_buf = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_samples * sdt.itemsize)
+    counters = np.zeros(8, dtype=np.uint32)
+    counters_buf = cl.Buffer(ctx.ctx, mf.READ_WRITE, counters.nbytes)
+    totals = {k: 0 for k in COUNTERS if k != "cells"}
+    n_samples = 0
+    levels = []
+    prog = _Progress(progress)
+    kernel = cl.Kernel(prg, "classify")
+    level = 0
+    grown = {"cells": 0, "samples": 0}
+    while n_in > 0:
+        if level >= max_levels:
+            raise RuntimeError(f"sampler did not finish in {max_levels} levels ({n_in} cells left)")
+        while True:
+            counters[:] = 0
+            counters[1] = n_samples
+            cl.enqueue_copy(queue, counters_buf, counters)
+            kernel(queue, launch_size(n_in), (WORK_GROUP,),
+                   scene.quadrics, scene.literals, scene.terms, np.int32(scene.n_terms),
+                   frames_buf, tasks_buf, cells_in, np.int32(n_in), cells_out, np.int32(cap_cells),
+                   samples_buf, np.int32(cap_samples), counters_buf,
+                   real.type(radius), real.type(floor))
+            cl.enqueue_copy(queue, counters, counters_buf)
+            n_cells_out, n_samples_out = int(counters[0]), int(counters[1])
+            ok = True
+            if n_cells_out > cap_cells:
+                cap_cells = _grow(cap_cells, n_cells_out)
+                cells_out = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_cells * cdt.itemsize)
+                grown["cells"] += 1
+                ok = False
+            if n_samples_out > cap_samples:
+                new_cap = _grow(cap_samples, n_samples_out)
+                bigger = cl.Buffer(ctx.ctx, mf.READ_WRITE, new_cap * sdt.itemsize)
+                if n_samples:
+                    cl.enqueue_copy(queue, bigger, samples_buf, byte_count=n_samples * sdt.itemsize)
+                samples_buf, cap_samples = bigger, new_cap
+                grown["samples"] += 1
+                ok = False
+            if ok:
+                break
+        for k, name in enumerate(COUNTERS):
+            if name not in ("cells", "samples"):
+                totals[name] += int(counters[k])
+        levels.append({"cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples})
+        n_samples = n_samples_out
+        prog.level(level, n_in, n_samples)
+        cells_in, cells_out = cells_out, cells_in
+        # the old input buffer becomes the next output: make sure it is large enough
+        if cap_cells * cdt.itemsize > cells_out.size:
+            cells_out = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_cells * cdt.itemsize)
+        n_in = n_cells_out
+        level += 1
+    prog.done()
+    raw = np.zeros(n_samples, dtype=sdt)
+    if n_samples:
+        cl.enqueue_copy(queue, raw, samples_buf)
+    totals["buffer_growths"] = grown
+    return raw, levels, totals
+
+
+def _grow(cap, needed):
+    return int(max(2 * cap, needed + needed // 2))
+
+
+def _finish(ctx, prg, packed, tasks, raw, mask_words):
+    import pyopencl as cl
+
+    mf = cl.mem_flags
+    n = len(raw)
+    real = packed.real
+    normals = np.zeros((n, 3), dtype=real)
+    masks = np.zeros((n, mask_words), dtype=np.uint32)
+    if n == 0:
+        return normals, masks
+    scene = SceneBuffers(ctx, packed)
+    tasks_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
+    raw_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=raw)
+    nb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, normals.nbytes)
+    mb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, masks.nbytes)
+    cl.Kernel(prg, "finish")(ctx.queue, launch_size(n), (WORK_GROUP,), scene.quadrics, scene.literals, scene.terms, tasks_buf,
+               raw_buf, np.int32(n), nb, mb)
+    cl.enqueue_copy(ctx.queue, normals, nb)
+    cl.enqueue_copy(ctx.queue, masks, mb)
+    return normals, masks
+
+
+def _assemble(raw, normals, masks, tasks, dnf, packed, radius) -> Samples:
+    """Host arrays in world coordinates; clip sets deduplicated (sort, then unique)."""
+    task = tasks[raw["task"]]
+    term = task["term"].astype(np.int32)
+    n = len(raw)
+    key = np.column_stack([term.astype(np.int64), masks.astype(np.int64)])
+    uniq, inverse = np.unique(key, axis=0, return_inverse=True) if n else (np.zeros((0, key.shape[1])), np.zeros(0, int))
+    inverse = np.asarray(inverse).reshape(-1)
+    firsts = np.zeros(len(uniq), dtype=np.int32)
+    counts = np.zeros(len(uniq), dtype=np.int32)
+    clip = []
+    for u, row in enumerate(uniq):
+        t = int(row[0])
+        lits = dnf.terms[t]
+        words = row[1:]
+        sel = [lits[j] for j in range(len(lits)) if (int(words[j // 32]) >> (j % 32)) & 1]
+        firsts[u] = len(clip)
+        counts[u] = len(sel)
+        clip.extend(sel)
+    clip_literals = np.array(clip, dtype=np.int32).reshape(-1, 2)
+    return Samples(
+        positions=raw["pos"].astype(np.float64) + packed.origin,
+        normals=normals.astype(np.float64),
+        radii=raw["radius"].astype(np.float64),
+        quadrics=task["quadric"].astype(np.int32),
+        signs=task["sign"].astype(np.int32),
+        terms=term,
+        clip_first=firsts[inverse] if n else np.zeros(0, np.int32),
+        clip_count=counts[inverse] if n else np.zeros(0, np.int32),
+        clip_literals=clip_literals,
+        radius=radius,
+        dnf=dnf,
+        packed=packed,
+    )

@@ -1,0 +1,513 @@
+/* Adaptive subdivision sampler (paper section 4.2 with eq. 22; design note sections 2-4).
+ *
+ * One launch per level: every work-item takes one cell of the current queue, evaluates the
+ * quadric-relative conservative distance d_Q(S, p) at its corners, and discards it, covers it
+ * with samples, covers it with a single sample, or splits it; children and samples are
+ * appended with atomics.  Writes happen only below the capacity; the counters keep counting,
+ * so the host sees an overflow, grows the buffer and re-runs the level.
+ *
+ * Build options: -DCLCSG_DOUBLE (real = double), -DWORST_CASE_DISTORTION=1 replaces the
+ * interval distortion bound by max(sqrt 3, bound) (for the paper's Fig. 14 comparison),
+ * -DMAX_FILL: largest grid a cell may emit at once (larger cells are split instead).
+ */
+#include "quadric.h"
+
+#ifndef MAX_FILL
+#define MAX_FILL 65536
+#endif
+#ifndef FILL_DELTA_RATIO
+#define FILL_DELTA_RATIO 1.1
+#endif
+#ifndef WORST_CASE_DISTORTION
+#define WORST_CASE_DISTORTION 0
+#endif
+
+/* counters */
+#define C_CELLS 0
+#define C_SAMPLES 1
+#define C_QUERIES 2
+#define C_UNRESOLVED 3
+#define C_DISCARDED 4
+#define C_FILLED 5
+#define C_SINGLE 6
+#define C_SPLIT 7
+#define N_COUNTERS 8
+
+inline real literal_distance(__global const quadric_rec *quadrics, literal_rec l, real3 p)
+{
+    __global const quadric_rec *r = quadrics + l.quadric;
+    /* d(-Q, p) = -d(Q, p): the negated literal swaps lam_min / lam_max and the sign of f */
+    return l.sign * quadric_distance(quadric_load(quadrics, l.quadric), r->lam_min, r->lam_max, p);
+}
+
+/* Distance from p to the term's bound box (0 inside). */
+inline real box_distance(__global const term_rec *t, real3 p)
+{
+    real3 lo = (real3)(t->lo[0], t->lo[1], t->lo[2]);
+    real3 hi = (real3)(t->hi[0], t->hi[1], t->hi[2]);
+    real3 e = fmax(lo - p, (real3)(0)) + fmax(p - hi, (real3)(0));
+    return length(e);
+}
+
+/* Quadric-relative conservative signed distance d_Q(S, p), eq. 22, for a point p on the
+ * task's quadric, with the design note's rules for shared surfaces: other terms that hold the
+ * same quadric with the same polarity are left out (they sample the shared region
+ * themselves); a term that holds it with the opposite polarity enters without that literal.
+ * `enough`: a |d| this large already classifies the cell, so a term whose bound box is at
+ * least that far away is not evaluated literal by literal (its box distance is a valid
+ * conservative distance too). */
+real csg_distance(__global const quadric_rec *quadrics, __global const literal_rec *literals,
+                  __global const term_rec *terms, int n_terms, task_rec t, real3 p, real enough)
+{
+    __global const term_rec *own = terms + t.term;
+    real inside_own = -INFINITY; /* eq. 21: max over the other literals of the own term */
+    for (int j = own->first; j < own->first + own->count; ++j) {
+        if (j == t.literal) continue;
+        inside_own = fmax(inside_own, literal_distance(quadrics, literals[j], p));
+    }
+    real nearest_other = INFINITY; /* min over other terms of max_j d(Q_ij, p), eq. 20 */
+    for (int i = 0; i < n_terms; ++i) {
+        if (i == t.term) continue;
+        __global const term_rec *ti = terms + i;
+        real box = box_distance(ti, p);
+        if (box >= enough || box >= nearest_other) {
+            nearest_other = fmin(nearest_other, box);
+            continue;
+        }
+        real v = -INFINITY;
+        bool shares = false;
+        for (int j = ti->first; j < ti->first + ti->count; ++j) {
+            literal_rec l = literals[j];
+            if (l.quadric == t.quadric) {
+                if (l.sign == t.sign) {
+                    shares = true;
+                    break;
+                }
+                continue;
+            }
+            v = fmax(v, literal_distance(quadrics, l, p));
+        }
+        if (shares) continue;
+        if (box > 0) v = fmax(v, box);
+        nearest_other = fmin(nearest_other, v);
+    }
+    return fmax(inside_own, -nearest_other);
+}
+
+/* exact range of lam z^2 + 2 beta z over [a, b] */
+inline real2 quad_range(real lam, real beta, real a, real b)
+{
+    real fa = lam * a * a + 2 * beta * a;
+    real fb = lam * b * b + 2 * beta * b;
+    real lo = fmin(fa, fb), hi = fmax(fa, fb);
+    if (lam != 0) {
+        real v = -beta / lam;
+        if (v > a && v < b) {
+            real fv = lam * v * v + 2 * beta * v;
+            lo = fmin(lo, fv);
+            hi = fmax(hi, fv);
+        }
+    }
+    return (real2)(lo, hi);
+}
+
+/* range of |lam z + beta| over [a, b] */
+inline real2 abs_linear_range(real lam, real beta, real a, real b)
+{
+    real fa = lam * a + beta, fb = lam * b + beta;
+    real hi = fmax(fabs(fa), fabs(fb));
+    real lo = (fa <= 0 && fb >= 0) || (fa >= 0 && fb <= 0) ? 0 : fmin(fabs(fa), fabs(fb));
+    return (real2)(lo, hi);
+}
+
+typedef struct {
+    real U[9];
+    real3 center;
+    real li, lj, lk, bi, bj, bk, gamma;
+    int i, j, k;
+    int sheet;
+} plane_frame;
+
+inline plane_frame plane_load(__global const frame_rec *f, int k, int sheet)
+{
+    plane_frame pf;
+    for (int m = 0; m < 9; ++m) pf.U[m] = f->U[m];
+    pf.center = (real3)(f->center[0], f->center[1], f->center[2]);
+    pf.k = k;
+    pf.i = k == 0 ? 1 : 0;
+    pf.j = k == 2 ? 1 : 2;
+    pf.li = f->lam[pf.i];
+    pf.lj = f->lam[pf.j];
+    pf.lk = f->lam[pf.k];
+    pf.bi = f->beta[pf.i];
+    pf.bj = f->beta[pf.j];
+    pf.bk = f->beta[pf.k];
+    pf.gamma = f->gamma;
+    pf.sheet = sheet;
+    return pf;
+}
+
+/* R(x, y) = lam_i x^2 + 2 beta_i x + lam_j y^2 + 2 beta_j y + gamma */
+inline real plane_R(const plane_frame *pf, real x, real y)
+{
+    return pf->li * x * x + 2 * pf->bi * x + pf->lj * y * y + 2 * pf->bj * y + pf->gamma;
+}
+
+/* Height t of the heightfield at (x, y); false where it is undefined. */
+inline bool plane_height(const plane_frame *pf, real x, real y, real *t)
+{
+    real R = plane_R(pf, x, y);
+    if (pf->lk != 0) {
+        real H = -R / pf->lk;
+        if (H < 0) return false;
+        *t = pf->sheet * sqrt(H);
+    } else {
+        *t = -R / (2 * pf->bk);
+    }
+    return true;
+}
+
+/* Height where the heightfield is known to be defined (rounding may make H slightly < 0). */
+inline real plane_height_clamped(const plane_frame *pf, real x, real y)
+{
+    real R = plane_R(pf, x, y);
+    if (pf->lk != 0) return pf->sheet * sqrt(fmax(-R / pf->lk, (real)0));
+    return -R / (2 * pf->bk);
+}
+
+/* Can plane k own a point of [x0,x1] x [y0,y1]?  (false: an in-plane normal component
+ * exceeds |n_k| everywhere there; the heightfield is known to be defined) */
+inline bool sub_rect_owned(const plane_frame *pf, real x0, real x1, real y0, real y1)
+{
+    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
+    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
+    real nk_hi;
+    if (pf->lk != 0) {
+        real2 Px = quad_range(pf->li, pf->bi, x0, x1);
+        real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
+        real Rlo = Px.x + Sy.x + pf->gamma, Rhi = Px.y + Sy.y + pf->gamma;
+        real Hhi = pf->lk > 0 ? -Rlo / pf->lk : -Rhi / pf->lk;
+        nk_hi = fabs(pf->lk) * sqrt(fmax(Hhi, (real)0));
+    } else {
+        nk_hi = fabs(pf->bk);
+    }
+    return !(ni.x > nk_hi || nj.x > nk_hi);
+}
+
+/* device coordinates of local (x, y, t) */
+inline real3 plane_point(const plane_frame *pf, real x, real y, real t)
+{
+    real z[3];
+    z[pf->i] = x;
+    z[pf->j] = y;
+    z[pf->k] = t;
+    return pf->center + (real3)(pf->U[0] * z[0] + pf->U[1] * z[1] + pf->U[2] * z[2],
+                                pf->U[3] * z[0] + pf->U[4] * z[1] + pf->U[5] * z[2],
+                                pf->U[6] * z[0] + pf->U[7] * z[1] + pf->U[8] * z[2]);
+}
+
+inline void emit_sample(__global raw_sample_rec *out, int slot, int cap, real3 p, real radius, int task)
+{
+    if (slot >= cap) return;
+    out[slot].pos[0] = p.x;
+    out[slot].pos[1] = p.y;
+    out[slot].pos[2] = p.z;
+    out[slot].radius = radius;
+    out[slot].task = task;
+    out[slot].pad = 0;
+}
+
+/* Distortion bounds over a rectangle: (delta_hi, delta_lo) with delta_hi = inf where the
+ * heightfield may be vertical; also whether plane k may own a point of it. */
+inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, real y1, bool *owned)
+{
+    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
+    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
+    real nk_lo, nk_hi;
+    if (pf->lk != 0) {
+        real2 Px = quad_range(pf->li, pf->bi, x0, x1);
+        real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
+        real Rlo = Px.x + Sy.x + pf->gamma, Rhi = Px.y + Sy.y + pf->gamma;
+        real Hlo = pf->lk > 0 ? -Rhi / pf->lk : -Rlo / pf->lk;
+        real Hhi = pf->lk > 0 ? -Rlo / pf->lk : -Rhi / pf->lk;
+        nk_lo = fabs(pf->lk) * sqrt(fmax(Hlo, (real)0));
+        nk_hi = fabs(pf->lk) * sqrt(fmax(Hhi, (real)0));
+    } else {
+        nk_lo = nk_hi = fabs(pf->bk);
+    }
+    *owned = !(ni.x > nk_hi || nj.x > nk_hi);
+    real hi = nk_lo > 0 ? sqrt(ni.y * ni.y + nj.y * nj.y + nk_hi * nk_hi) / nk_lo : INFINITY;
+    real lo = nk_hi > 0 ? sqrt(ni.x * ni.x + nj.x * nj.x + nk_lo * nk_lo) / nk_hi : INFINITY;
+    return (real2)(hi, lo);
+}
+
+/* Cover a block [x0,x1] x [y0,y1] known to lie on the CSG surface with samples at the
+ * centers of sub-rectangles whose half-diagonal is at most r / delta, delta bounding the
+ * distortion over that sub-rectangle: every point of a sub-rectangle is then within r (3-D)
+ * of its sample.  Rows are marched in y with the worst distortion of the row; within a row
+ * the width adapts to the local distortion (sx^2 + sy^2 <= 4 r^2 / delta^2).  Shrinking a
+ * rectangle never raises its distortion bound, so each step stays sound.  Sub-rectangles
+ * that plane k owns nowhere are left to the other planes. */
+void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real radius, int task,
+                __global volatile uint *counters, __global raw_sample_rec *samples, int cap_samples)
+{
+    bool owned;
+    real y = y0;
+    real hy = y1 - y0;
+    while (y < y1) {
+        hy = fmin(y1 - y, 2 * hy);
+        real dy = rect_distortion(pf, x0, x1, y, y + hy, &owned).x;
+        if (hy > sqrt((real)2) * radius / dy) hy = sqrt((real)2) * radius / dy;
+        real yb = y + hy >= y1 ? y1 : y + hy;
+        real x = x0, sx = hy;
+        while (x < x1) {
+            real w = fmin(x1 - x, 2 * sx);
+            real dx = rect_distortion(pf, x, x + w, y, yb, &owned).x;
+            sx = sqrt(fmax(4 * radius * radius / (dx * dx) - hy * hy, (real)0));
+            sx = fmax(fmin(sx, w), (real)1e-300);
+            real xb = x + sx >= x1 ? x1 : x + sx;
+            if (sub_rect_owned(pf, x, xb, y, yb)) {
+                real cx = 0.5 * (x + xb), cy = 0.5 * (y + yb);
+                uint slot = atomic_inc(&counters[C_SAMPLES]);
+                emit_sample(samples, slot, cap_samples, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)),
+                            radius, task);
+            }
+            x = xb;
+        }
+        y = yb;
+    }
+}
+
+/* Cover a cell that lies on the CSG surface: split it (no distance queries needed) into
+ * blocks over which the distortion varies little, and fill each block. */
+void fill_cell(const plane_frame *pf, cell_rec c, real radius, __global volatile uint *counters,
+               __global raw_sample_rec *samples, int cap_samples)
+{
+    real4 stack[40];
+    int top = 0;
+    stack[top++] = (real4)(c.x0, c.x1, c.y0, c.y1);
+    while (top > 0) {
+        real4 b = stack[--top];
+        bool owned;
+        real2 dl = rect_distortion(pf, b.x, b.y, b.z, b.w, &owned);
+        if (!owned) continue;
+        real wx = b.y - b.x, wy = b.w - b.z;
+        real s = sqrt((real)2) * radius / dl.x;
+        if (top + 2 <= 40 && wx * wy > 16 * s * s && dl.x > FILL_DELTA_RATIO * dl.y) {
+            if (wx >= wy) {
+                real mid = 0.5 * (b.x + b.y);
+                stack[top++] = (real4)(b.x, mid, b.z, b.w);
+                stack[top++] = (real4)(mid, b.y, b.z, b.w);
+            } else {
+                real mid = 0.5 * (b.z + b.w);
+                stack[top++] = (real4)(b.x, b.y, b.z, mid);
+                stack[top++] = (real4)(b.x, b.y, mid, b.w);
+            }
+            continue;
+        }
+        fill_block(pf, b.x, b.y, b.z, b.w, radius, c.task, counters, samples, cap_samples);
+    }
+}
+
+__kernel void classify(__global const quadric_rec *quadrics, __global const literal_rec *literals,
+                       __global const term_rec *terms, int n_terms,
+                       __global const frame_rec *frames, __global const task_rec *tasks,
+                       __global const cell_rec *cells_in, int n_cells,
+                       __global cell_rec *cells_out, int cap_cells,
+                       __global raw_sample_rec *samples, int cap_samples,
+                       __global volatile uint *counters, real radius, real floor_size)
+{
+    int gid = get_global_id(0);
+    if (gid >= n_cells) return;
+    cell_rec c = cells_in[gid];
+    task_rec t = tasks[c.task];
+    plane_frame pf = plane_load(frames + t.quadric, t.plane, t.sheet);
+
+    /* exact interval bounds over the cell (design note section 2) */
+    real2 Px = quad_range(pf.li, pf.bi, c.x0, c.x1);
+    real2 Sy = quad_range(pf.lj, pf.bj, c.y0, c.y1);
+    real Rlo = Px.x + Sy.x + pf.gamma, Rhi = Px.y + Sy.y + pf.gamma;
+    real nk_lo, nk_hi, t_lo, t_hi;
+    bool whole_domain = true;
+    if (pf.lk != 0) {
+        real Hlo = pf.lk > 0 ? -Rhi / pf.lk : -Rlo / pf.lk;
+        real Hhi = pf.lk > 0 ? -Rlo / pf.lk : -Rhi / pf.lk;
+        if (Hhi < 0) { /* no surface over this cell */
+            atomic_inc(&counters[C_DISCARDED]);
+            return;
+        }
+        whole_domain = Hlo >= 0;
+        Hlo = fmax(Hlo, (real)0);
+        nk_lo = fabs(pf.lk) * sqrt(Hlo);
+        nk_hi = fabs(pf.lk) * sqrt(Hhi);
+        real a = sqrt(Hlo), b = sqrt(Hhi);
+        t_lo = pf.sheet > 0 ? a : -b;
+        t_hi = pf.sheet > 0 ? b : -a;
+    } else {
+        nk_lo = nk_hi = fabs(pf.bk);
+        t_lo = -Rhi / (2 * pf.bk);
+        t_hi = -Rlo / (2 * pf.bk);
+        if (t_lo > t_hi) {
+            real s = t_lo;
+            t_lo = t_hi;
+            t_hi = s;
+        }
+    }
+    real2 ni = abs_linear_range(pf.li, pf.bi, c.x0, c.x1);
+    real2 nj = abs_linear_range(pf.lj, pf.bj, c.y0, c.y1);
+    /* plane k owns no point of the cell: an in-plane normal component dominates everywhere */
+    if (ni.x > nk_hi || nj.x > nk_hi) {
+        atomic_inc(&counters[C_DISCARDED]);
+        return;
+    }
+    /* the patch lies outside the term's bound */
+    if (t_hi < t.zlo[pf.k] || t_lo > t.zhi[pf.k]) {
+        atomic_inc(&counters[C_DISCARDED]);
+        return;
+    }
+
+    /* distortion bound: |dp| <= delta |d(x, y)| over the cell (design note section 2) */
+    real delta = nk_lo > 0 ? sqrt(ni.y * ni.y + nj.y * nj.y + nk_hi * nk_hi) / nk_lo : INFINITY;
+#if WORST_CASE_DISTORTION
+    delta = fmax(delta, sqrt((real)3));
+#endif
+    real wx = c.x1 - c.x0, wy = c.y1 - c.y0;
+    real diag = sqrt(wx * wx + wy * wy);
+    real enough = delta * diag;
+
+    /* corners: 3-D point and d_Q(S, p) */
+    real cx[4] = {c.x0, c.x1, c.x0, c.x1};
+    real cy[4] = {c.y0, c.y0, c.y1, c.y1};
+    real d[4];
+    bool defined[4];
+    real3 p[4];
+    int queries = 0;
+    for (int m = 0; m < 4; ++m) {
+        real h;
+        defined[m] = plane_height(&pf, cx[m], cy[m], &h);
+        if (defined[m]) {
+            p[m] = plane_point(&pf, cx[m], cy[m], h);
+            d[m] = csg_distance(quadrics, literals, terms, n_terms, t, p[m], enough);
+            ++queries;
+        } else {
+            d[m] = NAN;
+        }
+    }
+    atomic_add(&counters[C_QUERIES], (uint)queries);
+
+    /* discard: the corner discs of positive distance cover the cell */
+    bool all_pos = true, all_neg = true;
+    real min_abs = INFINITY;
+    for (int m = 0; m < 4; ++m) {
+        if (!defined[m]) {
+            all_pos = all_neg = false;
+            continue;
+        }
+        all_pos = all_pos && d[m] > 0;
+        all_neg = all_neg && d[m] < 0;
+        min_abs = fmin(min_abs, fabs(d[m]));
+        if (d[m] > 0 && d[m] >= enough) { /* one disc covers the whole cell */
+            atomic_inc(&counters[C_DISCARDED]);
+            return;
+        }
+    }
+    if (all_pos && min_abs >= 0.5 * enough) { /* each disc covers its quarter */
+        atomic_inc(&counters[C_DISCARDED]);
+        return;
+    }
+
+    /* single sample (paper 4.2 special case): a corner on the CSG surface whose splat of
+     * radius r covers the patch's whole 3-D box; the splat radius shrinks to what is needed */
+    real ex = fmax(wx, (real)0), ey = fmax(wy, (real)0), et = t_hi - t_lo;
+    int best = -1;
+    real best_r = INFINITY;
+    for (int m = 0; m < 4; ++m) {
+        if (!defined[m] || !(d[m] < 0)) continue;
+        /* farthest point of the local box [x0,x1]x[y0,y1]x[t_lo,t_hi] from the corner */
+        real h;
+        plane_height(&pf, cx[m], cy[m], &h);
+        real fx = fmax(cx[m] - c.x0, c.x1 - cx[m]);
+        real fy = fmax(cy[m] - c.y0, c.y1 - cy[m]);
+        real ft = fmax(h - t_lo, t_hi - h);
+        real r = sqrt(fx * fx + fy * fy + ft * ft);
+        if (r < best_r) {
+            best_r = r;
+            best = m;
+        }
+    }
+    if (best >= 0 && best_r <= radius) {
+        uint slot = atomic_inc(&counters[C_SAMPLES]);
+        emit_sample(samples, slot, cap_samples, p[best], fmax(best_r, radius * (real)1e-3), c.task);
+        atomic_inc(&counters[C_SINGLE]);
+        return;
+    }
+
+    /* fill: the corner discs of negative distance cover the cell and the heightfield is
+     * defined everywhere: a grid with spacing s <= sqrt 2 r / delta puts every point of the
+     * cell within r / delta (2-D), hence within r (3-D), of a sample */
+    bool covered = false;
+    if (whole_domain && isfinite(delta)) {
+        for (int m = 0; m < 4; ++m)
+            if (defined[m] && d[m] < 0 && -d[m] >= enough) covered = true;
+        if (all_neg && min_abs >= 0.5 * enough) covered = true;
+    }
+    if (covered) {
+        real s = sqrt((real)2) * radius / delta;
+        if ((wx / s + 1) * (wy / s + 1) <= MAX_FILL) {
+            fill_cell(&pf, c, radius, counters, samples, cap_samples);
+            atomic_inc(&counters[C_FILLED]);
+            return;
+        }
+    }
+
+    /* floor: the patch is smaller than the floor and still unresolved */
+    if (sqrt(ex * ex + ey * ey + et * et) < floor_size) {
+        atomic_inc(&counters[C_UNRESOLVED]);
+        return;
+    }
+
+    /* split along the longest edge */
+    uint slot = atomic_add(&counters[C_CELLS], 2u);
+    atomic_inc(&counters[C_SPLIT]);
+    if (slot + 1 >= (uint)cap_cells) return;
+    cell_rec a = c, b = c;
+    a.level = b.level = c.level + 1;
+    if (wx >= wy) {
+        real mid = 0.5 * (c.x0 + c.x1);
+        a.x1 = mid;
+        b.x0 = mid;
+    } else {
+        real mid = 0.5 * (c.y0 + c.y1);
+        a.y1 = mid;
+        b.y0 = mid;
+    }
+    cells_out[slot] = a;
+    cells_out[slot + 1] = b;
+}
+
+/* Per sample: the solid's outward normal and the clip set as a bit mask over the literals of
+ * its term (bit j: literal first + j, other than its own, with |d| < the splat radius). */
+__kernel void finish(__global const quadric_rec *quadrics, __global const literal_rec *literals,
+                     __global const term_rec *terms, __global const task_rec *tasks,
+                     __global const raw_sample_rec *raw, int n,
+                     __global real *normals, __global uint *masks)
+{
+    int gid = get_global_id(0);
+    if (gid >= n) return;
+    raw_sample_rec s = raw[gid];
+    task_rec t = tasks[s.task];
+    real3 p = (real3)(s.pos[0], s.pos[1], s.pos[2]);
+    real3 g = t.sign * quadric_gradient(quadric_load(quadrics, t.quadric), p);
+    g = g / length(g);
+    normals[3 * gid] = g.x;
+    normals[3 * gid + 1] = g.y;
+    normals[3 * gid + 2] = g.z;
+    __global const term_rec *own = terms + t.term;
+    for (int w = 0; w < MASK_WORDS; ++w) masks[MASK_WORDS * gid + w] = 0;
+    for (int j = 0; j < own->count; ++j) {
+        int l = own->first + j;
+        if (l == t.literal) continue;
+        if (fabs(literal_distance(quadrics, literals[l], p)) < s.radius)
+            masks[MASK_WORDS * gid + j / 32] |= 1u << (j % 32);
+    }
+}
