@@ -128,7 +128,10 @@ def root_tasks(dnf: Dnf, packed: PackedScene, frames: list) -> tuple[np.ndarray,
         for qi, s in term:
             f = frames[qi]
             z = (corners - f.center) @ f.U
-            zlo, zhi = z.min(0), z.max(0)
+            # pad by a relative epsilon: surface points on the bound's faces (a box face is
+            # the bound) must not be lost to rounding in the local coordinates
+            pad = 1e-7 * (np.abs(z).max() + np.abs(hi - lo).max())
+            zlo, zhi = z.min(0) - pad, z.max(0) + pad
             for k in range(3):
                 if f.lam[k] != 0.0:
                     sheets = (1, -1)

@@ -441,6 +441,25 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
         atomic_inc(&counters[C_SINGLE]);
         return;
     }
+    /* the same from the cell's center, which reaches a box twice as large: one more query */
+    real center_r = 0.5 * sqrt(ex * ex + ey * ey) ;
+    if (center_r <= radius) {
+        real mx = 0.5 * (c.x0 + c.x1), my = 0.5 * (c.y0 + c.y1), h;
+        if (plane_height(&pf, mx, my, &h)) {
+            real ft = fmax(h - t_lo, t_hi - h);
+            real r = sqrt(center_r * center_r + ft * ft);
+            if (r <= radius) {
+                real3 pc = plane_point(&pf, mx, my, h);
+                atomic_inc(&counters[C_QUERIES]);
+                if (csg_distance(quadrics, literals, terms, n_terms, t, pc, INFINITY) < 0) {
+                    uint slot = atomic_inc(&counters[C_SAMPLES]);
+                    emit_sample(samples, slot, cap_samples, pc, fmax(r, radius * (real)1e-3), c.task);
+                    atomic_inc(&counters[C_SINGLE]);
+                    return;
+                }
+            }
+        }
+    }
 
     /* fill: the corner discs of negative distance cover the cell and the heightfield is
      * defined everywhere: a grid with spacing s <= sqrt 2 r / delta puts every point of the
