@@ -35,7 +35,10 @@ def surface_residuals(samples):
     P = samples.positions
     Qs = dnf.quadrics
     own = Qs[samples.quadrics]
-    on_quadric = np.abs(_values(own, P)) / _grad_norm(own, P)
+    val = np.abs(_values(own, P))
+    gn = _grad_norm(own, P)
+    # a singular point (a cone's apex) has no gradient; it is on the surface iff Q = 0
+    on_quadric = np.divide(val, gn, out=np.where(val == 0.0, 0.0, np.inf), where=gn > 0)
     # signed first-order distance of every point to every quadric
     U = len(Qs)
     dist = np.empty((len(P), U))

@@ -235,8 +235,10 @@ def sample(
                                           capacity, estimate_samples(dnf, radius), progress, max_levels)
     t2 = time.perf_counter()
     timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
-    normals, masks = _finish(ctx, prg, packed, tasks, raw, mask_words)
+    normals, masks = _finish(ctx, prg, packed, frames_rec, tasks, raw, mask_words)
     samples = _assemble(raw, normals, masks, tasks, dnf, packed, radius)
+    if len(samples) == 0:
+        warnings.warn(f"{sc.source}: the solid has no surface; no samples", stacklevel=2)
     timings["finish_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     stats.update(totals)
@@ -350,7 +352,7 @@ def _grow(cap, needed):
     return int(max(2 * cap, needed + needed // 2))
 
 
-def _finish(ctx, prg, packed, tasks, raw, mask_words):
+def _finish(ctx, prg, packed, frames_rec, tasks, raw, mask_words):
     import pyopencl as cl
 
     mf = cl.mem_flags
@@ -362,10 +364,11 @@ def _finish(ctx, prg, packed, tasks, raw, mask_words):
         return normals, masks
     scene = SceneBuffers(ctx, packed)
     tasks_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
+    frames_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=frames_rec)
     raw_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=raw)
     nb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, normals.nbytes)
     mb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, masks.nbytes)
-    cl.Kernel(prg, "finish")(ctx.queue, launch_size(n), (WORK_GROUP,), scene.quadrics, scene.literals, scene.terms, tasks_buf,
+    cl.Kernel(prg, "finish")(ctx.queue, launch_size(n), (WORK_GROUP,), scene.quadrics, scene.literals, scene.terms, frames_buf, tasks_buf,
                raw_buf, np.int32(n), nb, mb)
     cl.enqueue_copy(ctx.queue, normals, nb)
     cl.enqueue_copy(ctx.queue, masks, mb)

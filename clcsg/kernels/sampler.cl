@@ -238,6 +238,10 @@ inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, r
     *owned = !(ni.x > nk_hi || nj.x > nk_hi);
     real hi = nk_lo > 0 ? sqrt(ni.y * ni.y + nj.y * nj.y + nk_hi * nk_hi) / nk_lo : INFINITY;
     real lo = nk_hi > 0 ? sqrt(ni.x * ni.x + nj.x * nj.x + nk_lo * nk_lo) / nk_hi : INFINITY;
+#if WORST_CASE_DISTORTION
+    hi = fmax(hi, sqrt((real)3));
+    lo = hi;
+#endif
     return (real2)(hi, lo);
 }
 
@@ -507,7 +511,8 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
 /* Per sample: the solid's outward normal and the clip set as a bit mask over the literals of
  * its term (bit j: literal first + j, other than its own, with |d| < the splat radius). */
 __kernel void finish(__global const quadric_rec *quadrics, __global const literal_rec *literals,
-                     __global const term_rec *terms, __global const task_rec *tasks,
+                     __global const term_rec *terms, __global const frame_rec *frames,
+                     __global const task_rec *tasks,
                      __global const raw_sample_rec *raw, int n,
                      __global real *normals, __global uint *masks)
 {
@@ -517,7 +522,14 @@ __kernel void finish(__global const quadric_rec *quadrics, __global const litera
     task_rec t = tasks[s.task];
     real3 p = (real3)(s.pos[0], s.pos[1], s.pos[2]);
     real3 g = t.sign * quadric_gradient(quadric_load(quadrics, t.quadric), p);
-    g = g / length(g);
+    real gl = length(g);
+    if (gl > 0) {
+        g = g / gl;
+    } else { /* a singular point (cone apex): the sampling direction stands in */
+        __global const frame_rec *f = frames + t.quadric;
+        real s = t.sheet != 0 ? (real)t.sheet : (real)1;
+        g = s * (real3)(f->U[t.plane], f->U[3 + t.plane], f->U[6 + t.plane]);
+    }
     normals[3 * gid] = g.x;
     normals[3 * gid + 1] = g.y;
     normals[3 * gid + 2] = g.z;
