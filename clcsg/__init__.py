@@ -7,3 +7,5 @@ from .solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sp
 __version__ = "0.1.0"
 from .scene import Scene, load, save
 from .host.device import devices
+from .host.sampler import sample
+from .samples import Samples

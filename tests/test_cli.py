@@ -294,3 +294,33 @@ def test_python_m_info_json_file(tmp_scene):
     assert json.loads(r.stdout)["stats"]["terms"] == 2
     r = run_module("info", str(path), "--bound", "1,2")
     assert r.returncode == 2 and "Traceback" not in r.stderr
+
+
+def test_sample_writes_ply_and_stats(tmp_path):
+    import json as _json
+
+    from clcsg.cli import main as _main
+    from clcsg.samples import read_ply
+
+    out, stats = tmp_path / "s.ply", tmp_path / "s.json"
+    scene = tmp_path / "scene.json"
+    import clcsg as _c
+
+    _c.save(_c.box(2) - _c.sphere(1.2), scene)
+    assert _main(["sample", str(scene), "-r", "0.1", "-o", str(out), "--stats", str(stats), "--no-progress"]) == 0
+    back = read_ply(out)
+    st = _json.loads(stats.read_text())
+    assert len(back["positions"]) == st["samples"] > 0
+    assert {"distance_queries", "clip_indices", "levels", "cells_per_level"} <= set(st)
+
+
+def test_sample_rejects_bad_radius(tmp_path, capsys):
+    from clcsg.cli import main as _main
+
+    scene = tmp_path / "scene.json"
+    import clcsg as _c
+
+    _c.save(_c.sphere(1), scene)
+    assert _main(["sample", str(scene), "-r", "0", "-o", str(tmp_path / "x.ply")]) == 2
+    err = capsys.readouterr().err
+    assert "radius" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
