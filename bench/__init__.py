@@ -1,0 +1,1 @@
+"""Benchmarks: ``python -m bench <part>``; each part writes JSON to bench/results/."""
