@@ -57,3 +57,33 @@ def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 
     cam = _camera(camera, dnf.bound)
     shade = Shading().with_options(background=background, **shading)
     return trace(context_of(device), dnf, cam, shade, precision)
+
+
+def render(samples, camera: Camera | None = None, device=None, background=(1.0, 1.0, 1.0),
+           precision: str = "auto", surface_aligned: bool = True, backface_culling: bool = True,
+           stats: bool = True, **shading) -> Image:
+    """Pixel-perfect splat rendering of :class:`~clcsg.samples.Samples` (paper section 6).
+
+    Per sample, one work-item loops over the screen bound of its splat; per pixel it solves
+    the view ray against the sample's quadric near the sample (eqs. 5, 6), keeps the hit if it
+    lies within the sample's radius and inside every literal of its clip set, and depth-tests
+    it with a 64-bit ``atom_min``; a resolve pass recomputes the winning hit and shades it like
+    :func:`raytrace`.
+
+    ``surface_aligned``: bound each splat by a box aligned with its normal whose height comes
+    from the eigenvalue bound of the patch (paper section 6.1) instead of the whole ball.
+    ``backface_culling``: skip splats and fragments that face away from the eye (only valid
+    from outside; turned off automatically when the eye is inside the solid).  ``stats``:
+    count fragments, clip evaluations, ... with atomic counters (``Image.stats``; off is a
+    little faster).  Other arguments as in :func:`raytrace`.  Requires 64-bit atomics
+    (``cl_khr_int64_extended_atomics``), else :class:`~clcsg.errors.DeviceError`.
+    """
+    from .host.raytracer import Shading, context_of
+    from .host.splat import rasterize
+
+    if not hasattr(samples, "device_buffers"):
+        raise UsageError(f"render needs Samples (see clcsg.sample), got {type(samples).__name__}")
+    cam = _camera(camera, samples.dnf.bound)
+    shade = Shading().with_options(background=background, **shading)
+    return rasterize(context_of(device), samples, cam, shade, precision, surface_aligned,
+                     backface_culling, stats)

@@ -1,0 +1,50 @@
+/* Resolve pass of the splat renderer, one work-item per pixel.  The framebuffer word holds
+ * (float depth bits << 32 | sample index) of the nearest accepted fragment (splat.cl).  The hit
+ * is recomputed from the winning sample's quadric and the pixel's ray, solved near the sample
+ * as in splat.cl (o = e + ((s - e).v) v, Q(o + tau v) = 0, eqs. 5, 6) in `real` precision,
+ * taking the root whose depth (s - e).v + tau is nearest the stored float depth.  Outputs the
+ * depth (distance along the unit view ray), the quadric id and the color shaded with shade.h
+ * from the solid's outward normal sign * grad Q(p) (eq. 4) — the same shading as the ray
+ * tracer. */
+#include "quadric.h"
+#include "shade.h"
+
+#define EMPTY_KEY 0xffffffffffffffffUL
+
+__kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
+                      __global const view_rec *view, __global const ulong *framebuffer,
+                      __global float *depth_out, __global int *id_out, __global uchar4 *rgba_out)
+{
+    int j = get_global_id(0), i = get_global_id(1);
+    if (i >= view->height || j >= view->width) return;
+    int pix = i * view->width + j;
+    ulong key = framebuffer[pix];
+    if (key == EMPTY_KEY) {
+        depth_out[pix] = INFINITY;
+        id_out[pix] = -1;
+        rgba_out[pix] = shade_background(view);
+        return;
+    }
+    uint idx = (uint)(key & 0xffffffffUL);
+    real stored = (real)as_float((uint)(key >> 32));
+    __global const sample_rec *sp = &samples[idx];
+    quadric q = quadric_load(quadrics, sp->quadric);
+    real3 e = view_eye(view);
+    real3 v = view_ray(view, i, j);
+    real3 a = vload3(0, sp->pos) - e;
+    real tc = dot(a, v);
+    real3 o = e + tc * v;
+    real tau[2];
+    int nr = quadric_intersect(q, o, v, &tau[0], &tau[1]);
+    real t = stored - tc; /* fallback: the stored depth (the roots vanished in rounding) */
+    if (nr > 0) {
+        t = tau[0];
+        if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
+    }
+    real3 p = o + t * v;
+    real3 g = sp->sign * quadric_gradient(q, p);
+    depth_out[pix] = (float)(tc + t);
+    id_out[pix] = sp->quadric;
+    rgba_out[pix] = shade(view, vload4(0, quadrics[sp->quadric].color), convert_float3(normalize(g)),
+                          convert_float3(v));
+}

@@ -1,0 +1,294 @@
+/* Splat rasterizer with local quadric ray tracing and clipping (paper section 6, design note
+ * section 5).  One work-item per sample s (radius r, quadric Q, literal sign, clip set C):
+ *
+ * 1. screen bound: the projection of the ball B(s, r) (exact tangent bound, screen_ball);
+ *    with SURFACE_ALIGNED also the projection of a flat cylinder aligned with the normal that
+ *    holds the quadric patch inside the ball (splat_slab; paper section 6.1), intersected;
+ * 2. per pixel of the bound, with unit view ray v from the eye e: skip rays that miss the ball
+ *    (with SURFACE_ALIGNED: whose chord through the ball misses the slab); then solve near the
+ *    sample: o = e + ((s - e).v) v, Q(o + tau v) = 0
+ *    (eqs. 5, 6), depth = (s - e).v + tau.  The root nearer the eye is tried first, the other
+ *    one if it fails: |p - s| <= r, depth > 0, and every literal of C holds, s_c Q_c(p) <= 0;
+ * 3. depth test: atom_min of ((ulong)as_uint((float)depth) << 32 | sample index) into the
+ *    64-bit framebuffer (positive floats order like their bit patterns), after a plain read
+ *    that skips atomics which cannot win.
+ *
+ * BACKFACE_CULLING (outside views only; the host turns it off when the eye is inside the
+ * solid) skips splats whose patch faces away from the eye everywhere (splat_backfacing) and
+ * fragments whose outward normal s grad Q(p) faces away from the view ray: a back-facing point
+ * is where a ray leaves the solid, so a front-facing surface point is nearer on the same ray.
+ *
+ * Build options: SURFACE_ALIGNED, BACKFACE_CULLING, CLCSG_STATS (0 or 1).  With CLCSG_STATS the
+ * counters of stats.h are accumulated per work-item and added with one atomic each at the end.
+ */
+#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
+#pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
+#include "quadric.h"
+#include "shade.h"
+
+#ifndef SURFACE_ALIGNED
+#define SURFACE_ALIGNED 1
+#endif
+#ifndef BACKFACE_CULLING
+#define BACKFACE_CULLING 1
+#endif
+#ifndef CLCSG_STATS
+#define CLCSG_STATS 1
+#endif
+
+/* counter slots (clcsg/host/splat.py: COUNTERS) */
+#define C_SPLATS_DRAWN 0
+#define C_SPLATS_CULLED 1
+#define C_SPLATS_OFFSCREEN 2
+#define C_BOUND_PIXELS 3
+#define C_FRAGMENTS 4
+#define C_CLIP_EVALS 5
+#define C_FRAGMENTS_PASSED 6
+#define C_ATOMICS 7
+#define N_COUNTERS 8
+
+/* rounding slack for conservative tests, relative to the magnitudes involved */
+#define SLACK (64 * REAL_EPS)
+
+typedef struct {
+    int x0, y0, x1, y1; /* inclusive pixel range; empty if x0 > x1 or y0 > y1 */
+} rect;
+
+inline rect rect_full(__global const view_rec *vw) { return (rect){0, 0, vw->width - 1, vw->height - 1}; }
+
+inline rect rect_meet(rect a, rect b)
+{
+    return (rect){max(a.x0, b.x0), max(a.y0, b.y0), min(a.x1, b.x1), min(a.y1, b.y1)};
+}
+
+/* Pixels whose center ray may pass through continuous image range [xmin, xmax] x [ymin, ymax]:
+ * centers are at j + 0.5, so j in [xmin - 0.5, xmax - 0.5]; one extra pixel each side absorbs
+ * rounding (the per-pixel tests are exact, so slack costs only time). */
+inline rect rect_from_range(__global const view_rec *vw, real xmin, real xmax, real ymin, real ymax)
+{
+    real lim = 4 * (real)max(vw->width, vw->height) + 4; /* keeps the int conversion sane */
+    xmin = clamp(xmin, -lim, lim); xmax = clamp(xmax, -lim, lim);
+    ymin = clamp(ymin, -lim, lim); ymax = clamp(ymax, -lim, lim);
+    rect r = {(int)floor(xmin - 0.5f) , (int)floor(ymin - 0.5f), (int)ceil(xmax - 0.5f), (int)ceil(ymax - 0.5f)};
+    return rect_meet(r, rect_full(vw));
+}
+
+/* 1-D tangent bound of a disc: the slopes u = X / Z of the two lines through the origin that
+ * touch the disc of radius r around (cx, cz), cz > r:
+ * (cx - u cz)^2 = r^2 (1 + u^2)  =>  u = (cx cz -+ r sqrt(cx^2 + cz^2 - r^2)) / (cz^2 - r^2). */
+inline real2 tangent_slopes(real cx, real cz, real r)
+{
+    real den = cz * cz - r * r;
+    real w = r * sqrt(fmax(cx * cx + cz * cz - r * r, (real)0));
+    return (real2)((cx * cz - w) / den, (cx * cz + w) / den);
+}
+
+/* Screen bound of the ball B(s, r): exact (the image x of a point only depends on its X and
+ * Z camera coordinates, so the ball's x range is the tangent bound of its XZ disc; same for
+ * y).  Returns an empty rect if the ball is behind the eye and the full screen if it reaches
+ * the eye plane. */
+inline rect screen_ball(__global const view_rec *vw, real3 a /* s - e */, real r)
+{
+    real cz = dot(a, vload3(0, vw->forward));
+    if (cz + r <= 0) return (rect){0, 0, -1, -1};
+    real rr = r * (1 + SLACK) + SLACK * length(a);
+    if (cz <= rr * 1.0001) return rect_full(vw);
+    real cx = dot(a, vload3(0, vw->right)), cy = dot(a, vload3(0, vw->up));
+    real2 ux = tangent_slopes(cx, cz, rr), uy = tangent_slopes(cy, cz, rr);
+    real f = vw->focal;
+    real hw = 0.5 * vw->width, hh = 0.5 * vw->height;
+    return rect_from_range(vw, hw + f * ux.x, hw + f * ux.y, hh - f * uy.y, hh - f * uy.x);
+}
+
+/* Surface-aligned splat bound (paper section 6.1; an eigenvalue bound in place of eq. 23).
+ * Frame: n = grad Q(s) / |grad Q(s)| and two tangents t1, t2.  A patch point p = s + w with
+ * |w| <= r and Q(p) = 0 satisfies (eq. 8) 0 = Q(s) + g.w + w^T A w, g = grad Q(s), so its
+ * height h = n.w = -(Q(s) + w^T A w) / |g|.  Since lam_min |w|^2 <= w^T A w <= lam_max |w|^2
+ * and 0 <= |w|^2 <= r^2:
+ *     h in [-(Q(s) + max(lam_max, 0) r^2) / |g|,  -(Q(s) + min(lam_min, 0) r^2) / |g|],
+ * and |h| <= r.  Both follow from Q(p) = 0 and |w| <= r alone, so every point a fragment can
+ * accept lies in the slab h_lo <= n.(x - s) <= h_hi and in the cylinder of radius r around
+ * the normal axis: conservative.  A plane (A = 0) gives a flat disc; the bound is never taller
+ * than the ball.  (The paper bounds with a box; the cylinder is the box minus its corners.) */
+typedef struct {
+    real3 t1, t2, n;
+    real h_lo, h_hi, r;
+} splat_slab;
+
+inline bool make_slab(quadric q, real lam_min, real lam_max, real3 s, real r, splat_slab *b)
+{
+    real3 g = quadric_gradient(q, s);
+    real gl = length(g);
+    if (!(gl > 0)) return false;
+    real3 n = g / gl;
+    real3 h = fabs(n.x) < 0.7 ? (real3)(1, 0, 0) : (real3)(0, 1, 0);
+    real3 t1 = normalize(cross(n, h));
+    real3 t2 = cross(n, t1);
+    real qs = quadric_value(q, s);
+    real pad = SLACK * (r + length(s)) + 1e-6 * r;
+    b->t1 = t1; b->t2 = t2; b->n = n;
+    b->h_lo = fmax(-(qs + fmax(lam_max, (real)0) * r * r) / gl, -r) - pad;
+    b->h_hi = fmin(-(qs + fmin(lam_min, (real)0) * r * r) / gl, r) + pad;
+    b->r = r + pad;
+    return true;
+}
+
+/* Range of X / Z over the circle c + r (cos(phi) u + sin(phi) w) (camera coordinates X, Z;
+ * the circle in front of the eye).  d/dphi (X / Z) = 0 gives  A sin(phi) + B cos(phi) + C = 0
+ * with A = u_z c_X - u_X c_z, B = w_X c_z - w_z c_X, C = r (w_X u_z - u_X w_z), i.e.
+ * phi = atan2(A, B) -+ acos(-C / sqrt(A^2 + B^2)): the two extremes. */
+inline real2 circle_slopes(real cx, real cz, real ux, real uz, real wx, real wz, real r)
+{
+    real A = uz * cx - ux * cz, B = wx * cz - wz * cx, C = r * (wx * uz - ux * wz);
+    real ab = sqrt(A * A + B * B);
+    real base = atan2(A, B);
+    real dphi = ab > 0 ? acos(clamp(-C / ab, (real)-1, (real)1)) : 0;
+    real lo = INFINITY, hi = -INFINITY;
+    for (int k = 0; k < 2; ++k) {
+        real phi = base + (k ? dphi : -dphi);
+        real c = cos(phi), sn = sin(phi);
+        real u = (cx + r * (c * ux + sn * wx)) / (cz + r * (c * uz + sn * wz));
+        lo = fmin(lo, u);
+        hi = fmax(hi, u);
+    }
+    return (real2)(lo, hi);
+}
+
+/* Screen bound of the cylinder {|x - s - h n| <= r in the tangent plane, h_lo <= h <= h_hi}:
+ * it is the convex hull of its two end discs, so its projection is the hull of the two
+ * projected discs (ellipses) and its bounding rect is the union of theirs (circle_slopes per
+ * axis; a few pixels of slack absorb the rounding of the trigonometry).  Full screen if a disc
+ * is not entirely in front of the eye. */
+inline rect screen_slab(__global const view_rec *vw, real3 a /* s - e */, splat_slab *b)
+{
+    real3 fw = vload3(0, vw->forward), rt = vload3(0, vw->right), up = vload3(0, vw->up);
+    real f = vw->focal, hw = 0.5 * vw->width, hh = 0.5 * vw->height;
+    real3 u = (real3)(dot(b->t1, rt), dot(b->t1, up), dot(b->t1, fw));
+    real3 w = (real3)(dot(b->t2, rt), dot(b->t2, up), dot(b->t2, fw));
+    real xmin = INFINITY, xmax = -INFINITY, ymin = INFINITY, ymax = -INFINITY;
+    for (int k = 0; k < 2; ++k) {
+        real3 c = a + (k ? b->h_hi : b->h_lo) * b->n;
+        real3 cc = (real3)(dot(c, rt), dot(c, up), dot(c, fw));
+        if (!(cc.z - b->r * sqrt(u.z * u.z + w.z * w.z) > SLACK * length(c) + b->r * 1e-6)) return rect_full(vw);
+        real2 sx = circle_slopes(cc.x, cc.z, u.x, u.z, w.x, w.z, b->r);
+        real2 sy = circle_slopes(cc.y, cc.z, u.y, u.z, w.y, w.z, b->r);
+        xmin = fmin(xmin, hw + f * sx.x); xmax = fmax(xmax, hw + f * sx.y);
+        ymin = fmin(ymin, hh - f * sy.y); ymax = fmax(ymax, hh - f * sy.x);
+    }
+    real slack = 1e-3 + 1e3 * REAL_EPS * (fabs(xmax - hw) + fabs(ymax - hh) + fabs(xmin - hw) + fabs(ymin - hh));
+    return rect_from_range(vw, xmin - slack, xmax + slack, ymin - slack, ymax + slack);
+}
+
+/* Per-pixel coarse test of the surface-aligned bound: does the part of the ray inside the ball
+ * meet the slab h_lo <= n.(x - s) <= h_hi?  (ball and slab both hold every acceptable patch
+ * point, so this is exact for their intersection: a flat splat seen at an angle costs the
+ * area of its projected disc.)  The height along the ray is linear in t,
+ * so over the ball's chord [tc - m, tc + m] it ranges between its values at the ends. */
+inline bool chord_meets_slab(splat_slab *b, real3 a, real3 v, real tc, real m)
+{
+    real h0 = -dot(b->n, a) + (tc - m) * dot(b->n, v);
+    real h1 = -dot(b->n, a) + (tc + m) * dot(b->n, v);
+    return fmax(h0, h1) >= b->h_lo && fmin(h0, h1) <= b->h_hi;
+}
+
+/* Back-facing test for a whole splat (outside views).  For a patch point p = s + w
+ * (|w| <= r, Q(p) = 0) the solid's outward normal is sign grad Q(p) = sign (g + 2 A w) and
+ *     grad Q(p).(p - e) = g.a + g.w + 2 (A w).a + 2 w^T A w        (a = s - e)
+ *                       = g.a - Q(s) + 2 (A w).a + w^T A w          (g.w = -Q(s) - w^T A w)
+ * with |2 (A w).a| <= 2 L r |a| and |w^T A w| <= L r^2, L = max(|lam_min|, |lam_max|).  If
+ * sign (g.a - Q(s)) exceeds 2 L r |a| + L r^2, every patch point faces away from the eye
+ * (its normal has a positive component along the ray from the eye): the splat is culled. */
+inline bool splat_backfacing(quadric q, real lam_min, real lam_max, int sign, real3 s, real3 a, real r)
+{
+    real3 g = quadric_gradient(q, s);
+    real qs = quadric_value(q, s);
+    real L = fmax(fabs(lam_min), fabs(lam_max));
+    real al = length(a);
+    real lhs = sign * (dot(g, a) - qs);
+    real slack = SLACK * (length(g) * al + fabs(qs)) * 4;
+    return lhs > 2 * L * r * al + L * r * r + slack;
+}
+
+__kernel void splat(__global const quadric_rec *quadrics, __global const sample_rec *samples, int n_samples,
+                    __global const literal_rec *clip, __global const view_rec *view,
+                    __global ulong *framebuffer, __global ulong *counters)
+{
+    int idx = get_global_id(0);
+    if (idx >= n_samples) return;
+    ulong cnt[N_COUNTERS] = {0, 0, 0, 0, 0, 0, 0, 0};
+
+    __global const sample_rec *sp = &samples[idx];
+    real3 s = vload3(0, sp->pos);
+    real r = sp->radius;
+    int sign = sp->sign;
+    quadric q = quadric_load(quadrics, sp->quadric);
+    real lam_min = quadrics[sp->quadric].lam_min, lam_max = quadrics[sp->quadric].lam_max;
+    real3 e = view_eye(view);
+    real3 a = s - e;
+    int W = view->width;
+
+    rect bound = screen_ball(view, a, r);
+#if BACKFACE_CULLING
+    if (bound.x0 <= bound.x1 && bound.y0 <= bound.y1 && splat_backfacing(q, lam_min, lam_max, sign, s, a, r)) {
+        cnt[C_SPLATS_CULLED] = 1;
+        bound = (rect){0, 0, -1, -1};
+    }
+#endif
+#if SURFACE_ALIGNED
+    splat_slab slab;
+    bool has_slab = make_slab(q, lam_min, lam_max, s, r, &slab);
+    if (has_slab && bound.x0 <= bound.x1 && bound.y0 <= bound.y1) bound = rect_meet(bound, screen_slab(view, a, &slab));
+#endif
+    if (bound.x0 <= bound.x1 && bound.y0 <= bound.y1)
+        cnt[C_SPLATS_DRAWN] = 1;
+    else if (!cnt[C_SPLATS_CULLED])
+        cnt[C_SPLATS_OFFSCREEN] = 1;
+
+    int c0 = sp->clip_first, nc = sp->clip_count;
+    for (int y = bound.y0; y <= bound.y1; ++y) {
+        for (int x = bound.x0; x <= bound.x1; ++x) {
+            cnt[C_BOUND_PIXELS]++;
+            real3 v = view_ray(view, y, x);
+            real tc = dot(a, v);
+            real3 w0 = tc * v - a; /* o - s: o = e + tc v, the ray point closest to s */
+            real m2 = r * r - dot(w0, w0);
+            if (m2 < 0) continue; /* the ray misses the ball */
+#if SURFACE_ALIGNED
+            if (has_slab && !chord_meets_slab(&slab, a, v, tc, sqrt(m2))) continue;
+#endif
+            cnt[C_FRAGMENTS]++;
+            real3 o = e + tc * v;
+            real tau[2];
+            int nr = quadric_intersect(q, o, v, &tau[0], &tau[1]);
+            for (int k = 0; k < nr; ++k) { /* tau[0] <= tau[1]: nearer the eye first */
+                real3 w = w0 + tau[k] * v; /* p - s */
+                if (dot(w, w) > r * r) continue;
+                real depth = tc + tau[k];
+                if (!(depth > 0)) continue;
+                real3 p = o + tau[k] * v;
+#if BACKFACE_CULLING
+                if (sign * dot(quadric_gradient(q, p), v) > 0) continue;
+#endif
+                bool keep = true;
+                for (int c = 0; c < nc && keep; ++c) {
+                    literal_rec lit = clip[c0 + c];
+                    cnt[C_CLIP_EVALS]++;
+                    keep = lit.sign * quadric_value(quadric_load(quadrics, lit.quadric), p) <= 0;
+                }
+                if (!keep) continue;
+                cnt[C_FRAGMENTS_PASSED]++;
+                ulong key = ((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx;
+                __global ulong *slot = &framebuffer[y * W + x];
+                if (key < *slot) {
+                    cnt[C_ATOMICS]++;
+                    atom_min(slot, key);
+                }
+                break;
+            }
+        }
+    }
+#if CLCSG_STATS
+    for (int k = 0; k < N_COUNTERS; ++k)
+        if (cnt[k]) atom_add(&counters[k], cnt[k]);
+#endif
+}
