@@ -245,38 +245,95 @@ inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, r
     return (real2)(hi, lo);
 }
 
+/* Slope bounds of the heightfield over a rectangle: (max |dt/dx|, max |dt/dy|) =
+ * (max |n_i|, max |n_j|) / min |n_k|, and min |n_k| itself. */
+inline real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real y1)
+{
+    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
+    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
+    real nk_lo;
+    if (pf->lk != 0) {
+        real2 Px = quad_range(pf->li, pf->bi, x0, x1);
+        real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
+        real Hlo = pf->lk > 0 ? -(Px.y + Sy.y + pf->gamma) / pf->lk : -(Px.x + Sy.x + pf->gamma) / pf->lk;
+        nk_lo = fabs(pf->lk) * sqrt(fmax(Hlo, (real)0));
+    } else {
+        nk_lo = fabs(pf->bk);
+    }
+    real mx = ni.y / nk_lo, my = nj.y / nk_lo;
+#if WORST_CASE_DISTORTION
+    /* the paper's isotropic bound |dp| <= delta |d| with delta >= sqrt 3: equal slopes
+     * m = sqrt((delta^2 - 1) / 2) give (m a + m b)^2 <= (delta^2 - 1)(a^2 + b^2) */
+    real dl = fmax(sqrt(1 + mx * mx + my * my), sqrt((real)3));
+    mx = my = sqrt((dl * dl - 1) / 2);
+#endif
+    return (real3)(mx, my, nk_lo);
+}
+
+/* Largest half-width a with a^2 + b^2 + (mx a + my b)^2 <= r^2 (0 if none). */
+inline real half_width(real mx, real my, real b, real r)
+{
+    real A = 1 + mx * mx, B = mx * my * b, C = b * b * (1 + my * my) - r * r;
+    real disc = B * B - A * C;
+    return disc > 0 ? fmax((-B + sqrt(disc)) / A, (real)0) : 0;
+}
+
 /* Cover a block [x0,x1] x [y0,y1] known to lie on the CSG surface with samples at the
- * centers of sub-rectangles whose half-diagonal is at most r / delta, delta bounding the
- * distortion over that sub-rectangle: every point of a sub-rectangle is then within r (3-D)
- * of its sample.  Rows are marched in y with the worst distortion of the row; within a row
- * the width adapts to the local distortion (sx^2 + sy^2 <= 4 r^2 / delta^2).  Shrinking a
- * rectangle never raises its distortion bound, so each step stays sound.  Sub-rectangles
- * that plane k owns nowhere are left to the other planes. */
+ * centers of sub-rectangles of half-sizes (a, b).  Anisotropic bound (beyond the paper's
+ * isotropic distortion): for two points of a sub-rectangle, p2 - p1 = (dx, dy, t2 - t1) and
+ * by the mean value theorem |t2 - t1| <= mx |dx| + my |dy| with mx, my the slope bounds over
+ * the sub-rectangle, so every point is within sqrt(a^2 + b^2 + (mx a + my b)^2) <= r of the
+ * center.  On a steep patch only the steep direction shrinks.  Rows are marched in y, each
+ * with the slopes over the whole row (shrinking a rectangle never raises them); (a, b)
+ * maximize the area a b on the constraint.  Sub-rectangles that plane k owns nowhere are
+ * left to the other planes; a row owned everywhere reserves its output with one atomic. */
 void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real radius, int task,
                 __global volatile uint *counters, __global raw_sample_rec *samples, int cap_samples)
 {
-    bool owned;
+    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
+    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
     real y = y0;
     real hy = y1 - y0;
     while (y < y1) {
         hy = fmin(y1 - y, 2 * hy);
-        real dy = rect_distortion(pf, x0, x1, y, y + hy, &owned).x;
-        if (hy > sqrt((real)2) * radius / dy) hy = sqrt((real)2) * radius / dy;
-        real yb = y + hy >= y1 ? y1 : y + hy;
-        real x = x0, sx = hy;
-        while (x < x1) {
-            real w = fmin(x1 - x, 2 * sx);
-            real dx = rect_distortion(pf, x, x + w, y, yb, &owned).x;
-            sx = sqrt(fmax(4 * radius * radius / (dx * dx) - hy * hy, (real)0));
-            sx = fmax(fmin(sx, w), (real)1e-300);
-            real xb = x + sx >= x1 ? x1 : x + sx;
-            if (sub_rect_owned(pf, x, xb, y, yb)) {
-                real cx = 0.5 * (x + xb), cy = 0.5 * (y + yb);
-                uint slot = atomic_inc(&counters[C_SAMPLES]);
-                emit_sample(samples, slot, cap_samples, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)),
-                            radius, task);
+        real3 m = rect_slopes(pf, x0, x1, y, y + hy);
+        /* best aspect for these slopes: a few angles suffice (the area is flat at its max) */
+        real best_b = 0, best_area = -1;
+        for (int k = 1; k < 16; ++k) {
+            real th = (real)(M_PI / 32) * k, cs = cos(th), sn = sin(th);
+            real e = m.x * cs + m.y * sn;
+            real rho = radius / sqrt(1 + e * e);
+            if (rho * rho * cs * sn > best_area) {
+                best_area = rho * rho * cs * sn;
+                best_b = rho * sn;
             }
-            x = xb;
+        }
+        if (hy > 2 * best_b) {
+            hy = 2 * best_b;
+            m = rect_slopes(pf, x0, x1, y, y + hy);
+        }
+        real yb = y + hy >= y1 ? y1 : y + hy;
+        real sx = 2 * half_width(m.x, m.y, 0.5 * hy, radius);
+        sx = fmax(sx, (real)1e-12 * radius);
+        int nx = max(1, (int)ceil((x1 - x0) / sx));
+        sx = (x1 - x0) / nx;
+        real cy = 0.5 * (y + yb);
+        if (ni.y <= m.z && nj.y <= m.z) { /* owned everywhere */
+            uint base = atomic_add(&counters[C_SAMPLES], (uint)nx);
+            for (int a = 0; a < nx; ++a) {
+                real cx = x0 + (a + (real)0.5) * sx;
+                emit_sample(samples, base + a, cap_samples,
+                            plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), radius, task);
+            }
+        } else {
+            for (int a = 0; a < nx; ++a) {
+                real xa = x0 + a * sx;
+                if (!sub_rect_owned(pf, xa, xa + sx, y, yb)) continue;
+                real cx = xa + (real)0.5 * sx;
+                uint slot = atomic_inc(&counters[C_SAMPLES]);
+                emit_sample(samples, slot, cap_samples,
+                            plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), radius, task);
+            }
         }
         y = yb;
     }
