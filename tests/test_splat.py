@@ -377,3 +377,68 @@ def test_single_splat_fragments_are_exact(cl_context, name):
             assert np.allclose(img.depth[both], ref[both], rtol=1e-5)
             written += int(img.mask.sum())
     assert written > 500
+
+
+# -- `clcsg render` (clcsg.render.cli_render; wired into clcsg/cli.py by its owner) --------------
+
+
+def _run_cli(argv):
+    import argparse
+
+    from clcsg.render import add_render_parser, cli_render
+
+    parser = argparse.ArgumentParser(prog="clcsg")
+    add_render_parser(parser.add_subparsers(dest="command"))
+    return cli_render(parser.parse_args(["render"] + argv))
+
+
+def test_cli_render(cl_context, tmp_path, capsys):
+    import json
+
+    from PIL import Image as PILImage
+
+    path = tmp_path / "part.json"
+    clcsg.save(THREE_CYL, path)
+    out = {}
+    for method in ("splat", "raytrace"):
+        png, dep, ids, st = (tmp_path / f"{method}.{ext}" for ext in ("png", "d.npy", "i.npy", "json"))
+        rc = _run_cli([str(path), "-o", str(png), "--method", method, "--size", "64x48", "-r", "0.1",
+                       "--depth", str(dep), "--ids", str(ids), "--stats", str(st), "--background", "0,0,255"])
+        assert rc == 0
+        rgba = np.asarray(PILImage.open(png))
+        assert rgba.shape == (48, 64, 4)
+        d, i = np.load(dep), np.load(ids)
+        assert d.dtype == np.float32 and i.dtype == np.int32 and d.shape == i.shape == (48, 64)
+        assert np.all(rgba[i < 0][:, :3] == [0, 0, 255])
+        stats = json.loads(st.read_text())
+        assert stats["method"] == method
+        out[method] = (rgba, d, i)
+    assert "splats" in capsys.readouterr().out
+    assert (out["splat"][2] == out["raytrace"][2]).mean() >= 0.999
+    # explicit camera: the target pixel shows the surface point straight ahead
+    png = tmp_path / "eye.png"
+    ids = tmp_path / "eye.npy"
+    assert _run_cli([str(path), "-o", str(png), "--size", "33x25", "--eye", "0.8,-5,0.7", "--target", "0.8,0,0.7",
+                     "--fov", "30", "--method", "raytrace", "--ids", str(ids)]) == 0
+    i = np.load(ids)
+    assert i[12, 16] >= 0 and i[0, 0] == -1
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--size", "64x0"], "--size"),
+        (["--size", "big"], "--size"),
+        (["--eye", "1,2"], "--eye"),
+        (["--background", "0,0"], "--background"),
+        (["--background", "0,0,-1"], "--background"),
+        (["-r", "0"], "--radius"),
+        (["--fov", "180"], "fov"),
+        (["--eye", "0,0,0", "--target", "0,0,0"], "eye and target"),
+    ],
+)
+def test_cli_render_errors(tmp_path, argv, message):
+    path = tmp_path / "s.json"
+    clcsg.save(clcsg.sphere(1.0), path)
+    with pytest.raises(UsageError, match=message):
+        _run_cli([str(path), "-o", str(tmp_path / "x.png"), "--method", "raytrace"] + argv)
