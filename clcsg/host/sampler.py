@@ -98,7 +98,7 @@ def task_dtype(real) -> np.dtype:
 
 def cell_dtype(real) -> np.dtype:
     return np.dtype(
-        [("x0", real), ("y0", real), ("x1", real), ("y1", real), ("task", np.int32), ("level", np.int32)],
+        [("x0", real), ("y0", real), ("x1", real), ("y1", real), ("d", real, 4), ("task", np.int32), ("level", np.int32)],
         align=True,
     )
 
@@ -152,7 +152,7 @@ def root_tasks(dnf: Dnf, packed: PackedScene, frames: list) -> tuple[np.ndarray,
                 i, j = [m for m in range(3) if m != k]
                 for sheet in sheets:
                     tasks.append((a, literal, qi, s, k, sheet, zlo, zhi))
-                    cells.append((zlo[i], zlo[j], zhi[i], zhi[j], len(tasks) - 1, 0))
+                    cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0))
             literal += 1
     t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
     for n, (a, lit, qi, s, k, sheet, zlo, zhi) in enumerate(tasks):

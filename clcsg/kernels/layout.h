@@ -23,65 +23,6 @@ typedef float3 real3;
 typedef float4 real4;
 #define REAL_MAX FLT_MAX
 #define REAL_EPS FLT_EPSILON
-/* One surface sample (paper section 6): position and unit normal in device coordinates,
- * splat radius, the literal it lies on (quadric index and sign: the solid's outward normal is
- * sign * grad Q), its DNF term, and its clip set: clip_count literals starting at clip_first in
- * the clip buffer (an array of literal_rec), the other literals of its term that come closer
- * than the radius. */
-typedef struct {
-    real pos[3];
-    real normal[3];
-    real radius;
-    int quadric;
-    int sign;
-    int term;
-    int clip_first;
-    int clip_count;
-} sample_rec;
-
-/* ---- sampler (clcsg/host/sampler.py, kernels/sampler.cl) ---------------------------------- */
-
-/* Principal frame of a quadric (clcsg/host/analysis.py): x = center + U z and
- * Q = sum_m (lam_m z_m^2 + 2 beta_m z_m) + gamma.  U is row-major: U[3 * r + c], column c is
- * the principal axis u_c. */
-typedef struct {
-    real U[9];
-    real center[3];
-    real lam[3];
-    real beta[3];
-    real gamma;
-} frame_rec;
-
-/* One root of the subdivision: literal `literal` (global index in the literal buffer, on
- * quadric `quadric` with polarity `sign`) of DNF term `term`, sampled from plane `plane`
- * (normal u_plane) on sheet `sheet` (+1 / -1; 0 for a one-sheet heightfield).  zlo / zhi:
- * the term's bound as a box in the quadric's local coordinates. */
-typedef struct {
-    int term;
-    int literal;
-    int quadric;
-    int sign;
-    int plane;
-    int sheet;
-    real zlo[3];
-    real zhi[3];
-} task_rec;
-
-/* An axis-aligned cell [x0, x1] x [y0, y1] of a task's sampling plane. */
-typedef struct {
-    real x0, y0, x1, y1;
-    int task;
-    int level;
-} cell_rec;
-
-/* A sample as the subdivision emits it: position (device coordinates), splat radius, task. */
-typedef struct {
-    real pos[3];
-    real radius;
-    int task;
-    int pad;
-} raw_sample_rec;
-
 #endif
 
 /* One unique quadric.  coef: the 10 coefficients of the symmetric 4x4 matrix in the order
@@ -153,9 +94,13 @@ typedef struct {
     real zhi[3];
 } task_rec;
 
-/* An axis-aligned cell [x0, x1] x [y0, y1] of a task's sampling plane. */
+/* An axis-aligned cell [x0, x1] x [y0, y1] of a task's sampling plane.  d: d_Q(S, p) at the
+ * corners (x0,y0), (x1,y0), (x0,y1), (x1,y1), NaN where the heightfield is undefined; known
+ * for children (level > 0), which inherit two corners from their parent and get the two new
+ * ones evaluated once by the parent. */
 typedef struct {
     real x0, y0, x1, y1;
+    real d[4];
     int task;
     int level;
 } cell_rec;

@@ -448,8 +448,12 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
         defined[m] = plane_height(&pf, cx[m], cy[m], &h);
         if (defined[m]) {
             p[m] = plane_point(&pf, cx[m], cy[m], h);
-            d[m] = csg_distance(quadrics, literals, terms, n_terms, t, p[m], enough);
-            ++queries;
+            if (c.level > 0 && !isnan(c.d[m])) {
+                d[m] = c.d[m]; /* inherited: evaluated for a larger cell, still conservative */
+            } else {
+                d[m] = csg_distance(quadrics, literals, terms, n_terms, t, p[m], enough);
+                ++queries;
+            }
         } else {
             d[m] = NAN;
         }
@@ -552,15 +556,43 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
     if (slot + 1 >= (uint)cap_cells) return;
     cell_rec a = c, b = c;
     a.level = b.level = c.level + 1;
+    /* the two new corners, shared by both children, are evaluated here once */
+    real e0 = NAN, e1 = NAN, h;
+    int queries2 = 0;
     if (wx >= wy) {
         real mid = 0.5 * (c.x0 + c.x1);
         a.x1 = mid;
         b.x0 = mid;
+        if (plane_height(&pf, mid, c.y0, &h)) {
+            e0 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, mid, c.y0, h), 0.5 * enough);
+            ++queries2;
+        }
+        if (plane_height(&pf, mid, c.y1, &h)) {
+            e1 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, mid, c.y1, h), 0.5 * enough);
+            ++queries2;
+        }
+        a.d[1] = e0; a.d[3] = e1; /* a = [x0, mid]: new right corners */
+        b.d[0] = e0; b.d[2] = e1; /* b = [mid, x1]: new left corners */
+        a.d[0] = d[0]; a.d[2] = d[2];
+        b.d[1] = d[1]; b.d[3] = d[3];
     } else {
         real mid = 0.5 * (c.y0 + c.y1);
         a.y1 = mid;
         b.y0 = mid;
+        if (plane_height(&pf, c.x0, mid, &h)) {
+            e0 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, c.x0, mid, h), 0.5 * enough);
+            ++queries2;
+        }
+        if (plane_height(&pf, c.x1, mid, &h)) {
+            e1 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, c.x1, mid, h), 0.5 * enough);
+            ++queries2;
+        }
+        a.d[2] = e0; a.d[3] = e1; /* a = [y0, mid]: new top corners */
+        b.d[0] = e0; b.d[1] = e1; /* b = [mid, y1]: new bottom corners */
+        a.d[0] = d[0]; a.d[1] = d[1];
+        b.d[2] = d[2]; b.d[3] = d[3];
     }
+    atomic_add(&counters[C_QUERIES], (uint)queries2);
     cells_out[slot] = a;
     cells_out[slot + 1] = b;
 }
