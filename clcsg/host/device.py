@@ -360,5 +360,10 @@ def require_int64_atomics(context, what: str) -> None:
 
 
 def real_dtype(context):
-    """``numpy.float64`` if the device has fp64, else ``numpy.float32``."""
+    """``numpy.float64`` if the device has fp64, else ``numpy.float32``.
+
+    ``CLCSG_PRECISION=float`` forces float32 (to test the path GPUs without fp64 take)."""
+    forced = os.environ.get("CLCSG_PRECISION", "").strip().lower()
+    if forced in ("float", "float32", "single"):
+        return np.float32
     return np.float64 if _info_of(context).fp64 else np.float32
