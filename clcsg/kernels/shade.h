@@ -41,6 +41,11 @@ inline real3 view_ray(__global const view_rec *vw, int i, int j)
     return normalize(d);
 }
 
+/* x^y for x >= 0 as exp2(y log2 x): several times faster than pow() on CPU devices, and
+ * plenty for 8-bit output (x = 0 gives 0 for y > 0). */
+inline float shade_pow(float x, float y) { return exp2(y * log2(x)); }
+inline float3 shade_pow3(float3 x, float y) { return exp2(y * log2(x)); }
+
 /* Blinn-Phong with two white lights: a headlight at the eye (direction -v) and a key light
  * (vw->key).  base: RGBA of the quadric in display (sRGB-like) space, linearized with gamma;
  * n: the solid's outward unit normal (sign * grad Q / |grad Q|, eq. 4); v: unit view ray.
@@ -50,17 +55,17 @@ inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v
 {
     if (dot(n, v) > 0.0f) n = -n;
     float g = vw->gamma;
-    float3 albedo = pow(clamp(base.xyz, 0.0f, 1.0f), (float3)(g));
+    float3 albedo = shade_pow3(clamp(base.xyz, 0.0f, 1.0f), g);
     float3 key = vload3(0, vw->key);
     float3 head = -v;
     float d_head = fmax(dot(n, head), 0.0f);
     float d_key = fmax(dot(n, key), 0.0f);
     float3 h_key = normalize(key + head);
-    float s_head = pow(d_head, vw->shininess);            /* half vector of the headlight is -v */
-    float s_key = d_key > 0.0f ? pow(fmax(dot(n, h_key), 0.0f), vw->shininess) : 0.0f;
+    float s_head = shade_pow(d_head, vw->shininess);            /* half vector of the headlight is -v */
+    float s_key = d_key > 0.0f ? shade_pow(fmax(dot(n, h_key), 0.0f), vw->shininess) : 0.0f;
     float3 c = albedo * (vw->ambient + vw->diffuse * (0.45f * d_head + 0.75f * d_key))
              + vw->specular * (0.25f * s_head + 0.5f * s_key);
-    c = pow(clamp(c, 0.0f, 1.0f), (float3)(1.0f / g));
+    c = shade_pow3(clamp(c, 0.0f, 1.0f), 1.0f / g);
     float4 out = (float4)(c, clamp(base.w, 0.0f, 1.0f)) * 255.0f + 0.5f;
     return convert_uchar4_sat(out);
 }
