@@ -412,7 +412,7 @@ class _Loader:
             if name not in known:
                 self.fail(_key(path, name), f"unknown {kind} parameter {name!r}{_suggest(name, known)}; "
                           f"{kind} takes {', '.join(known)}")
-            self.parameter(name, value, known[name], _key(path, name))
+            self.parameter(kind, name, value, known[name], _key(path, name))
         for name, default in known.items():
             if default is inspect.Parameter.empty and name not in params:
                 self.fail(path, f"missing {kind} parameter {name!r}")
@@ -423,7 +423,7 @@ class _Loader:
             named = [n for n in params if re.search(rf"(?<![A-Za-z0-9_]){re.escape(n)}(?![A-Za-z0-9_])", msg)]
             self.fail(_key(path, named[0]) if len(named) == 1 else path, msg)
 
-    def parameter(self, name, v, default, path):
+    def parameter(self, kind, name, v, default, path):
         """JSON-shape checks of a primitive parameter; the solid checks the geometry."""
         if name in ("center", "apex"):
             self.vec3(v, path)
@@ -440,7 +440,7 @@ class _Loader:
                 self.numbers(v, 3, path, "a positive number or 3 positive numbers", self.positive)
         elif name == "radii":
             n = len(default) if isinstance(default, (list, tuple)) else 3
-            if _is_number(v) and n == 3:
+            if _is_number(v) and kind == "ellipsoid":  # one radius for all three axes
                 self.positive(v, path)
             else:
                 self.numbers(v, n, path, f"{n} positive numbers", self.positive)

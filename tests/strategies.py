@@ -31,7 +31,9 @@ from clcsg.quadric import Quadric, affine, frame_z_to
 
 # -- numbers and vectors ------------------------------------------------------------------------
 def floats(lo: float, hi: float) -> st.SearchStrategy[float]:
-    return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
+    """Finite floats in [lo, hi]; magnitudes below 1e-12 become 0 (hypothesis likes values such
+    as 3e-216, whose squares underflow: a float64 range artefact, not geometry)."""
+    return st.floats(lo, hi, allow_nan=False, allow_infinity=False).map(lambda v: 0.0 if abs(v) < 1e-12 else v)
 
 
 def vec3(lo: float = -1.0, hi: float = 1.0) -> st.SearchStrategy[np.ndarray]:
@@ -339,7 +341,8 @@ def shapes(
     share: bool = True,
     max_translation: float = 0.5,
 ) -> csg.Shape:
-    """A CSG graph.  Leaves are drawn into a pool of 1-4 primitives first and picked from it,
+    """A CSG graph with an operation at the root (a transform edge may sit above it).
+    Leaves are drawn into a pool of 1-4 primitives first and picked from it,
     and finished sub-trees are sometimes picked again, so nodes are shared.  Transforms
     (Transformed edges) sit on any node.  Operations are built with the classes, not the
     flattening helpers, so nesting is kept as drawn."""
@@ -349,7 +352,7 @@ def shapes(
 
     def build(depth: int) -> csg.Shape:
         choice = draw(st.integers(0, 9))
-        if depth >= max_depth or choice < 3:
+        if depth >= max_depth or (depth > 0 and choice < 3):  # the root is an operation
             node = pool[draw(st.integers(0, len(pool) - 1))]
         elif share and choice == 3 and built:
             node = built[draw(st.integers(0, len(built) - 1))]

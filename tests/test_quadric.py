@@ -68,7 +68,8 @@ def surface_uncertainty(q: Quadric, x) -> float:
     eps_q = 1e-14 * float(abs_terms(q, x))
     g = 2.0 * float(np.linalg.norm(q.A @ x - q.b))
     lam = float(np.abs(np.linalg.eigvalsh(q.A)).max())
-    return 2.0 * eps_q / (g + np.sqrt(g * g + 4.0 * lam * eps_q)) + 1e-12 * (1.0 + float(np.linalg.norm(x)))
+    den = g + np.sqrt(g * g + 4.0 * lam * eps_q)
+    return (2.0 * eps_q / den if den > 0 else 0.0) + 1e-12 * (1.0 + float(np.linalg.norm(x)))
 
 
 def brute_distance_rays(q: Quadric, x) -> float:
