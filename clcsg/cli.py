@@ -447,13 +447,25 @@ def _jsonable(x):
 
 # -- the dispatch table -----------------------------------------------------------------------
 
+def _lazy(module: str, name: str) -> Callable:
+    """A function of ``clcsg.<module>`` imported on first call (keeps ``clcsg --help`` fast)."""
+
+    def call(*args, **kw):
+        import importlib
+
+        return getattr(importlib.import_module(f"clcsg.{module}"), name)(*args, **kw)
+
+    call.__name__ = name
+    return call
+
+
 #: name -> (add_<name>_parser(subparsers), run_<name>(args) -> exit code), in --help order
 COMMANDS: dict[str, tuple[Callable, Callable]] = {
     "devices": (add_devices_parser, run_devices),
     "info": (add_info_parser, run_info),
     # ---- more subcommands go here, in the same style: ----
     "sample": (add_sample_parser, run_sample),
-    # "render": (add_render_parser, run_render),
+    "render": (_lazy("render", "add_render_parser"), _lazy("render", "cli_render")),
 }
 
 
