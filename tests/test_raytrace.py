@@ -56,19 +56,26 @@ def _views(dnf):
     return views
 
 
-def compare(img, dnf, cam, rel=1e-6):
+def compare(img, dnf, cam, rel=None):
+    """Kernel vs oracle: masks and ids identical away from fragile pixels; depth within 1e-6
+    relative with double (2e-5 when the float32 path is forced, CLCSG_PRECISION=float)."""
+    double = img.stats["precision"] == "double"
+    if rel is None:
+        rel = 1e-6 if double else 2e-5
     o, d = cam.rays()
     ref = oracle.cast(dnf, o, d)
-    skip = oracle.fragile(dnf, o, d, rel=1e-9)
+    skip = oracle.fragile(dnf, o, d, rel=1e-9 if double else 1e-5)
     ok = ~skip
     assert skip.mean() < 0.02, f"too many fragile pixels: {skip.sum()}"
+    # float32: rays grazing a silhouette (discriminant ~ 0) may also flip
+    allowed = 0 if double else max(2, img.mask.size // 1000)
     mism = (img.mask != ref.mask) & ok
-    assert not mism.any(), f"{mism.sum()} mask mismatches at {np.argwhere(mism)[:5].tolist()}"
+    assert mism.sum() <= allowed, f"{mism.sum()} mask mismatches at {np.argwhere(mism)[:5].tolist()}"
     both = ref.mask & img.mask & ok
     rd = np.abs(img.depth[both].astype(np.float64) - ref.depth[both]) / ref.depth[both]
     assert rd.max(initial=0) <= rel, f"depth rel diff {rd.max()}"
     bad_ids = both & (img.ids != ref.quadric)
-    assert not bad_ids.any(), f"{bad_ids.sum()} id mismatches"
+    assert bad_ids.sum() <= allowed, f"{bad_ids.sum()} id mismatches"
     assert np.all(np.isinf(img.depth[~img.mask])) and np.all(img.ids[~img.mask] == -1)
     return ref
 

@@ -374,7 +374,8 @@ def test_single_splat_fragments_are_exact(cl_context, name):
             assert not missing.any(), f"sample {k} flags {sa, bf}: {missing.sum()} fragments lost"
             assert not extra.any(), f"sample {k} flags {sa, bf}: {extra.sum()} extra fragments"
             both = img.mask & np.isfinite(ref)
-            assert np.allclose(img.depth[both], ref[both], rtol=1e-5)
+            rtol = 1e-5 if img.stats["precision"] == "double" else 1e-4
+            assert np.allclose(img.depth[both], ref[both], rtol=rtol)
             written += int(img.mask.sum())
     assert written > 500
 

@@ -132,14 +132,14 @@ def context_of(device):
 
 
 def choose_real(context, precision="auto"):
-    """numpy float type for the kernels: 'auto' (double where the device has fp64), 'double',
-    'float'."""
+    """numpy float type for the kernels: 'auto' (double where the device has fp64, unless
+    CLCSG_PRECISION=float forces float32; see device.real_dtype), 'double', 'float'."""
     from .device import real_dtype
 
     if precision in (None, "auto"):
         return np.dtype(real_dtype(context))
     if precision in ("double", "float64", np.float64):
-        if np.dtype(real_dtype(context)) != np.float64:
+        if not context.info.fp64:
             raise DeviceError(f"device {context.info.describe()} has no fp64 (cl_khr_fp64); use precision='float'")
         return np.dtype(np.float64)
     if precision in ("float", "float32", np.float32):

@@ -12,7 +12,8 @@
  * current best are skipped, and terms whose (padded) bound the ray misses are skipped.
  *
  * Outputs depth (distance along the unit ray, +inf on background), ids (quadric index, -1)
- * and RGBA8 shaded with shade.h from the solid's outward normal s * grad Q (eq. 4).
+ * and RGBA8 shaded with shade.h from the solid's outward normal s * grad Q (eq. 4).  The winning
+ * depth is refined by one more solve from the hit point (accurate in float as well).
  */
 #include "quadric.h"
 #include "shade.h"
@@ -81,7 +82,17 @@ __kernel void raytrace(__global const quadric_rec *quadrics, __global const lite
         rgba_out[pix] = shade_background(view);
         return;
     }
+    /* refine the depth by solving again from the hit, Q(p0 + tau v) = 0, p0 = e + best v, and
+     * taking the root nearest 0: Q(p0) is then tiny and the roots are as accurate as the splat
+     * renderer's near-sample solve (matters in float; a no-op up to rounding in double) */
     quadric q = quadric_load(quadrics, best_q);
+    real3 p0 = e + best * v;
+    real tau[2];
+    int nr = quadric_intersect(q, p0, v, &tau[0], &tau[1]);
+    if (nr > 0) {
+        real d = (nr > 1 && fabs(tau[1]) < fabs(tau[0])) ? tau[1] : tau[0];
+        if (fabs(d) < 1e-3 * best) best += d;
+    }
     real3 p = e + best * v;
     real3 g = best_s * quadric_gradient(q, p);
     depth_out[pix] = (float)best;
