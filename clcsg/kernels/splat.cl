@@ -19,7 +19,7 @@
  * is where a ray leaves the solid, so a front-facing surface point is nearer on the same ray.
  *
  * Build options: SURFACE_ALIGNED, BACKFACE_CULLING, CLCSG_STATS (0 or 1).  With CLCSG_STATS the
- * counters of stats.h are accumulated per work-item and added with one atomic each at the end.
+ * C_* counters below are accumulated per work-item and added with one atomic each at the end.
  */
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
