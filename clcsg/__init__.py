@@ -9,3 +9,6 @@ from .scene import Scene, load, save
 from .host.device import devices
 from .host.sampler import sample
 from .samples import Samples
+from .camera import Camera, orbit
+from .image import Image
+from .render import raytrace, render
