@@ -446,6 +446,8 @@ class _Loader:
                 self.numbers(v, n, path, f"{n} positive numbers", self.positive)
         elif name == "matrix":
             if isinstance(v, (list, tuple)) and len(v) == 10 and all(_is_number(x) for x in v):
+                if not any(v):  # solids checks this for 4x4 matrices only
+                    self.fail(path, "quadric matrix must not be zero")
                 return
             if not isinstance(v, (list, tuple)) or len(v) != 4:
                 self.fail(path, f"expected a symmetric 4x4 matrix (4 rows of 4 numbers) or 10 coefficients, got {_jtype(v)}")

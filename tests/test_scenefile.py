@@ -298,6 +298,8 @@ BAD = [
      "$.root.quadric.matrix: quadric matrix must be symmetric"),
     (S('{"quadric": {"matrix": [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]]}}'),
      "$.root.quadric.matrix: quadric matrix must not be zero"),
+    (S('{"quadric": {"matrix": [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]}}'), "$.root.quadric.matrix: quadric matrix must not be zero"),
+    (S('{"quadric": {"matrix": [1, 0, 0, 0, 1, 0, 0, 1, 0]}}'), "$.root.quadric.matrix: expected a symmetric 4x4 matrix (4 rows of 4 numbers) or 10 coefficients, got array of 9"),
     # colors
     (S('{"box": {}, "color": [1, 0]}'), "$.root.color: expected [r, g, b] or [r, g, b, a] with components in [0, 1], got array of 2"),
     (S('{"box": {}, "color": [1, 2, 0]}'), "$.root.color[1]: color components must be in [0, 1], got 2"),
