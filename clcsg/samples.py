@@ -17,9 +17,11 @@ class Samples:
 
     Every sample lies on quadric ``quadrics[i]`` of the DNF; ``signs[i]`` is the polarity of
     its literal (the solid's outward normal is ``signs[i] * grad Q``, given in ``normals``);
-    ``terms[i]`` is its DNF term; its clip set is
-    ``clip_literals[clip_first[i] : clip_first[i] + clip_count[i]]`` (rows of quadric index
-    and sign, deduplicated across samples).  Guarantee: every point of the CSG surface has a
+    ``terms[i]`` is the DNF term it lies deepest in (a literal shared by several terms is
+    sampled once for all of them); its clip set is
+    ``clip_literals[clip_first[i] : clip_first[i] + clip_count[i]]``: rows of quadric index and
+    sign, in blocks separated by a row (-1, 0); a fragment of its splat is kept if every
+    literal of some block holds (empty: always kept).  Sets are deduplicated across samples.  Guarantee: every point of the CSG surface has a
     sample on the same quadric within ``radius`` (the sampler's radius; ``radii`` may be
     smaller where a small cell allowed it).
     """

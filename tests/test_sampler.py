@@ -188,23 +188,48 @@ def test_forced_overflow_gives_identical_results(cl_context):
         assert big.stats[k] == tiny.stats[k]
 
 
-def test_clip_sets_hold_exactly_the_close_literals(cl_context):
-    shape, r = SCENES["drilled_block"]
+def _blocks(s, i):
+    """Sample i's clip set as a list of literal sets (blocks separated by quadric -1)."""
+    out, cur = [], set()
+    for q, sg in s.clip_literals[s.clip_first[i]:s.clip_first[i] + s.clip_count[i]]:
+        if q < 0:
+            out.append(cur)
+            cur = set()
+        else:
+            cur.add((int(q), int(sg)))
+    if s.clip_count[i]:
+        out.append(cur)
+    return out
+
+
+@pytest.mark.parametrize("name", ["drilled_block", "shared_surface", "flush_tops"])
+def test_clip_sets_hold_exactly_the_close_literals(name, cl_context):
+    """Reference in float64: a sample on literal (q, s) is drawn for all terms holding it; a
+    term whose other literals all have d <= -r holds over the whole splat (no clipping); one
+    with a literal d >= r fails over it (no block); every other term is a block of its
+    literals with |d| < r."""
+    shape, r = SCENES[name]
     s = sample(shape, r, device=cl_context)
     dnf = s.dnf
-    for i in np.random.default_rng(1).choice(len(s), 300, replace=False):
-        clip = {tuple(x) for x in s.clip_literals[s.clip_first[i]:s.clip_first[i] + s.clip_count[i]]}
-        expect = set()
-        for qi, sg in dnf.terms[s.terms[i]]:
-            if qi == s.quadrics[i]:
+    for i in np.random.default_rng(1).choice(len(s), min(400, len(s)), replace=False):
+        q, sg, rad = int(s.quadrics[i]), int(s.signs[i]), s.radii[i]
+        expect, always = [], False
+        for term in dnf.terms:
+            if (q, sg) not in term:
                 continue
-            d = sg * dnf.quadric(qi).distance(s.positions[i][None])[0]
-            if abs(d) < s.radii[i]:
-                expect.add((qi, sg))
-        assert clip == expect
-    # deduplicated: every stored set is distinct
-    sets = {tuple(map(tuple, s.clip_literals[f:f + c])) for f, c in zip(s.clip_first, s.clip_count)}
-    assert len(s.clip_literals) == sum(len(x) for x in sets)
+            d = {(qi, si): si * dnf.quadric(qi).distance(s.positions[i][None])[0] for qi, si in term if qi != q}
+            if all(v <= -rad for v in d.values()):
+                always = True
+            elif not any(v >= rad for v in d.values()):
+                expect.append({lit for lit, v in d.items() if abs(v) < rad})
+        got = _blocks(s, i)
+        if always:
+            assert got == []
+        else:
+            assert sorted(map(sorted, got)) == sorted(map(sorted, expect))
+    # deduplicated: every stored clip set is distinct
+    spans = {(int(f), int(c)) for f, c in zip(s.clip_first, s.clip_count) if c}
+    assert len(s.clip_literals) == sum(c for _, c in spans)
 
 
 def test_stats_have_the_papers_columns(cl_context):

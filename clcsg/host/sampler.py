@@ -67,7 +67,8 @@ from .buffers import PackedScene, SceneBuffers, pack
 from .dnf import Dnf
 from .programs import build
 
-COUNTERS = ("cells", "samples", "distance_queries", "unresolved", "discarded", "filled", "single", "split")
+COUNTERS = ("cells", "samples", "distance_queries", "unresolved", "discarded", "filled", "single", "split",
+            "box_tests", "box_resolved")
 
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
@@ -89,11 +90,14 @@ def frame_dtype(real) -> np.dtype:
 def task_dtype(real) -> np.dtype:
     return np.dtype(
         [
-            ("term", np.int32), ("literal", np.int32), ("quadric", np.int32), ("sign", np.int32),
+            ("group_first", np.int32), ("group_count", np.int32), ("quadric", np.int32), ("sign", np.int32),
             ("plane", np.int32), ("sheet", np.int32), ("zlo", real, 3), ("zhi", real, 3),
         ],
         align=True,
     )
+
+
+GROUP_LITERAL_DTYPE = np.dtype([("term", np.int32), ("literal", np.int32)], align=True)
 
 
 def cell_dtype(real) -> np.dtype:
@@ -126,39 +130,56 @@ def principal_frame_of(matrix):
     return principal_frame(Quadric(matrix))
 
 
-def root_tasks(dnf: Dnf, packed: PackedScene, frames: list) -> tuple[np.ndarray, np.ndarray]:
-    """One task per (term, literal, plane, sheet) and its root cell."""
-    tasks, cells = [], []
-    lo_all = packed.terms["lo"]
-    hi_all = packed.terms["hi"]
-    literal = 0
+def literal_groups(dnf: Dnf) -> dict:
+    """(quadric, sign) -> the terms holding that literal, in term order."""
+    groups: dict = {}
     for a, term in enumerate(dnf.terms):
-        lo, hi = lo_all[a].astype(np.float64), hi_all[a].astype(np.float64)
+        for lit in term:
+            groups.setdefault(lit, []).append(a)
+    return groups
+
+
+def root_tasks(dnf: Dnf, packed: PackedScene, frames: list):
+    """One task per (literal group, plane, sheet), its root cell, and the group-literal table.
+
+    A literal shared by several terms is sampled once for all of them (see
+    ``kernels/sampler.cl:csg_distance``); its root cell covers the union of their bounds.
+    """
+    offsets = np.concatenate([[0], np.cumsum([len(t) for t in dnf.terms])]).astype(int)
+    tasks, cells, glits = [], [], []
+    lo_all = packed.terms["lo"].astype(np.float64)
+    hi_all = packed.terms["hi"].astype(np.float64)
+    for (qi, s), members in literal_groups(dnf).items():
+        first = len(glits)
+        for a in members:
+            others = [(a, offsets[a] + j) for j, (q2, _) in enumerate(dnf.terms[a]) if q2 != qi]
+            glits.extend(others or [(a, -1)])  # -1: the term is the literal alone
+        lo = lo_all[members].min(0)
+        hi = hi_all[members].max(0)
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        for qi, s in term:
-            f = frames[qi]
-            z = (corners - f.center) @ f.U
-            # pad by a relative epsilon: surface points on the bound's faces (a box face is
-            # the bound) must not be lost to rounding in the local coordinates
-            pad = 1e-7 * (np.abs(z).max() + np.abs(hi - lo).max())
-            zlo, zhi = z.min(0) - pad, z.max(0) + pad
-            for k in range(3):
-                if f.lam[k] != 0.0:
-                    sheets = (1, -1)
-                elif f.beta[k] != 0.0:
-                    sheets = (0,)
-                else:
-                    continue  # a cylinder along u_k: plane k owns no point
-                i, j = [m for m in range(3) if m != k]
-                for sheet in sheets:
-                    tasks.append((a, literal, qi, s, k, sheet, zlo, zhi))
-                    cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0))
-            literal += 1
+        f = frames[qi]
+        z = (corners - f.center) @ f.U
+        # pad by a relative epsilon: surface points on the bound's faces (a box face is the
+        # bound) must not be lost to rounding in the local coordinates
+        pad = 1e-7 * (np.abs(z).max() + np.abs(hi - lo).max())
+        zlo, zhi = z.min(0) - pad, z.max(0) + pad
+        for k in range(3):
+            if f.lam[k] != 0.0:
+                sheets = (1, -1)
+            elif f.beta[k] != 0.0:
+                sheets = (0,)
+            else:
+                continue  # a cylinder along u_k: plane k owns no point
+            i, j = [m for m in range(3) if m != k]
+            for sheet in sheets:
+                tasks.append((first, len(glits) - first, qi, s, k, sheet, zlo, zhi))
+                cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0))
     t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
-    for n, (a, lit, qi, s, k, sheet, zlo, zhi) in enumerate(tasks):
-        t[n] = (a, lit, qi, s, k, sheet, zlo, zhi)
+    for n, row in enumerate(tasks):
+        t[n] = row
     c = np.array(cells, dtype=cell_dtype(packed.real)) if cells else np.zeros(0, cell_dtype(packed.real))
-    return t, c
+    g = np.array(glits, dtype=GROUP_LITERAL_DTYPE) if glits else np.zeros(1, GROUP_LITERAL_DTYPE)
+    return t, c, g
 
 
 def estimate_samples(dnf: Dnf, radius: float) -> int:
@@ -231,22 +252,22 @@ def sample(
     t1 = time.perf_counter()
     packed = pack(dnf, real)
     frames_rec, frames = analyse(packed)
-    tasks, roots = root_tasks(dnf, packed, frames)
+    tasks, roots, glits = root_tasks(dnf, packed, frames)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), **{f"dnf_{k}": v for k, v in dnf.stats.items()}}
     if len(roots) == 0:
         warnings.warn(f"{sc.source}: the solid has no surface; no samples", stacklevel=2)
         return _empty(radius, dnf, packed, stats)
 
-    mask_words = max(1, (max((len(t) for t in dnf.terms), default=1) + 31) // 32)
+    mask_words = max(1, (int(tasks["group_count"].max(initial=1)) + 31) // 32)
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "MASK_WORDS": mask_words}
     prg = build(ctx, "sampler.cl", defines, real)
     raw, raw_buf, level_stats, totals = _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor,
                                           capacity, estimate_samples(dnf, radius), progress, max_levels)
     t2 = time.perf_counter()
     timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
-    normals, masks = _finish(ctx, prg, packed, frames_rec, tasks, raw_buf, len(raw), mask_words)
-    samples = _assemble(raw, normals, masks, tasks, dnf, packed, radius)
+    normals, terms, masks = _finish(ctx, prg, packed, frames_rec, tasks, glits, raw_buf, len(raw), mask_words)
+    samples = _assemble(raw, normals, terms, masks, tasks, glits, dnf, packed, radius)
     if len(samples) == 0:
         warnings.warn(f"{sc.source}: the solid has no surface; no samples", stacklevel=2)
     timings["finish_s"] = time.perf_counter() - t2
@@ -299,7 +320,7 @@ def _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor, capaci
     n_in = len(roots)
     cells_out = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_cells * cdt.itemsize)
     samples_buf = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_samples * sdt.itemsize)
-    counters = np.zeros(8, dtype=np.uint32)
+    counters = np.zeros(len(COUNTERS), dtype=np.uint32)
     counters_buf = cl.Buffer(ctx.ctx, mf.READ_WRITE, counters.nbytes)
     totals = {k: 0 for k in COUNTERS if k != "cells"}
     n_samples = 0
@@ -362,49 +383,71 @@ def _grow(cap, needed):
     return int(max(2 * cap, needed + needed // 2))
 
 
-def _finish(ctx, prg, packed, frames_rec, tasks, raw_buf, n, mask_words):
-    """Normals and clip masks, computed on the device from the samples still there."""
+def _finish(ctx, prg, packed, frames_rec, tasks, glits, raw_buf, n, mask_words):
+    """Normals, terms and clip masks, computed on the device from the samples still there."""
     import pyopencl as cl
 
     mf = cl.mem_flags
     real = packed.real
     normals = np.zeros((n, 3), dtype=real)
-    masks = np.zeros((n, mask_words), dtype=np.uint32)
+    terms = np.zeros(n, dtype=np.int32)
+    masks = np.zeros((n, mask_words + 1), dtype=np.uint32)
     if n == 0:
-        return normals, masks
+        return normals, terms, masks
     scene = SceneBuffers(ctx, packed)
-    tasks_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
-    frames_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=frames_rec)
+
+    def up(a):
+        return cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
+
     nb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, normals.nbytes)
+    tb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, terms.nbytes)
     mb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, masks.nbytes)
     cl.Kernel(prg, "finish")(ctx.queue, launch_size(n), (WORK_GROUP,), scene.quadrics, scene.literals,
-                             scene.terms, frames_buf, tasks_buf, raw_buf, np.int32(n), nb, mb)
+                             scene.terms, up(frames_rec), up(tasks), up(glits), raw_buf, np.int32(n),
+                             nb, tb, mb)
     cl.enqueue_copy(ctx.queue, normals, nb)
+    cl.enqueue_copy(ctx.queue, terms, tb)
     cl.enqueue_copy(ctx.queue, masks, mb)
-    return normals, masks
+    return normals, terms, masks
 
 
-def _assemble(raw, normals, masks, tasks, dnf, packed, radius) -> Samples:
+#: separates the terms of a clip set in the clip buffer (a splat fragment is kept if all
+#: literals of some block hold)
+CLIP_SEPARATOR = (-1, 0)
+
+
+def _assemble(raw, normals, terms, masks, tasks, glits, dnf, packed, radius) -> Samples:
     """Host arrays in world coordinates; clip sets deduplicated (sort, then unique).
 
-    Most samples have an empty clip set; only the others are sorted."""
+    A clip set is a list of blocks, one per group term that neither holds nor fails over the
+    whole splat ball, separated by ``CLIP_SEPARATOR``; empty when some group term holds over
+    the whole ball.  Most samples have an empty clip set; only the others are sorted."""
     tid = raw["task"]
-    term = tasks["term"][tid]
     n = len(raw)
     clip_first = np.zeros(n, dtype=np.int32)
     clip_count = np.zeros(n, dtype=np.int32)
     clip = []
-    some = np.flatnonzero(masks.any(axis=1))
+    some = np.flatnonzero((masks[:, 0] == 0) & masks[:, 1:].any(axis=1))
     if len(some):
-        key = np.column_stack([term[some].astype(np.int64), masks[some].astype(np.int64)])
+        gfirst = tasks["group_first"][tid[some]].astype(np.int64)
+        key = np.column_stack([gfirst, masks[some, 1:].astype(np.int64)])
         uniq, inverse = np.unique(key, axis=0, return_inverse=True)
         inverse = np.asarray(inverse).reshape(-1)
         firsts = np.zeros(len(uniq), dtype=np.int32)
         counts = np.zeros(len(uniq), dtype=np.int32)
         for u, row in enumerate(uniq):
-            lits = dnf.terms[int(row[0])]
+            g0 = int(row[0])
             words = row[1:]
-            sel = [lits[j] for j in range(len(lits)) if (int(words[j // 32]) >> (j % 32)) & 1]
+            blocks: dict = {}
+            for j in range(32 * len(words)):
+                if (int(words[j // 32]) >> (j % 32)) & 1:
+                    term, lit = glits[g0 + j]
+                    blocks.setdefault(int(term), []).append(tuple(packed.literals[lit][["quadric", "sign"]].tolist()))
+            sel = []
+            for b, lits in enumerate(blocks.values()):
+                if b:
+                    sel.append(CLIP_SEPARATOR)
+                sel.extend(lits)
             firsts[u] = len(clip)
             counts[u] = len(sel)
             clip.extend(sel)
@@ -416,7 +459,7 @@ def _assemble(raw, normals, masks, tasks, dnf, packed, radius) -> Samples:
         radii=np.array(raw["radius"], dtype=np.float64),
         quadrics=tasks["quadric"][tid],
         signs=tasks["sign"][tid],
-        terms=term,
+        terms=terms,
         clip_first=clip_first,
         clip_count=clip_count,
         clip_literals=np.array(clip, dtype=np.int32).reshape(-1, 2),

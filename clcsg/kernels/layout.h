@@ -53,8 +53,8 @@ typedef struct {
 /* One surface sample (paper section 6): position and unit normal in device coordinates,
  * splat radius, the literal it lies on (quadric index and sign: the solid's outward normal is
  * sign * grad Q), its DNF term, and its clip set: clip_count literals starting at clip_first in
- * the clip buffer (an array of literal_rec), the other literals of its term that come closer
- * than the radius. */
+ * the clip buffer (an array of literal_rec): blocks of literals separated by an entry with
+ * quadric -1; a splat fragment is kept if all literals of some block hold. */
 typedef struct {
     real pos[3];
     real normal[3];
@@ -79,13 +79,16 @@ typedef struct {
     real gamma;
 } frame_rec;
 
-/* One root of the subdivision: literal `literal` (global index in the literal buffer, on
- * quadric `quadric` with polarity `sign`) of DNF term `term`, sampled from plane `plane`
- * (normal u_plane) on sheet `sheet` (+1 / -1; 0 for a one-sheet heightfield).  zlo / zhi:
- * the term's bound as a box in the quadric's local coordinates. */
+/* One root of the subdivision: the literal (quadric `quadric`, polarity `sign`) sampled from
+ * plane `plane` (normal u_plane) on sheet `sheet` (+1 / -1; 0 for a one-sheet heightfield).
+ * The literal is sampled once for all DNF terms that hold it (its "group"): a point of the
+ * quadric is on the CSG surface if some group term holds there and no other term contains it.
+ * group_first / group_count: the group's other literals, as (term, literal) pairs in the
+ * group-literal buffer (for clip sets).  zlo / zhi: the union of the group terms' bounds as a
+ * box in the quadric's local coordinates. */
 typedef struct {
-    int term;
-    int literal;
+    int group_first;
+    int group_count;
     int quadric;
     int sign;
     int plane;
@@ -93,6 +96,12 @@ typedef struct {
     real zlo[3];
     real zhi[3];
 } task_rec;
+
+/* A literal of a group term: term index and global literal index. */
+typedef struct {
+    int term;
+    int literal;
+} group_literal_rec;
 
 /* An axis-aligned cell [x0, x1] x [y0, y1] of a task's sampling plane.  d: d_Q(S, p) at the
  * corners (x0,y0), (x1,y0), (x0,y1), (x1,y1), NaN where the heightfield is undefined; known

@@ -31,7 +31,9 @@
 #define C_FILLED 5
 #define C_SINGLE 6
 #define C_SPLIT 7
-#define N_COUNTERS 8
+#define C_BOX_TESTS 8
+#define C_BOX_RESOLVED 9
+#define N_COUNTERS 10
 
 inline real literal_distance(__global const quadric_rec *quadrics, literal_rec l, real3 p)
 {
@@ -50,48 +52,46 @@ inline real box_distance(__global const term_rec *t, real3 p)
 }
 
 /* Quadric-relative conservative signed distance d_Q(S, p), eq. 22, for a point p on the
- * task's quadric, with the design note's rules for shared surfaces: other terms that hold the
- * same quadric with the same polarity are left out (they sample the shared region
- * themselves); a term that holds it with the opposite polarity enters without that literal.
+ * task's quadric q, generalized to the literal's group (the design note's rules for shared
+ * surfaces, taken one step further):
+ *   own   = min over terms holding (q, sign) of max over their other literals of d   (eq. 21)
+ *   other = min over the remaining terms of max over their literals of d               (eq. 20)
+ * where a term holding q with the opposite polarity enters without that literal, and
+ * d_Q = max(own, -other).  Eq. 22 is the case of a single term holding the literal; taking the
+ * union of the terms that share it removes the seams that distributing A - (B | C) over a
+ * union leaves across A's faces (each term there is A minus one literal of B and C) and
+ * samples a shared face once instead of once per term.
  * `enough`: a |d| this large already classifies the cell, so a term whose bound box is at
  * least that far away is not evaluated literal by literal (its box distance is a valid
- * conservative distance too). */
+ * conservative distance to it too). */
 real csg_distance(__global const quadric_rec *quadrics, __global const literal_rec *literals,
                   __global const term_rec *terms, int n_terms, task_rec t, real3 p, real enough)
 {
-    __global const term_rec *own = terms + t.term;
-    real inside_own = -INFINITY; /* eq. 21: max over the other literals of the own term */
-    for (int j = own->first; j < own->first + own->count; ++j) {
-        if (j == t.literal) continue;
-        inside_own = fmax(inside_own, literal_distance(quadrics, literals[j], p));
-    }
-    real nearest_other = INFINITY; /* min over other terms of max_j d(Q_ij, p), eq. 20 */
+    real own = INFINITY, other = INFINITY;
     for (int i = 0; i < n_terms; ++i) {
-        if (i == t.term) continue;
         __global const term_rec *ti = terms + i;
-        real box = box_distance(ti, p);
-        if (box >= enough || box >= nearest_other) {
-            nearest_other = fmin(nearest_other, box);
+        bool member = false; /* does the term hold (q, sign)? */
+        for (int j = ti->first; j < ti->first + ti->count; ++j)
+            if (literals[j].quadric == t.quadric && literals[j].sign == t.sign) member = true;
+        real box = member ? 0 : box_distance(ti, p);
+        if (!member && (box >= enough || box >= other)) {
+            other = fmin(other, box);
             continue;
         }
         real v = -INFINITY;
-        bool shares = false;
         for (int j = ti->first; j < ti->first + ti->count; ++j) {
             literal_rec l = literals[j];
-            if (l.quadric == t.quadric) {
-                if (l.sign == t.sign) {
-                    shares = true;
-                    break;
-                }
-                continue;
-            }
+            if (l.quadric == t.quadric) continue;
             v = fmax(v, literal_distance(quadrics, l, p));
         }
-        if (shares) continue;
-        if (box > 0) v = fmax(v, box);
-        nearest_other = fmin(nearest_other, v);
+        if (member) {
+            own = fmin(own, v);
+        } else {
+            if (box > 0) v = fmax(v, box);
+            other = fmin(other, v);
+        }
     }
-    return fmax(inside_own, -nearest_other);
+    return fmax(own, -other);
 }
 
 /* exact range of lam z^2 + 2 beta z over [a, b] */
@@ -373,6 +373,80 @@ void fill_cell(const plane_frame *pf, cell_rec c, real radius, __global volatile
     }
 }
 
+/* ---- classifying a whole patch box at once ------------------------------------------------
+ * The corner discs of eq. 22 need cells no larger than the distance to the nearest decision
+ * border, so a face lying a hair inside another solid (an interior face 0.01 below a plate's
+ * top) would need cells of that size everywhere.  The patch's 3-D box decides such cells at
+ * once: a plane literal is linear, so it holds (fails) on the whole box iff it holds (fails)
+ * at its 8 corners; any other literal holds (fails) on the box if its conservative distance at
+ * the box center exceeds the half-diagonal. */
+typedef struct {
+    real3 corner[8];
+    real3 center;
+    real hdiag; /* half the diagonal */
+} patch_box;
+
+inline bool literal_is_plane(__global const quadric_rec *quadrics, int q)
+{
+    __global const real *c = quadrics[q].coef;
+    return c[0] == 0 && c[1] == 0 && c[2] == 0 && c[4] == 0 && c[5] == 0 && c[7] == 0;
+}
+
+/* +1: the literal fails on the whole box; -1: it holds on the whole box; 0: unknown */
+inline int literal_on_box(__global const quadric_rec *quadrics, literal_rec l, const patch_box *b)
+{
+    if (literal_is_plane(quadrics, l.quadric)) {
+        quadric q = quadric_load(quadrics, l.quadric);
+        int in = 0, out = 0;
+        for (int m = 0; m < 8; ++m) {
+            real v = l.sign * quadric_value(q, b->corner[m]);
+            if (v <= 0) ++in;
+            if (v > 0) ++out;
+        }
+        return in == 8 ? -1 : out == 8 ? 1 : 0;
+    }
+    real d = literal_distance(quadrics, l, b->center);
+    return d <= -b->hdiag ? -1 : d >= b->hdiag ? 1 : 0;
+}
+
+/* -1: the whole patch is on the CSG surface, +1: none of it is, 0: unknown (same rules as
+ * csg_distance: the union of the terms holding the literal, against all other terms). */
+int box_classify(__global const quadric_rec *quadrics, __global const literal_rec *literals,
+                 __global const term_rec *terms, int n_terms, task_rec t, const patch_box *b)
+{
+    bool some_member_holds = false, all_members_fail = true, others_all_fail = true;
+    for (int i = 0; i < n_terms; ++i) {
+        __global const term_rec *ti = terms + i;
+        bool member = false;
+        for (int j = ti->first; j < ti->first + ti->count; ++j)
+            if (literals[j].quadric == t.quadric && literals[j].sign == t.sign) member = true;
+        if (!member) {
+            /* quick reject: the box misses the term's bound */
+            real3 lo = (real3)(ti->lo[0], ti->lo[1], ti->lo[2]), hi = (real3)(ti->hi[0], ti->hi[1], ti->hi[2]);
+            real3 e = fmax(lo - b->center, (real3)(0)) + fmax(b->center - hi, (real3)(0));
+            if (length(e) > b->hdiag) continue;
+        }
+        bool holds = true, fails = false;
+        for (int j = ti->first; j < ti->first + ti->count && !fails; ++j) {
+            literal_rec l = literals[j];
+            if (l.quadric == t.quadric) continue;
+            int k = literal_on_box(quadrics, l, b);
+            if (k > 0) fails = true;
+            if (k >= 0) holds = false;
+        }
+        if (member) {
+            if (holds) some_member_holds = true;
+            if (!fails) all_members_fail = false;
+        } else {
+            if (holds) return 1; /* the patch lies inside another term: interior */
+            if (!fails) others_all_fail = false;
+        }
+    }
+    if (all_members_fail) return 1;
+    if (some_member_holds && others_all_fail) return -1;
+    return 0;
+}
+
 __kernel void classify(__global const quadric_rec *quadrics, __global const literal_rec *literals,
                        __global const term_rec *terms, int n_terms,
                        __global const frame_rec *frames, __global const task_rec *tasks,
@@ -547,6 +621,31 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
         }
     }
 
+    /* the discs could not decide: try the patch's box as a whole */
+    {
+        patch_box b;
+        real lx[2] = {c.x0, c.x1}, ly[2] = {c.y0, c.y1}, lt[2] = {t_lo, t_hi};
+        for (int m = 0; m < 8; ++m) b.corner[m] = plane_point(&pf, lx[m & 1], ly[(m >> 1) & 1], lt[m >> 2]);
+        b.center = plane_point(&pf, 0.5 * (c.x0 + c.x1), 0.5 * (c.y0 + c.y1), 0.5 * (t_lo + t_hi));
+        b.hdiag = 0.5 * sqrt(ex * ex + ey * ey + et * et);
+        atomic_inc(&counters[C_BOX_TESTS]);
+        int k = box_classify(quadrics, literals, terms, n_terms, t, &b);
+        if (k > 0) {
+            atomic_inc(&counters[C_BOX_RESOLVED]);
+            atomic_inc(&counters[C_DISCARDED]);
+            return;
+        }
+        if (k < 0 && whole_domain && isfinite(delta)) {
+            real s = sqrt((real)2) * radius / delta;
+            if ((wx / s + 1) * (wy / s + 1) <= MAX_FILL) {
+                fill_cell(&pf, c, radius, counters, samples, cap_samples);
+                atomic_inc(&counters[C_BOX_RESOLVED]);
+                atomic_inc(&counters[C_FILLED]);
+                return;
+            }
+        }
+    }
+
     /* floor: the patch is smaller than the floor and still unresolved */
     if (sqrt(ex * ex + ey * ey + et * et) < floor_size) {
         atomic_inc(&counters[C_UNRESOLVED]);
@@ -600,13 +699,16 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
     cells_out[slot + 1] = b;
 }
 
-/* Per sample: the solid's outward normal and the clip set as a bit mask over the literals of
- * its term (bit j: literal first + j, other than its own, with |d| < the splat radius). */
+/* Per sample: the solid's outward normal, its term (the group term it lies deepest in), and
+ * its clip set as a bit mask over the group's literals (bit j: group literal group_first + j
+ * with |d| < the splat radius, in a term that is neither false nor true over the whole splat
+ * ball), plus bit 0 of the flags word: some group term holds over the whole ball (no clipping).
+ * A term is false over the ball if one of its literals has d >= r, true if all have d <= -r. */
 __kernel void finish(__global const quadric_rec *quadrics, __global const literal_rec *literals,
                      __global const term_rec *terms, __global const frame_rec *frames,
-                     __global const task_rec *tasks,
+                     __global const task_rec *tasks, __global const group_literal_rec *glits,
                      __global const raw_sample_rec *raw, int n,
-                     __global real *normals, __global uint *masks)
+                     __global real *normals, __global int *sample_terms, __global uint *masks)
 {
     int gid = get_global_id(0);
     if (gid >= n) return;
@@ -619,18 +721,42 @@ __kernel void finish(__global const quadric_rec *quadrics, __global const litera
         g = g / gl;
     } else { /* a singular point (cone apex): the sampling direction stands in */
         __global const frame_rec *f = frames + t.quadric;
-        real s = t.sheet != 0 ? (real)t.sheet : (real)1;
-        g = s * (real3)(f->U[t.plane], f->U[3 + t.plane], f->U[6 + t.plane]);
+        real sh = t.sheet != 0 ? (real)t.sheet : (real)1;
+        g = sh * (real3)(f->U[t.plane], f->U[3 + t.plane], f->U[6 + t.plane]);
     }
     normals[3 * gid] = g.x;
     normals[3 * gid + 1] = g.y;
     normals[3 * gid + 2] = g.z;
-    __global const term_rec *own = terms + t.term;
-    for (int w = 0; w < MASK_WORDS; ++w) masks[MASK_WORDS * gid + w] = 0;
-    for (int j = 0; j < own->count; ++j) {
-        int l = own->first + j;
-        if (l == t.literal) continue;
-        if (fabs(literal_distance(quadrics, literals[l], p)) < s.radius)
-            masks[MASK_WORDS * gid + j / 32] |= 1u << (j % 32);
+    __global uint *mask = masks + (MASK_WORDS + 1) * gid;
+    for (int w = 0; w <= MASK_WORDS; ++w) mask[w] = 0;
+    int best_term = -1;
+    real best = INFINITY;
+    bool always = false;
+    int j = 0;
+    while (j < t.group_count) {
+        int term = glits[t.group_first + j].term;
+        int j0 = j;
+        real vmax = -INFINITY;
+        bool is_false = false, is_true = true;
+        for (; j < t.group_count && glits[t.group_first + j].term == term; ++j) {
+            int l = glits[t.group_first + j].literal;
+            real d = l < 0 ? -INFINITY : literal_distance(quadrics, literals[l], p);
+            vmax = fmax(vmax, d);
+            if (d >= s.radius) is_false = true;
+            if (d > -s.radius) is_true = false;
+        }
+        if (vmax < best) {
+            best = vmax;
+            best_term = term;
+        }
+        if (is_true) always = true;
+        if (is_false || is_true) continue;
+        for (int k = j0; k < j; ++k) {
+            int l = glits[t.group_first + k].literal;
+            real d = l < 0 ? -INFINITY : literal_distance(quadrics, literals[l], p);
+            if (fabs(d) < s.radius) mask[1 + k / 32] |= 1u << (k % 32);
+        }
     }
+    if (always) mask[0] = 1;
+    sample_terms[gid] = best_term;
 }

@@ -269,12 +269,22 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
 #if BACKFACE_CULLING
                 if (sign * dot(quadric_gradient(q, p), v) > 0) continue;
 #endif
-                bool keep = true;
-                for (int c = 0; c < nc && keep; ++c) {
+                /* the clip set is a union of blocks (separated by quadric -1), each an
+                 * intersection of literals: keep the fragment if every literal of some block
+                 * holds (one block in the common case) */
+                bool keep = false, block = true;
+                for (int c = 0; c < nc; ++c) {
                     literal_rec lit = clip[c0 + c];
+                    if (lit.quadric < 0) {
+                        if (block) break;
+                        block = true;
+                        continue;
+                    }
+                    if (!block) continue;
                     cnt[C_CLIP_EVALS]++;
-                    keep = lit.sign * quadric_value(quadric_load(quadrics, lit.quadric), p) <= 0;
+                    block = lit.sign * quadric_value(quadric_load(quadrics, lit.quadric), p) <= 0;
                 }
+                keep = block;
                 if (!keep) continue;
                 cnt[C_FRAGMENTS_PASSED]++;
                 ulong key = ((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx;
