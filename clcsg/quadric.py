@@ -41,13 +41,20 @@ def _unit(v, what="axis") -> np.ndarray:
 
 
 def frame_z_to(axis) -> np.ndarray:
-    """A rotation matrix R (3x3) with R @ (0, 0, 1) = axis (unit), right-handed."""
+    """The rotation R (3x3) taking (0, 0, 1) to the unit ``axis`` by the shortest arc, so
+    that the local x and y axes stay as close to the world's as possible (identity for +z)."""
     w = _unit(axis)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(helper, w)
-    u /= np.linalg.norm(u)
-    v = np.cross(w, u)
-    return np.column_stack([u, v, w])
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(w @ z)
+    if c > 1.0 - 1e-15:
+        return np.eye(3)
+    if c < -1.0 + 1e-15:
+        return np.diag([1.0, -1.0, -1.0])  # half turn about x
+    k = np.cross(z, w)
+    s = np.linalg.norm(k)
+    k /= s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
 def affine(linear=None, translation=None) -> np.ndarray:

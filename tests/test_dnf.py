@@ -249,23 +249,13 @@ def test_term_limit_is_configurable():
 
 
 # -- unbounded terms ------------------------------------------------------------------------------
-BOUNDS_TOLERANCE_BUG = (
-    "bug in clcsg/host/bounds.py (not ours): polytope_vertices() takes its feasibility "
-    "tolerance 1e-9 * max|offset| over all planes *including the far box at 1e9*, so the "
-    "tolerance is 1.0 absolute: vertices up to 1 unit outside the polytope are kept, bounds "
-    "grow by up to 1 unit past the user bound, and empty tilted terms are not pruned"
-)
 
 UNBOUNDED = [
     solids.Primitive("double_cone", {}),
     solids.halfspace((0, 0, 1), 0.0),
     ~solids.sphere(1.0),
     solids.Primitive("elliptic_paraboloid", {}),
-    pytest.param(
-        solids.Primitive("infinite_cylinder", {"axis": (1, 1, 0)}),
-        marks=pytest.mark.xfail(strict=True, reason=BOUNDS_TOLERANCE_BUG),
-        id="tilted infinite_cylinder",
-    ),
+    pytest.param(solids.Primitive("infinite_cylinder", {"axis": (1, 1, 0)}), id="tilted infinite_cylinder"),
     solids.Primitive("hyperboloid_one_sheet", {}),
     solids.slab((0, 0, 1), -1, 1) & solids.halfspace((1, 0, 0), 0.0),
 ]
@@ -363,7 +353,6 @@ def test_bounds_of_axis_aligned_solids_are_exact():
             np.testing.assert_allclose(dnf.bound, expected, atol=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason=BOUNDS_TOLERANCE_BUG)
 @pytest.mark.parametrize("scale", [1.0, 0.01])
 def test_empty_tilted_term_is_pruned(scale):
     """A box and the half-space x + y >= 1.5 (the box reaches x + y = 1 only) share no point."""
@@ -374,3 +363,13 @@ def test_empty_tilted_term_is_pruned(scale):
 def test_normalize_rejects_non_shapes():
     with pytest.raises(SceneError, match="expected a CSG shape"):
         normalize("box", source="x")
+
+
+def test_complement_of_empty_union_is_everything():
+    from clcsg.csg import Difference, Union, contains
+
+    s = Difference([solids.box(1), Union([])])
+    d = normalize(s)
+    x = np.random.default_rng(0).uniform(-1, 1, (500, 3))
+    assert d.n_terms == 1
+    np.testing.assert_array_equal(d.contains(x), contains(s, x))

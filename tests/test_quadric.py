@@ -428,12 +428,6 @@ def test_coefficients_round_trip():
     assert Quadric.from_coefficients(q.coefficients()) == q
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug in clcsg/quadric.py (not ours): Quadric.ellipsoid builds its diagonal with _local(), "
-    "which rotates by frame_z_to((0, 0, 1)) (a 90 degree turn about z), so radii[0] lies along y "
-    "and radii[1] along x instead of along the rotation's columns",
-)
 def test_ellipsoid_radii_follow_the_rotation_columns():
     q = Quadric.ellipsoid((0, 0, 0), (2.0, 1.0, 0.5))
     np.testing.assert_allclose(q.value([[2.0, 0, 0], [0, 1.0, 0], [0, 0, 0.5]]), 0.0, atol=1e-12)

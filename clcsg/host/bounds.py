@@ -81,7 +81,8 @@ def polytope_vertices(normals: np.ndarray, offsets: np.ndarray, far: float = FAR
     box_n = np.vstack([_WORLD, -_WORLD])
     N = np.vstack([normals.reshape(-1, 3), box_n])
     d = np.concatenate([offsets.reshape(-1), np.full(6, far)])
-    scale = max(np.abs(d[np.isfinite(d)]).max(initial=1.0), 1.0)
+    # the tolerance follows the caller's planes, not the far box
+    scale = max(np.abs(offsets[np.isfinite(offsets)]).max(initial=1.0), 1e-300)
     idx = np.array(list(combinations(range(len(N)), 3)))
     M = N[idx]  # (K, 3, 3)
     rhs = d[idx]

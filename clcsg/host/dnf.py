@@ -228,7 +228,8 @@ class _Normalizer:
                     f"= {n} DNF terms, past the limit of {self.limit} (raise it with --term-limit)"
                 )
             acc = self._clean([a | b for a in acc for b in terms])
-        return acc or []
+        # an empty intersection (the complement of an empty union) is everything
+        return [frozenset()] if acc is None else acc
 
     def _clean(self, terms: list[frozenset]) -> list[frozenset]:
         out = []
