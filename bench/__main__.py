@@ -1,21 +1,33 @@
-"""``python -m bench sampler [--quick] [--device D]``."""
+"""``python -m bench PART [--quick] [--device D] [--out DIR]``.
+
+Parts: ``micro`` (the paper's Table 1 as OpenCL microbenchmarks), ``sampler`` (sampler
+throughput), ``models`` (the model zoo: the paper's Table 2 and the gallery), ``peers``
+(manifold3d on the same solids), ``plots`` (PNG plots from the JSON files).  Each writes
+``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 
-from . import sampler
-
-PARTS = {"sampler": sampler.run}
+PARTS = ("micro", "sampler", "models", "peers", "plots")
 
 
-def main():
+def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench", description="clcsg benchmarks (write JSON to bench/results/)")
-    p.add_argument("part", choices=sorted(PARTS))
+    p.add_argument("part", choices=PARTS)
     p.add_argument("--quick", action="store_true", help="keep the part under a minute")
     p.add_argument("--device", default=None, help="cpu, gpu or P:D (default as for clcsg)")
-    a = p.parse_args()
-    PARTS[a.part](quick=a.quick, device=a.device)
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="write results (JSON, PNG) to DIR instead of bench/results (models: no gallery then)")
+    a = p.parse_args(argv)
+    from . import common
+
+    if a.out:
+        common.RESULTS = a.out
+    module = importlib.import_module(f".{a.part}", __package__)
+    module.run(quick=a.quick, device=a.device)
 
 
 if __name__ == "__main__":

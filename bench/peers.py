@@ -1,0 +1,306 @@
+"""Peer comparison: manifold3d (mesh Booleans) on the same solids as the model zoo.
+
+For each zoo model the CSG graph is translated node by node into manifold3d: boxes, finite
+cylinders, cone frusta, spheres and ellipsoids become ``Manifold.cube`` / ``cylinder`` /
+``sphere`` (ellipsoids: a scaled sphere) with ``circular_segments`` = n; half-spaces, slabs
+and infinite cylinders become boxes / cylinders clipped to 4x the scene bound; transforms are
+``Manifold.transform``; a complement inside an intersection becomes a difference.  At each
+tessellation level n the time of the Boolean build (construction, Booleans and ``to_mesh``,
+which forces manifold's lazy evaluation) and of sampling the result (area-weighted random
+points on its triangles, as many as clcsg's medium-size sample count) is measured, best of
+several runs.
+
+Surface error of a sample x: the first-order distance to the nearest surface quadric of the
+scene, min over its unique quadrics Q of |Q(x)| / |grad Q(x)| (the quadrics are those of
+``clcsg.Scene(shape).normalize()``).  At the small errors of interest it equals the Euclidean
+distance to that quadric up to a relative O(error / curvature radius); being a minimum over
+all quadrics (not only the visible CSG surface) it never overstates the error.  Reported:
+maximum and RMS over the samples, relative to the diagonal of the scene bound.  clcsg's own
+samples are measured the same way.
+
+Equal accuracy: the first tessellation level whose maximum relative error is <= 1e-4; if no
+measured level reaches it, the level is extrapolated from a power-law fit (error ~ n^-a) of
+the measured levels, and the time at that level from a power-law fit of time against n;
+the output says which.  Our time is the whole ``clcsg.sample`` call at the medium size.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import warnings
+
+import numpy as np
+
+import clcsg
+from clcsg.csg import Complement, Difference, Intersection, Primitive, Transformed, Union
+from clcsg.host.device import get_context
+
+from . import zoo
+from .common import environment, write
+
+TARGET = 1e-4  # relative to the bound's diagonal
+SEGMENTS = [16, 32, 64, 128, 256]
+QUICK_SEGMENTS = [16, 64]
+
+
+class Unsupported(Exception):
+    pass
+
+
+def _frame_to(axis):
+    """3x3 rotation taking +z to ``axis``."""
+    from clcsg.quadric import frame_z_to
+
+    return frame_z_to(np.asarray(axis, dtype=float))
+
+
+def _place(m, rot, center):
+    """Rotate ``m`` by the 3x3 ``rot`` about the origin, then translate it to ``center``."""
+    M = np.zeros((3, 4))
+    M[:, :3] = rot
+    M[:, 3] = center
+    return m.transform(M)
+
+
+class Translator:
+    def __init__(self, manifold3d, segments, bound):
+        self.mf = manifold3d
+        self.n = int(segments)
+        b = np.asarray(bound, dtype=float)
+        self.center = 0.5 * (b[0] + b[1])
+        self.big = 4.0 * float(np.linalg.norm(b[1] - b[0])) + 1.0
+
+    def build(self, shape):
+        M = self.mf.Manifold
+        if isinstance(shape, Primitive):
+            return self.primitive(shape)
+        if isinstance(shape, Union):
+            return M.batch_boolean([self.build(s) for s in shape.operands], self.mf.OpType.Add) \
+                if shape.operands else M()
+        if isinstance(shape, Intersection):
+            pos = [s for s in shape.operands if not isinstance(s, Complement)]
+            neg = [s.operand for s in shape.operands if isinstance(s, Complement)]
+            if not pos:
+                raise Unsupported("an intersection of complements only")
+            out = M.batch_boolean([self.build(s) for s in pos], self.mf.OpType.Intersect) if len(pos) > 1 \
+                else self.build(pos[0])
+            for s in neg:
+                out = out - self.build(s)
+            return out
+        if isinstance(shape, Difference):
+            first = self.build(shape.operands[0])
+            rest = [self.build(s) for s in shape.operands[1:]]
+            if not rest:
+                return first
+            return first - (M.batch_boolean(rest, self.mf.OpType.Add) if len(rest) > 1 else rest[0])
+        if isinstance(shape, Transformed):
+            return self.build(shape.operand).transform(np.asarray(shape.matrix)[:3, :4])
+        raise Unsupported(f"{type(shape).__name__} outside an intersection")
+
+    def halfspace(self, normal, offset):
+        """normal . x <= offset, as a cube of side `big` with one face on the plane."""
+        n = np.asarray(normal, dtype=float)
+        ln = np.linalg.norm(n)
+        w, o = n / ln, offset / ln
+        p0 = self.center - (w @ self.center - o) * w  # the scene center projected onto the plane
+        L = self.big
+        cube = self.mf.Manifold.cube((L, L, L), True)
+        return _place(cube, _frame_to(w), p0 - 0.5 * L * w)
+
+    def primitive(self, p: Primitive):
+        M = self.mf.Manifold
+        k, a, n = p.kind, p.params, self.n
+        if k == "box":
+            size = np.broadcast_to(np.asarray(a.get("size", 1.0), dtype=float), (3,))
+            return M.cube(tuple(size), True).translate(tuple(np.asarray(a.get("center", (0, 0, 0)), dtype=float)))
+        if k in ("cylinder", "cone"):
+            h = float(a.get("height", 1.0))
+            if k == "cylinder":
+                r1 = r2 = float(a.get("radius", 1.0))
+            else:
+                r1, r2 = float(a.get("r1", 1.0)), float(a.get("r2", 0.0))
+            m = M.cylinder(h, r1, r2, n, True)
+            return _place(m, _frame_to(a.get("axis", (0, 0, 1))), np.asarray(a.get("center", (0, 0, 0)), float))
+        if k == "sphere":
+            return M.sphere(float(a.get("radius", 1.0)), n).translate(tuple(np.asarray(a.get("center", (0, 0, 0)), float)))
+        if k == "ellipsoid":
+            r = np.broadcast_to(np.asarray(a.get("radii", (1, 1, 1)), dtype=float), (3,))
+            return M.sphere(1.0, n).scale(tuple(r)).translate(tuple(np.asarray(a.get("center", (0, 0, 0)), float)))
+        if k == "halfspace":
+            return self.halfspace(a.get("normal", (0, 0, 1)), float(a.get("offset", 0.0)))
+        if k == "slab":
+            nrm = np.asarray(a.get("normal", (0, 0, 1)), dtype=float)
+            return self.halfspace(nrm, float(a.get("hi", 0.5))) ^ self.halfspace(-nrm, -float(a.get("lo", -0.5)))
+        if k == "infinite_cylinder":
+            m = M.cylinder(self.big, float(a.get("radius", 1.0)), -1.0, n, True)
+            axis = np.asarray(a.get("axis", (0, 0, 1)), dtype=float)
+            c = np.asarray(a.get("center", (0, 0, 0)), dtype=float)
+            w = axis / np.linalg.norm(axis)
+            c = c + (w @ (self.center - c)) * w  # centered on the scene along its axis
+            return _place(m, _frame_to(w), c)
+        raise Unsupported(f"primitive {k!r}")
+
+
+def sample_mesh(mesh, count, rng):
+    """``count`` area-weighted random points on the triangles of a manifold3d Mesh."""
+    V = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
+    T = np.asarray(mesh.tri_verts, dtype=np.int64)
+    a, b, c = V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    cdf = np.cumsum(area)
+    tri = np.searchsorted(cdf, rng.random(count) * cdf[-1])
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    return a[tri] + u[:, None] * (b[tri] - a[tri]) + v[:, None] * (c[tri] - a[tri]), len(T)
+
+
+def surface_error(dnf, points, chunk=20000):
+    """First-order distance to the nearest unique quadric: min_u |Q_u(x)| / |grad Q_u(x)|."""
+    Qs = dnf.quadrics  # (U, 4, 4)
+    out = np.empty(len(points))
+    for s in range(0, len(points), chunk):
+        x = points[s:s + chunk]
+        xh = np.concatenate([x, np.ones((len(x), 1))], axis=1)
+        mx = np.einsum("uij,nj->nui", Qs, xh)  # (N, U, 4): Q_u xh
+        val = np.einsum("nui,ni->nu", mx, xh)
+        grad = 2.0 * mx[:, :, :3]
+        g = np.linalg.norm(grad, axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.where(g > 0, np.abs(val) / g, np.where(val == 0, 0.0, np.inf))
+        out[s:s + chunk] = d.min(axis=1)
+    return out
+
+
+def _powerfit(x, y):
+    """(a, b) of log y = a + b log x (least squares)."""
+    lx, ly = np.log(np.asarray(x, float)), np.log(np.asarray(y, float))
+    b, a = np.polyfit(lx, ly, 1)
+    return a, b
+
+
+def run(quick=False, device=None):
+    try:
+        import manifold3d
+    except Exception as e:  # noqa: BLE001 - any import failure means "not available"
+        msg = f"manifold3d is not available ({type(e).__name__}: {e}); install it with pip install 'clcsg[bench]'"
+        print(msg)
+        ctx = get_context(device)
+        path = write("peers", {"environment": environment(ctx), "available": False, "message": msg})
+        print(f"written to {path}")
+        return None
+    warnings.simplefilter("ignore")
+    ctx = get_context(device)
+    load0 = os.getloadavg()[0]
+    segments = QUICK_SEGMENTS if quick else SEGMENTS
+    repeats = 1 if quick else 3
+    models = zoo.MODELS
+    if quick:
+        models = [m for m in models if m.name in ("lens", "flange")]
+    rng = np.random.default_rng(1)
+    results = []
+    for m in models:
+        shape = m.build()
+        dnf = clcsg.Scene(shape).normalize()
+        diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
+        radius = diag / 150
+        clcsg.sample(shape, diag / 20, device=ctx, progress=False)
+        best = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            s = clcsg.sample(shape, radius, device=ctx, progress=False)
+            best = min(best, time.perf_counter() - t0)
+        count = len(s)
+        ours_err = surface_error(dnf, s.positions)
+        rec = {"model": m.name, "quadrics": dnf.n_quadrics, "diagonal": diag, "samples": count,
+               "ours_s": best, "ours_max_rel_error": float(ours_err.max() / diag),
+               "ours_rms_rel_error": float(np.sqrt(np.mean(ours_err ** 2)) / diag), "levels": []}
+        for n in segments:
+            try:
+                tr = Translator(manifold3d, n, dnf.bound)
+                tb = tsamp = float("inf")
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    mesh = tr.build(shape).to_mesh()
+                    t1 = time.perf_counter()
+                    pts, ntri = sample_mesh(mesh, count, rng)
+                    t2 = time.perf_counter()
+                    tb, tsamp = min(tb, t1 - t0), min(tsamp, t2 - t1)
+            except Unsupported as e:
+                rec["unsupported"] = str(e)
+                break
+            err = surface_error(dnf, pts)
+            lvl = {"segments": n, "triangles": ntri, "build_s": tb, "sample_s": tsamp, "total_s": tb + tsamp,
+                   "max_rel_error": float(err.max() / diag), "rms_rel_error": float(np.sqrt(np.mean(err ** 2)) / diag)}
+            rec["levels"].append(lvl)
+            print(f"{m.name} n={n}: {ntri} triangles, build {1e3 * tb:.1f} ms, sampling {1e3 * tsamp:.1f} ms, "
+                  f"max error {lvl['max_rel_error']:.2e} of the diagonal", flush=True)
+        rec.update(equal_accuracy(rec["levels"]))
+        if rec.get("manifold_s_at_target"):
+            rec["ours_over_manifold"] = best / rec["manifold_s_at_target"]
+        results.append(rec)
+    env = environment(ctx)
+    env["manifold3d"] = getattr(manifold3d, "__version__", None) or _dist_version("manifold3d")
+    env["loadavg_start"] = round(load0, 2)
+    env["loadavg_end"] = round(os.getloadavg()[0], 2)
+    payload = {"environment": env, "available": True, "quick": bool(quick), "method": " ".join(__doc__.split()),
+               "target_rel_error": TARGET, "segments": segments, "models": results}
+    path = write("peers", payload)
+    print()
+    print(table(payload))
+    print(f"\nwritten to {path}")
+    return payload
+
+
+def _dist_version(name):
+    try:
+        from importlib.metadata import version
+
+        return version(name)
+    except Exception:  # noqa: BLE001
+        return None
+
+
+def equal_accuracy(levels) -> dict:
+    ok = [lv for lv in levels if lv["max_rel_error"] <= TARGET]
+    if ok:
+        lv = ok[0]
+        return {"target_segments": lv["segments"], "manifold_s_at_target": lv["total_s"], "target_how": "measured"}
+    usable = [lv for lv in levels if lv["max_rel_error"] > 0]
+    if len(usable) < 2:
+        return {"target_how": "not reached, too few levels to extrapolate"}
+    ae, be = _powerfit([lv["segments"] for lv in usable], [lv["max_rel_error"] for lv in usable])
+    if be >= 0:
+        return {"target_how": "not reached, error does not fall with n", "error_exponent": be}
+    n_t = math.exp((math.log(TARGET) - ae) / be)
+    at, bt = _powerfit([lv["segments"] for lv in usable[-3:]], [lv["total_s"] for lv in usable[-3:]])
+    return {"target_segments": n_t, "manifold_s_at_target": math.exp(at + bt * math.log(n_t)),
+            "target_how": "extrapolated", "error_exponent": be, "time_exponent": bt}
+
+
+def table(payload) -> str:
+    env = payload["environment"]
+    lines = [f"manifold3d {env.get('manifold3d')} vs clcsg ({env['device']}, {env['compute_units']} CUs): "
+             f"time to build and sample each solid with the same number of samples; error = max first-order "
+             f"distance to the nearest surface quadric / bound diagonal", "",
+             "| model | quadrics | samples | segments | triangles | manifold build (ms) | manifold sampling (ms) | "
+             "manifold max error | manifold RMS error |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in payload["models"]:
+        for lv in r["levels"]:
+            lines.append(f"| {r['model']} | {r['quadrics']} | {r['samples']:,} | {lv['segments']} | {lv['triangles']:,} | "
+                         f"{1e3 * lv['build_s']:.1f} | {1e3 * lv['sample_s']:.1f} | {lv['max_rel_error']:.1e} | "
+                         f"{lv['rms_rel_error']:.1e} |")
+    lines += ["", f"At equal accuracy (max error <= {payload['target_rel_error']:g} of the diagonal):", "",
+              "| model | clcsg (ms) | clcsg max error | manifold segments needed | manifold (ms) | how | clcsg / manifold |",
+              "|---|---|---|---|---|---|---|"]
+    for r in payload["models"]:
+        nt = r.get("target_segments")
+        mt = r.get("manifold_s_at_target")
+        ratio = r.get("ours_over_manifold")
+        lines.append(f"| {r['model']} | {1e3 * r['ours_s']:.1f} | {r['ours_max_rel_error']:.1e} | "
+                     f"{'-' if nt is None else f'{nt:.0f}'} | {'-' if mt is None else f'{1e3 * mt:.1f}'} | "
+                     f"{r.get('target_how', '-')}{' (' + r['unsupported'] + ')' if r.get('unsupported') else ''} | "
+                     f"{'-' if ratio is None else f'{ratio:.2f}x'} |")
+    return "\n".join(lines)
