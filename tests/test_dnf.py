@@ -58,7 +58,8 @@ def normalize_or_skip(shape, **kw):
 
 
 def unpruned(shape, user_bound):
-    """The DNF with pruning switched off: no disjoint-box pruning while distributing and no
+    """The DNF with pruning switched off: no disjoint-box pruning or redundant-literal dropping
+    while distributing and no
     empty-polytope pruning afterwards (contradictions K & ~K are still dropped: they hold no
     point at all).  Same quadric table as the pruned normalization."""
     lo, hi = np.asarray(user_bound, dtype=np.float64)
@@ -68,7 +69,7 @@ def unpruned(shape, user_bound):
         box = real_term_box(literals, ub)
         return (lo.copy(), hi.copy()) if box is None else box
 
-    with mock.patch.object(dnf_module._Normalizer, "_disjoint", lambda self, term: False), mock.patch.object(
+    with mock.patch.object(dnf_module._Normalizer, "_simplify", lambda self, term: term), mock.patch.object(
         bounds_module, "term_box", term_box
     ):
         return normalize(shape, term_limit=50 * TERM_LIMIT, user_bound=user_bound)
@@ -132,7 +133,8 @@ def test_pruning_never_drops_a_point(shape, seed):
     pruned = normalize_or_skip(shape, user_bound=UB)
     full = unpruned(shape, UB)
     np.testing.assert_array_equal(pruned.quadrics, full.quadrics)
-    assert set(pruned.terms) <= set(full.terms)
+    # pruning drops terms and redundant literals: each kept term is a subset of a full one
+    assert all(any(set(p) <= set(f) for f in full.terms) for p in pruned.terms)
     assert pruned.stats["terms_before_pruning"] >= pruned.n_terms
     rng = np.random.default_rng(seed)
     x = random_points(rng, UB, 1500)
@@ -373,3 +375,20 @@ def test_complement_of_empty_union_is_everything():
     x = np.random.default_rng(0).uniform(-1, 1, (500, 3))
     assert d.n_terms == 1
     np.testing.assert_array_equal(d.contains(x), contains(s, x))
+
+
+def test_redundant_literals_are_dropped_without_changing_the_solid():
+    """A hole far from the part and a subtracted box beside it cut nothing: their literals go."""
+    part = solids.box(2)
+    far_hole = solids.cylinder(5, 0.3, center=(5, 5, 0))
+    beside = solids.box(1).translate((0.5, 0.5, 1.2))  # overlaps the top only
+    shape = part - far_hole - beside
+    d = normalize(shape)
+    assert d.stats["redundant_literals_dropped"] > 0
+    used = {qi for t in d.terms for qi, _ in t}
+    x = np.random.default_rng(3).uniform(-3, 6, (20000, 3))
+    np.testing.assert_array_equal(d.contains(x), csg.contains(shape, x))
+    # the far cylinder's side surface is in no term
+    cyl = clcsg.Scene(far_hole).normalize()
+    side = [q for q in cyl.quadrics if np.abs(q[:3, :3]).max() > 0][0]
+    assert not any(np.allclose(d.quadrics[qi], side) for qi in used)

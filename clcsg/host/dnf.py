@@ -17,6 +17,7 @@ before a cross product is formed.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -155,6 +156,7 @@ def normalize(
         "terms_pruned_contradiction": n.pruned_contradiction,
         "terms_pruned_disjoint": n.pruned_disjoint,
         "terms_pruned_empty": pruned_empty,
+        "redundant_literals_dropped": n.dropped_literals,
         "terms": len(kept),
         "literals": int(sum(sizes)),
         "max_term_size": max(sizes, default=0),
@@ -172,6 +174,9 @@ class _Normalizer:
         self.pruned_contradiction = 0
         self.pruned_disjoint = 0
         self._boxes: dict[Literal, tuple] = {}
+        self._quadrics: dict[int, Quadric] = {}
+        self._lin: dict = {}
+        self.dropped_literals = 0
 
     # A term is a frozenset of literals; a DNF is a list of terms.
     def visit(self, node: Shape, m: np.ndarray, neg: bool) -> list[frozenset]:
@@ -232,6 +237,8 @@ class _Normalizer:
         return [frozenset()] if acc is None else acc
 
     def _clean(self, terms: list[frozenset]) -> list[frozenset]:
+        """Drop duplicate, contradictory (K and not-K) and provably empty terms, and the
+        literals that are redundant in their term (see :meth:`_simplify`)."""
         out = []
         seen = set()
         for t in terms:
@@ -247,23 +254,108 @@ class _Normalizer:
             if bad:
                 self.pruned_contradiction += 1
                 continue
-            if self._disjoint(t):
+            t2 = self._simplify(t)
+            if t2 is None:
                 self.pruned_disjoint += 1
                 continue
-            out.append(t)
+            if t2 is not t:
+                if t2 in seen:
+                    continue
+                seen.add(t2)
+            out.append(t2)
         return out
 
-    def _disjoint(self, term) -> bool:
-        lo = np.full(3, -np.inf)
-        hi = np.full(3, np.inf)
-        for lit in term:
-            box = self._boxes.get(lit)
-            if box is None:
-                q = Quadric.from_coefficients(self.table.coefs[lit[0]])
-                box = _bounds.literal_box(q, lit[1]) or _EMPTY
-                self._boxes[lit] = box
-            if box is _EMPTY:
-                return True
-            lo = np.maximum(lo, box[0])
-            hi = np.minimum(hi, box[1])
-        return bool(np.any(lo > hi + 1e-9 * np.maximum(1.0, np.abs(lo))))
+    def _literal_box(self, lit):
+        """(x0, y0, z0, x1, y1, z1) of the literal's solid (+-inf where unbounded) or _EMPTY."""
+        box = self._boxes.get(lit)
+        if box is None:
+            bx = _bounds.literal_box(self._quadric(lit[0]), lit[1])
+            box = _EMPTY if bx is None else tuple(float(v) for v in (*bx[0], *bx[1]))
+            self._boxes[lit] = box
+        return box
+
+    def _quadric(self, qi) -> Quadric:
+        q = self._quadrics.get(qi)
+        if q is None:
+            q = self._quadrics[qi] = Quadric.from_coefficients(self.table.coefs[qi])
+        return q
+
+    def _simplify(self, term: frozenset):
+        """The term without its redundant literals, or None if it is provably empty.
+
+        The box of a term is the intersection of its literals' boxes.  A literal whose solid
+        misses the box of the others empties the term; one whose solid contains that box
+        never cuts the term's solid and is dropped (a hole far from the part it is subtracted
+        from, one literal of a subtracted box that is beside the part).  Planes are tested
+        exactly at the box corners, other quadrics by the conservative distance at the box
+        center against the half-diagonal.
+        """
+        # plain Python floats: terms are small and numpy's per-call overhead dominates here
+        lits = list(term)
+        boxes = []
+        for lit in lits:
+            bx = self._literal_box(lit)
+            if bx is _EMPTY:
+                return None
+            boxes.append(bx)
+        n = len(lits)
+        inf = math.inf
+        # prefix / suffix intersections give the box of all literals but k
+        pre = [(-inf, -inf, -inf, inf, inf, inf)]
+        for bx in boxes:
+            p = pre[-1]
+            pre.append((max(p[0], bx[0]), max(p[1], bx[1]), max(p[2], bx[2]),
+                        min(p[3], bx[3]), min(p[4], bx[4]), min(p[5], bx[5])))
+        full = pre[-1]
+        for k in range(3):
+            if full[k] > full[3 + k] + 1e-9 * max(1.0, abs(full[k])):
+                return None
+        if n < 2:
+            return term
+        suf = [(-inf, -inf, -inf, inf, inf, inf)]
+        for bx in reversed(boxes):
+            p = suf[-1]
+            suf.append((max(p[0], bx[0]), max(p[1], bx[1]), max(p[2], bx[2]),
+                        min(p[3], bx[3]), min(p[4], bx[4]), min(p[5], bx[5])))
+        suf.reverse()
+        keep = []
+        for k, lit in enumerate(lits):
+            a, b = pre[k], suf[k + 1]
+            box = (max(a[0], b[0]), max(a[1], b[1]), max(a[2], b[2]),
+                   min(a[3], b[3]), min(a[4], b[4]), min(a[5], b[5]))
+            if not all(math.isfinite(v) for v in box):
+                keep.append(lit)
+                continue
+            side = self._side(lit, box)
+            if side > 0:
+                return None
+            if side == 0:
+                keep.append(lit)
+        if len(keep) == n:
+            return term
+        self.dropped_literals += n - len(keep)
+        return frozenset(keep)
+
+    def _side(self, lit, box) -> int:
+        """-1: the literal holds on the whole box, +1: it fails on all of it, 0: unknown."""
+        g = self._linear(lit)
+        cx, cy, cz = 0.5 * (box[0] + box[3]), 0.5 * (box[1] + box[4]), 0.5 * (box[2] + box[5])
+        hx, hy, hz = 0.5 * (box[3] - box[0]), 0.5 * (box[4] - box[1]), 0.5 * (box[5] - box[2])
+        if g is not None:
+            # a linear function's range over a box: g . center +- |g| . half-extent + c0
+            mid = g[0] * cx + g[1] * cy + g[2] * cz + g[3]
+            spread = abs(g[0]) * hx + abs(g[1]) * hy + abs(g[2]) * hz
+            return -1 if mid + spread <= 0 else 1 if mid - spread > 0 else 0
+        r = math.sqrt(hx * hx + hy * hy + hz * hz)
+        d = lit[1] * float(self._quadric(lit[0]).distance(np.array([[cx, cy, cz]]))[0])
+        return -1 if d <= -r else 1 if d >= r else 0
+
+    def _linear(self, lit):
+        """(gx, gy, gz, c0) with sign * Q(x) = g . x + c0 for a plane literal, else None."""
+        if lit not in self._lin:
+            m = lit[1] * self._quadric(lit[0]).matrix
+            if np.abs(m[:3, :3]).max() == 0.0:
+                self._lin[lit] = tuple(float(v) for v in (2 * m[0, 3], 2 * m[1, 3], 2 * m[2, 3], m[3, 3]))
+            else:
+                self._lin[lit] = None
+        return self._lin[lit]
