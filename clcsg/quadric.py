@@ -175,6 +175,19 @@ class Quadric:
         """
         p = _as_points(p)
         v = _as_points(v)
+        # Solve from the point of the line closest to the quadric's center instead of from p:
+        # with p far away, c = Q(p) and h^2 would be huge and cancel in h^2 - a c.
+        vv = np.einsum("...i,...i->...", v, v)
+        t0 = np.einsum("...i,...i->...", self.center - p, v) / np.where(vv > 0, vv, 1.0)
+        lo, hi = self._intersect_from(p + t0[..., None] * v, v)
+        return lo + t0, hi + t0
+
+    @property
+    def center(self) -> np.ndarray:
+        """Min-norm least-squares solution q of A q = b (the center of a central quadric)."""
+        return np.linalg.lstsq(self.A, self.b, rcond=1e-12)[0]
+
+    def _intersect_from(self, p, v):
         a = np.einsum("...i,ij,...j->...", v, self.A, v)
         h = np.einsum("...i,...i->...", v, p @ self.A - self.b)
         c = self.value(p)
