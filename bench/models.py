@@ -11,8 +11,13 @@ covered pixel, from a separate run with counters on).
 
 Splat sizes are relative to the model: radius = diagonal of the scene bound times 1/50
 (large), 1/150 (medium), 1/500 (small).  The camera looks at the model from the model's view
-direction and is moved so that the bound's projection fills ~90% of the image (the paper:
-"approximately screen-filling").
+direction and is moved so that the solid's silhouette (from a 192-pixel-wide exact ray tracing)
+spans ~90% of the image (the paper: "approximately screen-filling").
+
+``query_cost``: per model, the mean number of literal distances (and terms) one evaluation of
+eq. 22 computes, replayed in numpy at the medium-size samples with the kernel's culling rules
+and ``enough`` = 4 r (a fine cell) or infinity (a root cell), in the kernel's term order and
+nearest-box-first.
 
 A resolution sweep (splat and ray tracer at 480x270 ... 3840x2160) for two models feeds the
 render-time plot.  ``--quick``: 480x270, the medium size only, one run each, no sweep.
@@ -77,6 +82,80 @@ def fit_camera(bound, width, height, direction, fill=0.9) -> Camera:
     return cam
 
 
+def fit_to_silhouette(dnf, width, height, direction, fill=0.9, ctx=None) -> Camera:
+    """:func:`fit_camera`, then moved along the view direction until the solid's silhouette
+    (found with a low-resolution exact ray tracing) spans ``fill`` of the image."""
+    _render, raytrace = _render_fns()
+    cam = fit_camera(dnf.bound, width, height, direction, fill)
+    small_w = 192
+    small_h = max(2, round(small_w * height / width))
+    for _ in range(3):
+        ids = raytrace(dnf, cam.resized(small_w, small_h), device=ctx).ids
+        ys, xs = np.nonzero(ids >= 0)
+        if len(xs) == 0:
+            break
+        span = max(np.abs(xs + 0.5 - small_w / 2).max() / (small_w / 2),
+                   np.abs(ys + 0.5 - small_h / 2).max() / (small_h / 2))
+        if abs(span / fill - 1) < 0.02:
+            break
+        d = cam.eye - cam.target
+        cam = Camera.look_at(cam.target + d * (span / fill), cam.target, up=(0, 0, 1), fov=cam.fov,
+                             width=width, height=height)
+    return cam
+
+
+def query_cost(dnf, samples, enough, limit=20000, seed=0) -> dict:
+    """How many literal distances one evaluation of eq. 22 (``csg_distance`` in
+    kernels/sampler.cl) computes, replayed in numpy at sample positions with the kernel's
+    culling rules (terms in index order; a term is skipped when its bound box is at least
+    ``enough`` or the nearest term so far away).  Also the same with the terms visited
+    nearest-box-first, which lets the second rule skip more."""
+    from clcsg.quadric import Quadric
+
+    rng = np.random.default_rng(seed)
+    n = len(samples)
+    idx = rng.choice(n, size=min(n, limit), replace=False) if n else np.zeros(0, int)
+    p = samples.positions[idx]
+    own_q, own_s, own_t = samples.quadrics[idx], samples.signs[idx], samples.terms[idx]
+    qd = np.stack([Quadric(m).distance(p) for m in dnf.quadrics], axis=1)  # (N, U)
+    lo, hi = dnf.term_bounds[:, 0], dnf.term_bounds[:, 1]
+    box = np.linalg.norm(np.maximum(lo[None] - p[:, None], 0) + np.maximum(p[:, None] - hi[None], 0), axis=2)
+    out = {}
+    for order in ("index", "nearest_first"):
+        evals = np.array([len(dnf.terms[t]) - 1 for t in own_t], dtype=float)
+        terms_visited = np.zeros(len(p))
+        nearest = np.full(len(p), np.inf)
+        rows = np.arange(len(p))
+        order_idx = np.argsort(box, axis=1) if order == "nearest_first" else \
+            np.broadcast_to(np.arange(dnf.n_terms), box.shape)
+        for k in range(dnf.n_terms):
+            t = order_idx[:, k]
+            b = box[rows, t]
+            active = (t != own_t) & ~(b >= enough) & ~(b >= nearest)
+            skipped = (t != own_t) & ~active
+            nearest = np.where(skipped, np.minimum(nearest, b), nearest)
+            for ti in np.unique(t[active]):
+                sel = active & (t == ti)
+                v = np.full(sel.sum(), -np.inf)
+                cnt = np.zeros(sel.sum())
+                shares = np.zeros(sel.sum(), bool)
+                for qi, sg in dnf.terms[ti]:
+                    same = own_q[sel] == qi
+                    shares |= same & (own_s[sel] == sg) & ~shares
+                    live = ~same & ~shares
+                    cnt += live
+                    v = np.where(live, np.maximum(v, sg * qd[sel, qi]), v)
+                v = np.where(b[sel] > 0, np.maximum(v, b[sel]), v)
+                nearest[sel] = np.where(shares, nearest[sel], np.minimum(nearest[sel], v))
+                evals[sel] += cnt
+                terms_visited[sel] += 1
+        out[order] = {"literals_per_query": float(evals.mean()), "terms_per_query": float(terms_visited.mean())}
+    out["enough"] = float(enough)
+    out["points"] = int(len(p))
+    out["literals_total"] = int(sum(len(t) for t in dnf.terms))
+    return out
+
+
 def _render_fns():
     import importlib
 
@@ -133,8 +212,7 @@ def run(quick=False, device=None):
         scene = clcsg.Scene(shape, source=m.name)
         dnf = scene.normalize()
         diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
-        cam = fit_camera(dnf.bound, W, H, m.direction)
-        raytrace(dnf, cam.resized(64, 36), device=ctx)  # build
+        cam = fit_to_silhouette(dnf, W, H, m.direction, ctx=ctx)
         t_rt, st_rt = time_render(raytrace, dnf, cam, ctx, repeats)
         paper_q, paper_sizes, paper_rt = zoo_paper(mi)
         clcsg.sample(shape, diag / 20, device=ctx, progress=False)  # build the sampler program
@@ -181,9 +259,11 @@ def run(quick=False, device=None):
             print(_row_line(row), flush=True)
             if size == "medium":
                 medium_samples = s
+                info["query_cost"] = {"fine_cell": query_cost(dnf, s, 4 * radius),
+                                      "root_cell": query_cost(dnf, s, np.inf)}
         if gallery and medium_samples is not None:
             os.makedirs(GALLERY_DIR, exist_ok=True)
-            gcam = fit_camera(dnf.bound, *GALLERY_RES, m.direction, fill=0.85)
+            gcam = fit_to_silhouette(dnf, *GALLERY_RES, m.direction, fill=0.9, ctx=ctx)
             render(medium_samples, gcam, device=ctx).save(os.path.join(GALLERY_DIR, f"{m.name}.png"))
     sweep = [] if quick else resolution_sweep(ctx, repeats)
     env = environment(ctx)
@@ -216,7 +296,7 @@ def resolution_sweep(ctx, repeats) -> list[dict]:
         diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
         s = clcsg.sample(shape, diag * SIZES["medium"], device=ctx, progress=False)
         for w, h in SWEEP_RES:
-            cam = fit_camera(dnf.bound, w, h, m.direction)
+            cam = fit_to_silhouette(dnf, w, h, m.direction, ctx=ctx)
             t_sp, st = time_render(render, s, cam, ctx, repeats, stats=False)
             t_rt, _ = time_render(raytrace, dnf, cam, ctx, repeats)
             out.append({"model": m.name, "quadrics": dnf.n_quadrics, "width": w, "height": h, "pixels": w * h,
