@@ -392,3 +392,16 @@ def test_redundant_literals_are_dropped_without_changing_the_solid():
     cyl = clcsg.Scene(far_hole).normalize()
     side = [q for q in cyl.quadrics if np.abs(q[:3, :3]).max() > 0][0]
     assert not any(np.allclose(d.quadrics[qi], side) for qi in used)
+
+
+@pytest.mark.parametrize("axis", [(1, 1, 0), (1, 2, 3), (0, 0, 1)])
+def test_tilted_cone_frustum_bound_holds_the_solid(axis):
+    """Regression: far-box vertices of the caps' slab were lost to a too tight tolerance, so
+    the cone's cross-section bound used a wrong height and cut the wide end off."""
+    shape = solids.cone(2, 1, 0.3, axis=axis)
+    d = normalize(shape)
+    x = np.random.default_rng(5).uniform(-2, 2, (400000, 3))
+    p = x[csg.contains(shape, x)]
+    assert len(p) > 1000
+    lo, hi = d.term_bounds[0]
+    assert np.all(p >= lo - 1e-9) and np.all(p <= hi + 1e-9)

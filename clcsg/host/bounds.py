@@ -91,7 +91,9 @@ def polytope_vertices(normals: np.ndarray, offsets: np.ndarray, far: float = FAR
     if not ok.any():
         return None
     pts = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]
-    tol = 1e-9 * scale
+    # relative to the caller's planes, and to each vertex's own size: vertices on the far box
+    # carry rounding errors of ~1e-16 * far
+    tol = 1e-9 * scale + 1e-12 * np.abs(pts).max(axis=1, keepdims=True)
     feasible = np.all(pts @ N.T <= d + tol, axis=1)
     if not feasible.any():
         return None
