@@ -30,16 +30,8 @@ import inspect
 import numpy as np
 
 from .csg import Primitive
+from .csg import _vec3 as _v3
 from .quadric import Quadric, frame_z_to
-
-
-def _v3(v, what):
-    a = np.asarray(v, dtype=np.float64)
-    if a.shape == ():
-        a = np.full(3, float(a))
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{what} must be 3 finite numbers, got {np.asarray(v).tolist()}")
-    return a
 
 
 def _pos(v, what, allow_zero=False):

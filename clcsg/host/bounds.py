@@ -58,19 +58,22 @@ def supporting_planes(q: Quadric, sign: int) -> tuple[np.ndarray, np.ndarray] | 
         return np.array(normals), np.array(offsets)
     if f.gamma > 0.0:
         return None  # sum lam z^2 <= -gamma < 0 is empty
-    P = f.U[:, ~null]  # non-null principal axes
+    return ellipse_support(f.center, f.U[:, ~null], lam[~null], -f.gamma)
+
+
+def ellipse_support(center, P, lam, rhs) -> tuple[np.ndarray, np.ndarray]:
+    """Supporting half-spaces of {x : sum_m lam_m (u_m . (x - center))^2 <= rhs} (columns u_m of
+    P, lam_m > 0; an ellipsoid, or an elliptic cylinder along the axes P leaves out), in the
+    directions of P's axes and of the world axes projected onto their span:
+    n . x <= n . center + sqrt(rhs sum_m (n . u_m)^2 / lam_m)."""
     dirs = [P[:, m] for m in range(P.shape[1])]
     for e in _WORLD:
         p = P @ (P.T @ e)
         if np.linalg.norm(p) > 1e-9:
             dirs.append(p / np.linalg.norm(p))
-    for n in dirs:
-        for s in (1.0, -1.0):
-            nn = s * n
-            h = nn @ f.center + np.sqrt(-f.gamma * np.sum((nn @ P) ** 2 / lam[~null]))
-            normals.append(nn)
-            offsets.append(h)
-    return np.array(normals), np.array(offsets)
+    N = np.array([s * n for n in dirs for s in (1.0, -1.0)])
+    h = N @ center + np.sqrt(rhs * np.sum((N @ P) ** 2 / lam, axis=1))
+    return N, h
 
 
 def polytope_vertices(normals: np.ndarray, offsets: np.ndarray, far: float = FAR):
@@ -191,19 +194,10 @@ def term_box(literals: list[tuple[Quadric, int]], user_bound=None):
             if rhs < 0:
                 return None
             pos = [m for m in range(3) if m != k]
-            P = f.U[:, pos]
-            lam = f.lam[pos]
-            dirs = [P[:, m] for m in range(2)]
-            for e in _WORLD:
-                p = P @ (P.T @ e)
-                if np.linalg.norm(p) > 1e-9:
-                    dirs.append(p / np.linalg.norm(p))
-            for n in dirs:
-                for sgn in (1.0, -1.0):
-                    nn = sgn * n
-                    normals.append(nn[None, :])
-                    offsets.append(np.array([nn @ f.center + np.sqrt(rhs * np.sum((nn @ P) ** 2 / lam))]))
-                    added = True
+            n, h = ellipse_support(f.center, f.U[:, pos], f.lam[pos], rhs)
+            normals.append(n)
+            offsets.append(h)
+            added = True
         if not added:
             return box
     N, d = _dedupe(np.vstack(normals), np.concatenate(offsets))

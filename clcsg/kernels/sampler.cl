@@ -175,23 +175,38 @@ inline real plane_height_clamped(const plane_frame *pf, real x, real y)
     return -R / (2 * pf->bk);
 }
 
-/* Can plane k own a point of [x0,x1] x [y0,y1]?  (false: an in-plane normal component
- * exceeds |n_k| everywhere there; the heightfield is known to be defined) */
+/* Exact ranges over a rectangle [x0,x1] x [y0,y1] of a plane (design note section 2): R is
+ * separable, so its range is exact; |n_i| = |lam_i x + beta_i| and |n_j| are linear in one
+ * coordinate each; |n_k| = sqrt(-lam_k R) on a two-sheet heightfield (lam_k t^2 = -R),
+ * |beta_k| on a one-sheet one.  Ranges are (min, max). */
+typedef struct {
+    real2 R, ni, nj, nk;
+} rect_bounds;
+
+inline rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
+{
+    rect_bounds b;
+    real2 Px = quad_range(pf->li, pf->bi, x0, x1);
+    real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
+    b.R = (real2)(Px.x + Sy.x + pf->gamma, Px.y + Sy.y + pf->gamma);
+    b.ni = abs_linear_range(pf->li, pf->bi, x0, x1);
+    b.nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
+    if (pf->lk != 0) {
+        real a = -pf->lk * b.R.x, c = -pf->lk * b.R.y; /* -lam_k R = (lam_k t)^2 */
+        b.nk = (real2)(sqrt(fmax(fmin(a, c), (real)0)), sqrt(fmax(fmax(a, c), (real)0)));
+    } else {
+        b.nk = (real2)(fabs(pf->bk), fabs(pf->bk));
+    }
+    return b;
+}
+
+/* Can plane k own a point of the rectangle?  (no: an in-plane normal component exceeds |n_k|
+ * everywhere there) */
+inline bool rect_may_be_owned(rect_bounds b) { return !(b.ni.x > b.nk.y || b.nj.x > b.nk.y); }
+
 inline bool sub_rect_owned(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
-    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
-    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
-    real nk_hi;
-    if (pf->lk != 0) {
-        real2 Px = quad_range(pf->li, pf->bi, x0, x1);
-        real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
-        real Rlo = Px.x + Sy.x + pf->gamma, Rhi = Px.y + Sy.y + pf->gamma;
-        real Hhi = pf->lk > 0 ? -Rlo / pf->lk : -Rhi / pf->lk;
-        nk_hi = fabs(pf->lk) * sqrt(fmax(Hhi, (real)0));
-    } else {
-        nk_hi = fabs(pf->bk);
-    }
-    return !(ni.x > nk_hi || nj.x > nk_hi);
+    return rect_may_be_owned(rect_bounds_of(pf, x0, x1, y0, y1));
 }
 
 /* device coordinates of local (x, y, t) */
@@ -221,23 +236,10 @@ inline void emit_sample(__global raw_sample_rec *out, int slot, int cap, real3 p
  * heightfield may be vertical; also whether plane k may own a point of it. */
 inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, real y1, bool *owned)
 {
-    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
-    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
-    real nk_lo, nk_hi;
-    if (pf->lk != 0) {
-        real2 Px = quad_range(pf->li, pf->bi, x0, x1);
-        real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
-        real Rlo = Px.x + Sy.x + pf->gamma, Rhi = Px.y + Sy.y + pf->gamma;
-        real Hlo = pf->lk > 0 ? -Rhi / pf->lk : -Rlo / pf->lk;
-        real Hhi = pf->lk > 0 ? -Rlo / pf->lk : -Rhi / pf->lk;
-        nk_lo = fabs(pf->lk) * sqrt(fmax(Hlo, (real)0));
-        nk_hi = fabs(pf->lk) * sqrt(fmax(Hhi, (real)0));
-    } else {
-        nk_lo = nk_hi = fabs(pf->bk);
-    }
-    *owned = !(ni.x > nk_hi || nj.x > nk_hi);
-    real hi = nk_lo > 0 ? sqrt(ni.y * ni.y + nj.y * nj.y + nk_hi * nk_hi) / nk_lo : INFINITY;
-    real lo = nk_hi > 0 ? sqrt(ni.x * ni.x + nj.x * nj.x + nk_lo * nk_lo) / nk_hi : INFINITY;
+    rect_bounds b = rect_bounds_of(pf, x0, x1, y0, y1);
+    *owned = rect_may_be_owned(b);
+    real hi = b.nk.x > 0 ? sqrt(b.ni.y * b.ni.y + b.nj.y * b.nj.y + b.nk.y * b.nk.y) / b.nk.x : INFINITY;
+    real lo = b.nk.y > 0 ? sqrt(b.ni.x * b.ni.x + b.nj.x * b.nj.x + b.nk.x * b.nk.x) / b.nk.y : INFINITY;
 #if WORST_CASE_DISTORTION
     hi = fmax(hi, sqrt((real)3));
     lo = hi;
@@ -249,25 +251,15 @@ inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, r
  * (max |n_i|, max |n_j|) / min |n_k|, and min |n_k| itself. */
 inline real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
-    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
-    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
-    real nk_lo;
-    if (pf->lk != 0) {
-        real2 Px = quad_range(pf->li, pf->bi, x0, x1);
-        real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
-        real Hlo = pf->lk > 0 ? -(Px.y + Sy.y + pf->gamma) / pf->lk : -(Px.x + Sy.x + pf->gamma) / pf->lk;
-        nk_lo = fabs(pf->lk) * sqrt(fmax(Hlo, (real)0));
-    } else {
-        nk_lo = fabs(pf->bk);
-    }
-    real mx = ni.y / nk_lo, my = nj.y / nk_lo;
+    rect_bounds b = rect_bounds_of(pf, x0, x1, y0, y1);
+    real mx = b.ni.y / b.nk.x, my = b.nj.y / b.nk.x;
 #if WORST_CASE_DISTORTION
     /* the paper's isotropic bound |dp| <= delta |d| with delta >= sqrt 3: equal slopes
      * m = sqrt((delta^2 - 1) / 2) give (m a + m b)^2 <= (delta^2 - 1)(a^2 + b^2) */
     real dl = fmax(sqrt(1 + mx * mx + my * my), sqrt((real)3));
     mx = my = sqrt((dl * dl - 1) / 2);
 #endif
-    return (real3)(mx, my, nk_lo);
+    return (real3)(mx, my, b.nk.x);
 }
 
 /* Largest half-width a with a^2 + b^2 + (mx a + my b)^2 <= r^2 (0 if none). */
@@ -462,39 +454,28 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
     plane_frame pf = plane_load(frames + t.quadric, t.plane, t.sheet);
 
     /* exact interval bounds over the cell (design note section 2) */
-    real2 Px = quad_range(pf.li, pf.bi, c.x0, c.x1);
-    real2 Sy = quad_range(pf.lj, pf.bj, c.y0, c.y1);
-    real Rlo = Px.x + Sy.x + pf.gamma, Rhi = Px.y + Sy.y + pf.gamma;
-    real nk_lo, nk_hi, t_lo, t_hi;
+    rect_bounds rb = rect_bounds_of(&pf, c.x0, c.x1, c.y0, c.y1);
+    real t_lo, t_hi;
     bool whole_domain = true;
     if (pf.lk != 0) {
-        real Hlo = pf.lk > 0 ? -Rhi / pf.lk : -Rlo / pf.lk;
-        real Hhi = pf.lk > 0 ? -Rlo / pf.lk : -Rhi / pf.lk;
+        real Hlo = -(pf.lk > 0 ? rb.R.y : rb.R.x) / pf.lk;
+        real Hhi = -(pf.lk > 0 ? rb.R.x : rb.R.y) / pf.lk;
         if (Hhi < 0) { /* no surface over this cell */
             atomic_inc(&counters[C_DISCARDED]);
             return;
         }
         whole_domain = Hlo >= 0;
-        Hlo = fmax(Hlo, (real)0);
-        nk_lo = fabs(pf.lk) * sqrt(Hlo);
-        nk_hi = fabs(pf.lk) * sqrt(Hhi);
-        real a = sqrt(Hlo), b = sqrt(Hhi);
+        real a = sqrt(fmax(Hlo, (real)0)), b = sqrt(Hhi);
         t_lo = pf.sheet > 0 ? a : -b;
         t_hi = pf.sheet > 0 ? b : -a;
     } else {
-        nk_lo = nk_hi = fabs(pf.bk);
-        t_lo = -Rhi / (2 * pf.bk);
-        t_hi = -Rlo / (2 * pf.bk);
-        if (t_lo > t_hi) {
-            real s = t_lo;
-            t_lo = t_hi;
-            t_hi = s;
-        }
+        t_lo = fmin(-rb.R.y / (2 * pf.bk), -rb.R.x / (2 * pf.bk));
+        t_hi = fmax(-rb.R.y / (2 * pf.bk), -rb.R.x / (2 * pf.bk));
     }
-    real2 ni = abs_linear_range(pf.li, pf.bi, c.x0, c.x1);
-    real2 nj = abs_linear_range(pf.lj, pf.bj, c.y0, c.y1);
+    real2 ni = rb.ni, nj = rb.nj;
+    real nk_lo = rb.nk.x, nk_hi = rb.nk.y;
     /* plane k owns no point of the cell: an in-plane normal component dominates everywhere */
-    if (ni.x > nk_hi || nj.x > nk_hi) {
+    if (!rect_may_be_owned(rb)) {
         atomic_inc(&counters[C_DISCARDED]);
         return;
     }
