@@ -294,6 +294,80 @@ def measure_ops(ctx, real, dependent, repeats) -> list[dict]:
     return rows
 
 
+# -- the distance query of eq. 22 on the zoo models ----------------------------------------------
+
+
+def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
+    """Time of one ``csg_distance`` (eq. 22) evaluation at the medium-size sample positions of
+    zoo models, with ``enough`` = 4 r (a fine cell) and infinity (a root cell), per core-second
+    of CPU time, beside the replayed count of literal distances it computes (models.query_cost)."""
+    import pyopencl as cl
+
+    from clcsg.host.buffers import SceneBuffers
+    from clcsg.host.sampler import task_dtype
+
+    from . import models as models_mod
+    from . import zoo
+
+    real = np.dtype(ctx.real_dtype)
+    r = Runner(ctx, real, False)
+    kern = cl.Kernel(r.prg, "op_csg_distance")
+    rows = []
+    for m in zoo.MODELS:
+        if models is not None and m.name not in models:
+            continue
+        shape = m.build()
+        dnf = clcsg.Scene(shape).normalize()
+        diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
+        radius = diag / 150
+        s = clcsg.sample(shape, radius, device=ctx, progress=False)
+        rng = np.random.default_rng(0)
+        idx = rng.choice(len(s), size=min(len(s), 4096), replace=False)
+        packed = s.packed
+        # csg_distance reads only the task's quadric and polarity
+        tasks = np.zeros(len(idx), dtype=task_dtype(real))
+        tasks["quadric"] = s.quadrics[idx]
+        tasks["sign"] = s.signs[idx]
+        pts = np.ascontiguousarray((s.positions[idx] - packed.origin).astype(real))
+        sb = SceneBuffers(ctx, packed)
+        mf = cl.mem_flags
+        tbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
+        pbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts)
+        cost = {"fine_cell": models_mod.query_cost(dnf, s, 4 * radius), "root_cell": models_mod.query_cost(dnf, s, np.inf)}
+        for label, enough in (("fine_cell", 4 * radius), ("root_cell", np.inf)):
+            n = 4096
+            out = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, n * real.itemsize)
+
+            def launch(nn):
+                ctx.queue.finish()
+                c0 = time.process_time()
+                ev = kern(ctx.queue, (nn,), (Runner.WG,), sb.quadrics, sb.literals, sb.terms, np.int32(sb.n_terms),
+                          tbuf, pbuf, np.int32(len(idx)), np.int32(K), real.type(enough), out)
+                ev.wait()
+                return event_seconds(ev), time.process_time() - c0
+
+            launch(Runner.WG)
+            while True:
+                if out.size < n * real.itemsize:
+                    out = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, n * real.itemsize)
+                t, _ = launch(n)
+                if t >= MIN_LAUNCH or n >= 1 << 22:
+                    break
+                n = int(min(max(2.0, 1.5 * MIN_LAUNCH / max(t, 1e-6)), 16.0) * n) // Runner.WG * Runner.WG
+            runs = [launch(n) for _ in range(repeats)]
+            t, c = min(x for x, _ in runs), min(y for _, y in runs)
+            q = n * K
+            lit = cost[label]["index"]["literals_per_query"]
+            rows.append({"model": m.name, "quadrics": dnf.n_quadrics, "terms": dnf.n_terms,
+                         "literals": sum(len(tt) for tt in dnf.terms), "cell": label, "enough": float(enough),
+                         "queries": q, "launch_s": t, "cpu_s": c, "ns_per_query_per_cu": 1e9 * t * ctx.info.compute_units / q,
+                         "ns_per_query_per_core": 1e9 * c / q, "replayed_literals_per_query": lit,
+                         "replayed_terms_per_query": cost[label]["index"]["terms_per_query"],
+                         "ns_per_literal_per_core": 1e9 * c / q / max(lit, 1)})
+            print(f"query {m.name} {label}: {1e9 * c / q:.0f} ns per query per core, {lit:.1f} literals", flush=True)
+    return rows
+
+
 # -- sampling rows --------------------------------------------------------------------------------
 
 
@@ -386,6 +460,13 @@ def table(payload) -> str:
             f"{_rate(r['samples_per_s_classify_kernel'])} | "
             f"{r['ns_per_sample_per_cu_subdivide']:.1f} / {kern:.1f} | {paper} | "
             f"{r['ratio_per_cu_to_paper_subdivide']:.2f}x / {r['ratio_per_cu_to_paper_kernel']:.2f}x |")
+    lines += ["", "The distance query of eq. 22 (csg_distance) at medium-size sample positions of the zoo models",
+              "", "| model | quadrics | terms / literals | cell | ns per query per core | literals per query (replayed) | "
+              "terms visited | ns per literal |", "|---|---|---|---|---|---|---|---|"]
+    for q in payload.get("distance_queries", []):
+        lines.append(f"| {q['model']} | {q['quadrics']} | {q['terms']} / {q['literals']} | {q['cell']} | "
+                     f"{q['ns_per_query_per_core']:.0f} | {q['replayed_literals_per_query']:.1f} | "
+                     f"{q['replayed_terms_per_query']:.1f} | {q['ns_per_literal_per_core']:.1f} |")
     c = payload["clock"]
     lines += ["", f"Clock estimate (dependent FMA chain, {c['fma_latency_cycles']} cycles per FMA): "
               f"{c['clock_ghz']:.2f} GHz per core-second of CPU time ({c['clock_ghz_wall']:.2f} GHz from wall time "
@@ -407,6 +488,7 @@ def run(quick=False, device=None):
     clock = measure_clock(ctx, repeats)
     radii = [0.004] if quick else [0.004, 0.001]
     sampling = measure_sampling(ctx, radii, 2 if quick else 3)
+    queries = measure_queries(ctx, repeats, models=("lens", "flange") if quick else None)
     env = environment(ctx)
     env["loadavg_start"] = round(load0, 2)
     env["loadavg_end"] = round(os.getloadavg()[0], 2)
@@ -421,6 +503,7 @@ def run(quick=False, device=None):
         "clock": clock,
         "operations": ops,
         "sampling": sampling,
+        "distance_queries": queries,
     }
     path = write("micro", payload)
     print(table(payload))

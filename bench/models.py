@@ -109,52 +109,57 @@ def fit_to_silhouette(dnf, width, height, direction, fill=0.9, ctx=None) -> Came
 def query_cost(dnf, samples, enough, limit=20000, seed=0) -> dict:
     """How many literal distances one evaluation of eq. 22 (``csg_distance`` in
     kernels/sampler.cl) computes, replayed in numpy at sample positions with the kernel's
-    culling rules (terms in index order; a term is skipped when its bound box is at least
-    ``enough`` or the nearest term so far away).  Also the same with the terms visited
-    nearest-box-first, which lets the second rule skip more."""
+    rules: every term is scanned for the sample's literal (quadric and polarity); terms that
+    hold it are always evaluated (the union of the own terms), any other term is skipped when
+    its bound box is at least ``enough`` or the nearest other term so far away; an evaluated
+    term computes the distances of all its literals except those on the sample's quadric.
+    Terms are visited in index order (as the kernel does) and nearest-box-first."""
     from clcsg.quadric import Quadric
 
     rng = np.random.default_rng(seed)
     n = len(samples)
     idx = rng.choice(n, size=min(n, limit), replace=False) if n else np.zeros(0, int)
     p = samples.positions[idx]
-    own_q, own_s, own_t = samples.quadrics[idx], samples.signs[idx], samples.terms[idx]
+    own_q, own_s = samples.quadrics[idx], samples.signs[idx]
     qd = np.stack([Quadric(m).distance(p) for m in dnf.quadrics], axis=1)  # (N, U)
     lo, hi = dnf.term_bounds[:, 0], dnf.term_bounds[:, 1]
     box = np.linalg.norm(np.maximum(lo[None] - p[:, None], 0) + np.maximum(p[:, None] - hi[None], 0), axis=2)
+    # member[n, t]: term t holds the sample's literal
+    member = np.zeros((len(p), dnf.n_terms), dtype=bool)
+    for t, lits in enumerate(dnf.terms):
+        for qi, sg in lits:
+            member[:, t] |= (own_q == qi) & (own_s == sg)
     out = {}
     for order in ("index", "nearest_first"):
-        evals = np.array([len(dnf.terms[t]) - 1 for t in own_t], dtype=float)
-        terms_visited = np.zeros(len(p))
-        nearest = np.full(len(p), np.inf)
+        evals = np.zeros(len(p))
+        visited = np.zeros(len(p))
+        other = np.full(len(p), np.inf)
         rows = np.arange(len(p))
-        order_idx = np.argsort(box, axis=1) if order == "nearest_first" else \
+        order_idx = np.argsort(np.where(member, -1.0, box), axis=1) if order == "nearest_first" else \
             np.broadcast_to(np.arange(dnf.n_terms), box.shape)
         for k in range(dnf.n_terms):
             t = order_idx[:, k]
             b = box[rows, t]
-            active = (t != own_t) & ~(b >= enough) & ~(b >= nearest)
-            skipped = (t != own_t) & ~active
-            nearest = np.where(skipped, np.minimum(nearest, b), nearest)
+            mem = member[rows, t]
+            active = mem | ~((b >= enough) | (b >= other))
+            other = np.where(~active, np.minimum(other, b), other)
             for ti in np.unique(t[active]):
                 sel = active & (t == ti)
                 v = np.full(sel.sum(), -np.inf)
                 cnt = np.zeros(sel.sum())
-                shares = np.zeros(sel.sum(), bool)
                 for qi, sg in dnf.terms[ti]:
-                    same = own_q[sel] == qi
-                    shares |= same & (own_s[sel] == sg) & ~shares
-                    live = ~same & ~shares
+                    live = own_q[sel] != qi
                     cnt += live
                     v = np.where(live, np.maximum(v, sg * qd[sel, qi]), v)
                 v = np.where(b[sel] > 0, np.maximum(v, b[sel]), v)
-                nearest[sel] = np.where(shares, nearest[sel], np.minimum(nearest[sel], v))
+                other[sel] = np.where(mem[sel], other[sel], np.minimum(other[sel], v))
                 evals[sel] += cnt
-                terms_visited[sel] += 1
-        out[order] = {"literals_per_query": float(evals.mean()), "terms_per_query": float(terms_visited.mean())}
+                visited[sel] += 1
+        out[order] = {"literals_per_query": float(evals.mean()), "terms_per_query": float(visited.mean())}
     out["enough"] = float(enough)
     out["points"] = int(len(p))
     out["literals_total"] = int(sum(len(t) for t in dnf.terms))
+    out["membership_scan_per_query"] = out["literals_total"]
     return out
 
 
