@@ -90,8 +90,9 @@ def frame_dtype(real) -> np.dtype:
 def task_dtype(real) -> np.dtype:
     return np.dtype(
         [
-            ("group_first", np.int32), ("group_count", np.int32), ("quadric", np.int32), ("sign", np.int32),
-            ("plane", np.int32), ("sheet", np.int32), ("zlo", real, 3), ("zhi", real, 3),
+            ("group_first", np.int32), ("group_count", np.int32), ("terms_first", np.int32),
+            ("terms_count", np.int32), ("quadric", np.int32), ("sign", np.int32), ("plane", np.int32),
+            ("sheet", np.int32), ("far_other", real), ("zlo", real, 3), ("zhi", real, 3),
         ],
         align=True,
     )
@@ -146,9 +147,10 @@ def root_tasks(dnf: Dnf, packed: PackedScene, frames: list):
     ``kernels/sampler.cl:csg_distance``); its root cell covers the union of their bounds.
     """
     offsets = np.concatenate([[0], np.cumsum([len(t) for t in dnf.terms])]).astype(int)
-    tasks, cells, glits = [], [], []
+    tasks, cells, glits, task_terms = [], [], [], []
     lo_all = packed.terms["lo"].astype(np.float64)
     hi_all = packed.terms["hi"].astype(np.float64)
+    scale = float(np.abs(np.concatenate([lo_all.ravel(), hi_all.ravel()])).max(initial=1.0))
     for (qi, s), members in literal_groups(dnf).items():
         first = len(glits)
         for a in members:
@@ -156,6 +158,18 @@ def root_tasks(dnf: Dnf, packed: PackedScene, frames: list):
             glits.extend(others or [(a, -1)])  # -1: the term is the literal alone
         lo = lo_all[members].min(0)
         hi = hi_all[members].max(0)
+        # other terms whose bound misses the group's: out of the queries, their distance to
+        # the group's bound stands in (a lower bound for every point of the group's patches)
+        gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo_all - hi, lo - hi_all)), axis=1)
+        near = gap <= 1e-9 * scale
+        near[members] = False
+        far = ~near
+        far[members] = False
+        far_other = float(gap[far].min()) if far.any() else np.inf
+        terms_first = len(task_terms)
+        task_terms.extend(~np.int64(a) for a in members)
+        task_terms.extend(np.flatnonzero(near).tolist())
+        terms_count = len(task_terms) - terms_first
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         f = frames[qi]
         z = (corners - f.center) @ f.U
@@ -172,14 +186,16 @@ def root_tasks(dnf: Dnf, packed: PackedScene, frames: list):
                 continue  # a cylinder along u_k: plane k owns no point
             i, j = [m for m in range(3) if m != k]
             for sheet in sheets:
-                tasks.append((first, len(glits) - first, qi, s, k, sheet, zlo, zhi))
+                tasks.append((first, len(glits) - first, terms_first, terms_count, qi, s, k, sheet,
+                              far_other, zlo, zhi))
                 cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0))
     t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
     for n, row in enumerate(tasks):
         t[n] = row
     c = np.array(cells, dtype=cell_dtype(packed.real)) if cells else np.zeros(0, cell_dtype(packed.real))
     g = np.array(glits, dtype=GROUP_LITERAL_DTYPE) if glits else np.zeros(1, GROUP_LITERAL_DTYPE)
-    return t, c, g
+    tt = np.array(task_terms, dtype=np.int32) if task_terms else np.zeros(1, np.int32)
+    return t, c, g, tt
 
 
 def estimate_samples(dnf: Dnf, radius: float) -> int:
@@ -223,6 +239,8 @@ def sample(
     capacity: tuple[int, int] | None = None,
     progress: bool | None = None,
     max_levels: int = 200,
+    max_samples: float | None = None,
+    max_memory: float | None = None,
 ) -> Samples:
     """Samples on the CSG surface of ``scene`` with the coverage guarantee for ``radius``.
 
@@ -231,6 +249,9 @@ def sample(
     size below which unresolved cells are dropped (default radius / 10).  ``distortion``:
     use the interval distortion bound (True) or the worst case max(sqrt 3, bound) (False).
     ``capacity``: initial (cells, samples) buffer sizes (tests force tiny ones).
+    ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.host.guard`;
+    None: 50 million samples / 80% of the device's global memory); past them
+    :class:`~clcsg.errors.LimitError` is raised before anything is allocated.
     """
     try:
         radius = float(radius)
@@ -249,10 +270,14 @@ def sample(
 
     ctx = scene_context(device)
     real = _device.real_dtype(ctx)
+    from .guard import check as _guard  # resource guard: LimitError before any allocation
+
+    _guard(dnf, radius, ctx.info, max_samples=max_samples, max_memory=max_memory, source=sc.source,
+           real_itemsize=np.dtype(real).itemsize)
     t1 = time.perf_counter()
     packed = pack(dnf, real)
     frames_rec, frames = analyse(packed)
-    tasks, roots, glits = root_tasks(dnf, packed, frames)
+    tasks, roots, glits, task_terms = root_tasks(dnf, packed, frames)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), **{f"dnf_{k}": v for k, v in dnf.stats.items()}}
     if len(roots) == 0:
@@ -262,7 +287,7 @@ def sample(
     mask_words = max(1, (int(tasks["group_count"].max(initial=1)) + 31) // 32)
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "MASK_WORDS": mask_words}
     prg = build(ctx, "sampler.cl", defines, real)
-    raw, raw_buf, level_stats, totals = _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor,
+    raw, raw_buf, level_stats, totals = _subdivide(ctx, prg, packed, frames_rec, tasks, task_terms, roots, radius, floor,
                                           capacity, estimate_samples(dnf, radius), progress, max_levels)
     t2 = time.perf_counter()
     timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
@@ -300,7 +325,8 @@ def _empty(radius, dnf, packed, stats) -> Samples:
                    np.zeros((0, 2), dtype=np.int32), radius, dnf, packed, stats)
 
 
-def _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress, max_levels):
+def _subdivide(ctx, prg, packed, frames_rec, tasks, task_terms, roots, radius, floor, capacity, estimate, progress,
+               max_levels):
     import pyopencl as cl
 
     mf = cl.mem_flags
@@ -309,6 +335,7 @@ def _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor, capaci
     scene = SceneBuffers(ctx, packed)
     frames_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=frames_rec)
     tasks_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
+    task_terms_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=task_terms)
     cdt = cell_dtype(real)
     sdt = raw_sample_dtype(real)
     if capacity is None:
@@ -337,7 +364,7 @@ def _subdivide(ctx, prg, packed, frames_rec, tasks, roots, radius, floor, capaci
             counters[1] = n_samples
             cl.enqueue_copy(queue, counters_buf, counters)
             kernel(queue, launch_size(n_in), (WORK_GROUP,),
-                   scene.quadrics, scene.literals, scene.terms, np.int32(scene.n_terms),
+                   scene.quadrics, scene.literals, scene.terms, task_terms_buf,
                    frames_buf, tasks_buf, cells_in, np.int32(n_in), cells_out, np.int32(cap_cells),
                    samples_buf, np.int32(cap_samples), counters_buf,
                    real.type(radius), real.type(floor))

@@ -84,15 +84,19 @@ typedef struct {
  * The literal is sampled once for all DNF terms that hold it (its "group"): a point of the
  * quadric is on the CSG surface if some group term holds there and no other term contains it.
  * group_first / group_count: the group's other literals, as (term, literal) pairs in the
- * group-literal buffer (for clip sets).  zlo / zhi: the union of the group terms' bounds as a
+ * group-literal buffer (for clip sets).  Terms whose bound is disjoint from the group's bound
+ * are left out of the distance queries; far_other stands in for them.  zlo / zhi: the union of the group terms' bounds as a
  * box in the quadric's local coordinates. */
 typedef struct {
     int group_first;
     int group_count;
+    int terms_first; /* the terms near the group's bound, in the task-term buffer: */
+    int terms_count; /* index i for other terms, ~i for the group's own terms */
     int quadric;
     int sign;
     int plane;
     int sheet;
+    real far_other; /* lower bound of the distance from the group's bound to every other term */
     real zlo[3];
     real zhi[3];
 } task_rec;

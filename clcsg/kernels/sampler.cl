@@ -15,6 +15,9 @@
 #ifndef MAX_FILL
 #define MAX_FILL 65536
 #endif
+#ifndef BOX_TEST
+#define BOX_TEST 1
+#endif
 #ifndef FILL_DELTA_RATIO
 #define FILL_DELTA_RATIO 1.1
 #endif
@@ -65,21 +68,27 @@ inline real box_distance(__global const term_rec *t, real3 p)
  * least that far away is not evaluated literal by literal (its box distance is a valid
  * conservative distance to it too). */
 real csg_distance(__global const quadric_rec *quadrics, __global const literal_rec *literals,
-                  __global const term_rec *terms, int n_terms, task_rec t, real3 p, real enough)
+                  __global const term_rec *terms, __global const int *task_terms, task_rec t, real3 p,
+                  real enough)
 {
-    real own = INFINITY, other = INFINITY;
-    for (int i = 0; i < n_terms; ++i) {
-        __global const term_rec *ti = terms + i;
-        bool member = false; /* does the term hold (q, sign)? */
-        for (int j = ti->first; j < ti->first + ti->count; ++j)
-            if (literals[j].quadric == t.quadric && literals[j].sign == t.sign) member = true;
+    /* Branch and bound: the task lists the group's own terms first.  A term's max over its
+     * literals only grows, so its scan stops once it can no longer lower the running min; and
+     * once |d_Q| is known to be at least `enough` with its sign settled, the rest is skipped
+     * (a smaller |d| of the right sign is still conservative). */
+    real own = INFINITY, other = t.far_other;
+    for (int n = 0; n < t.terms_count; ++n) {
+        int code = task_terms[t.terms_first + n];
+        bool member = code < 0; /* the term holds (q, sign) */
+        if (!member && own >= enough) return own; /* outside every own term by enough */
+        __global const term_rec *ti = terms + (member ? ~code : code);
         real box = member ? 0 : box_distance(ti, p);
         if (!member && (box >= enough || box >= other)) {
             other = fmin(other, box);
             continue;
         }
-        real v = -INFINITY;
-        for (int j = ti->first; j < ti->first + ti->count; ++j) {
+        real bound = member ? own : other;
+        real v = member ? -INFINITY : box;
+        for (int j = ti->first; j < ti->first + ti->count && v < bound; ++j) {
             literal_rec l = literals[j];
             if (l.quadric == t.quadric) continue;
             v = fmax(v, literal_distance(quadrics, l, p));
@@ -87,8 +96,8 @@ real csg_distance(__global const quadric_rec *quadrics, __global const literal_r
         if (member) {
             own = fmin(own, v);
         } else {
-            if (box > 0) v = fmax(v, box);
             other = fmin(other, v);
+            if (-other >= enough) return -other; /* inside another term by enough */
         }
     }
     return fmax(own, -other);
@@ -404,14 +413,15 @@ inline int literal_on_box(__global const quadric_rec *quadrics, literal_rec l, c
 /* -1: the whole patch is on the CSG surface, +1: none of it is, 0: unknown (same rules as
  * csg_distance: the union of the terms holding the literal, against all other terms). */
 int box_classify(__global const quadric_rec *quadrics, __global const literal_rec *literals,
-                 __global const term_rec *terms, int n_terms, task_rec t, const patch_box *b)
+                 __global const term_rec *terms, __global const int *task_terms, task_rec t,
+                 const patch_box *b)
 {
+    /* terms left out of the task miss the group's bound, hence the patch: they fail */
     bool some_member_holds = false, all_members_fail = true, others_all_fail = true;
-    for (int i = 0; i < n_terms; ++i) {
-        __global const term_rec *ti = terms + i;
-        bool member = false;
-        for (int j = ti->first; j < ti->first + ti->count; ++j)
-            if (literals[j].quadric == t.quadric && literals[j].sign == t.sign) member = true;
+    for (int n = 0; n < t.terms_count; ++n) {
+        int code = task_terms[t.terms_first + n];
+        bool member = code < 0;
+        __global const term_rec *ti = terms + (member ? ~code : code);
         if (!member) {
             /* quick reject: the box misses the term's bound */
             real3 lo = (real3)(ti->lo[0], ti->lo[1], ti->lo[2]), hi = (real3)(ti->hi[0], ti->hi[1], ti->hi[2]);
@@ -440,7 +450,7 @@ int box_classify(__global const quadric_rec *quadrics, __global const literal_re
 }
 
 __kernel void classify(__global const quadric_rec *quadrics, __global const literal_rec *literals,
-                       __global const term_rec *terms, int n_terms,
+                       __global const term_rec *terms, __global const int *task_terms,
                        __global const frame_rec *frames, __global const task_rec *tasks,
                        __global const cell_rec *cells_in, int n_cells,
                        __global cell_rec *cells_out, int cap_cells,
@@ -509,7 +519,7 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
             if (c.level > 0 && !isnan(c.d[m])) {
                 d[m] = c.d[m]; /* inherited: evaluated for a larger cell, still conservative */
             } else {
-                d[m] = csg_distance(quadrics, literals, terms, n_terms, t, p[m], enough);
+                d[m] = csg_distance(quadrics, literals, terms, task_terms, t, p[m], enough);
                 ++queries;
             }
         } else {
@@ -574,7 +584,7 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
             if (r <= radius) {
                 real3 pc = plane_point(&pf, mx, my, h);
                 atomic_inc(&counters[C_QUERIES]);
-                if (csg_distance(quadrics, literals, terms, n_terms, t, pc, INFINITY) < 0) {
+                if (csg_distance(quadrics, literals, terms, task_terms, t, pc, INFINITY) < 0) {
                     uint slot = atomic_inc(&counters[C_SAMPLES]);
                     emit_sample(samples, slot, cap_samples, pc, fmax(r, radius * (real)1e-3), c.task);
                     atomic_inc(&counters[C_SINGLE]);
@@ -603,14 +613,14 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
     }
 
     /* the discs could not decide: try the patch's box as a whole */
-    {
+    if (BOX_TEST) {
         patch_box b;
         real lx[2] = {c.x0, c.x1}, ly[2] = {c.y0, c.y1}, lt[2] = {t_lo, t_hi};
         for (int m = 0; m < 8; ++m) b.corner[m] = plane_point(&pf, lx[m & 1], ly[(m >> 1) & 1], lt[m >> 2]);
         b.center = plane_point(&pf, 0.5 * (c.x0 + c.x1), 0.5 * (c.y0 + c.y1), 0.5 * (t_lo + t_hi));
         b.hdiag = 0.5 * sqrt(ex * ex + ey * ey + et * et);
         atomic_inc(&counters[C_BOX_TESTS]);
-        int k = box_classify(quadrics, literals, terms, n_terms, t, &b);
+        int k = box_classify(quadrics, literals, terms, task_terms, t, &b);
         if (k > 0) {
             atomic_inc(&counters[C_BOX_RESOLVED]);
             atomic_inc(&counters[C_DISCARDED]);
@@ -647,11 +657,11 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
         a.x1 = mid;
         b.x0 = mid;
         if (plane_height(&pf, mid, c.y0, &h)) {
-            e0 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, mid, c.y0, h), 0.5 * enough);
+            e0 = csg_distance(quadrics, literals, terms, task_terms, t, plane_point(&pf, mid, c.y0, h), 0.5 * enough);
             ++queries2;
         }
         if (plane_height(&pf, mid, c.y1, &h)) {
-            e1 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, mid, c.y1, h), 0.5 * enough);
+            e1 = csg_distance(quadrics, literals, terms, task_terms, t, plane_point(&pf, mid, c.y1, h), 0.5 * enough);
             ++queries2;
         }
         a.d[1] = e0; a.d[3] = e1; /* a = [x0, mid]: new right corners */
@@ -663,11 +673,11 @@ __kernel void classify(__global const quadric_rec *quadrics, __global const lite
         a.y1 = mid;
         b.y0 = mid;
         if (plane_height(&pf, c.x0, mid, &h)) {
-            e0 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, c.x0, mid, h), 0.5 * enough);
+            e0 = csg_distance(quadrics, literals, terms, task_terms, t, plane_point(&pf, c.x0, mid, h), 0.5 * enough);
             ++queries2;
         }
         if (plane_height(&pf, c.x1, mid, &h)) {
-            e1 = csg_distance(quadrics, literals, terms, n_terms, t, plane_point(&pf, c.x1, mid, h), 0.5 * enough);
+            e1 = csg_distance(quadrics, literals, terms, task_terms, t, plane_point(&pf, c.x1, mid, h), 0.5 * enough);
             ++queries2;
         }
         a.d[2] = e0; a.d[3] = e1; /* a = [y0, mid]: new top corners */
