@@ -274,20 +274,22 @@ def measure_ops(ctx, real, dependent, repeats) -> list[dict]:
         t_base, c_base = (v * n / nb for v in r.best("baseline", nb, repeats))
         ops = n * K
         net, net_cpu = t_op - t_base, c_op - c_base
-        rate = ops / net if net > 0 else float("inf")
-        rate_cpu = ops / net_cpu if net_cpu > 0 else float("inf")
+        # None: the difference to the baseline was lost in timing noise (write valid JSON)
+        rate = ops / net if net > 0 else None
+        rate_cpu = ops / net_cpu if net_cpu > 0 else None
+        inv = lambda x, scale=1.0: None if x is None else scale / x  # noqa: E731
         lo, hi = PAPER[name]
         rows.append({
             "operation": name, "kernel": kernel, "precision": "double" if r.real == np.float64 else "float",
             "mode": "latency" if dependent else "throughput",
             "work_items": n, "iterations": K, "launch_s": t_op, "baseline_s": t_base,
             "launch_cpu_s": c_op, "baseline_cpu_s": c_base, "cores_busy": c_op / t_op,
-            "ops_per_s": rate, "ns_per_op": 1e9 / rate,
-            "ops_per_s_per_cu": rate / cu, "ns_per_op_per_cu": 1e9 * cu / rate,
-            "ops_per_core_s": rate_cpu, "ns_per_op_per_core": 1e9 / rate_cpu,
+            "ops_per_s": rate, "ns_per_op": inv(rate, 1e9),
+            "ops_per_s_per_cu": None if rate is None else rate / cu, "ns_per_op_per_cu": inv(rate, 1e9 * cu),
+            "ops_per_core_s": rate_cpu, "ns_per_op_per_core": inv(rate_cpu, 1e9),
             "paper_ops_per_s_core": lo, "paper_ns_per_op": 1e9 / lo,
-            "ratio_per_cu_to_paper": rate / cu / lo,
-            "ratio_per_core_s_to_paper": rate_cpu / lo,
+            "ratio_per_cu_to_paper": None if rate is None else rate / cu / lo,
+            "ratio_per_core_s_to_paper": None if rate_cpu is None else rate_cpu / lo,
             "baseline_ns_per_iteration_per_cu": 1e9 * t_base * cu / ops,
             "checksum": r.checksum.get(kernel),
         })
@@ -439,13 +441,16 @@ def table(payload) -> str:
              "per CU / paper | per core-s / paper |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     ghz = payload["clock"]["clock_ghz"]
+    def f(x, fmt, scale=1.0, suffix=""):
+        return "-" if x is None or not math.isfinite(x) else f"{x * scale:{fmt}}{suffix}"
+
     for r in payload["operations"]:
         lines.append(f"| {r['operation']} | {r['precision']} | {r['mode']} | {_rate(r['ops_per_s'])} | "
-                     f"{r['ns_per_op']:.2f} | {_rate(r['ops_per_s_per_cu'])} | {r['ns_per_op_per_cu']:.2f} | "
-                     f"{_rate(r['ops_per_core_s'])} | {r['ns_per_op_per_core'] * ghz:.1f} | "
+                     f"{f(r['ns_per_op'], '.2f')} | {_rate(r['ops_per_s_per_cu'])} | {f(r['ns_per_op_per_cu'], '.2f')} | "
+                     f"{_rate(r['ops_per_core_s'])} | {f(r['ns_per_op_per_core'], '.1f', ghz)} | "
                      f"{_rate(r['paper_ops_per_s_core'])} | {r['paper_ns_per_op']:.2f} | "
-                     f"{r['paper_ns_per_op'] * PAPER_GHZ:.1f} | {r['ratio_per_cu_to_paper']:.2f}x | "
-                     f"{r['ratio_per_core_s_to_paper']:.2f}x |")
+                     f"{r['paper_ns_per_op'] * PAPER_GHZ:.1f} | {f(r['ratio_per_cu_to_paper'], '.2f', 1, 'x')} | "
+                     f"{f(r['ratio_per_core_s_to_paper'], '.2f', 1, 'x')} |")
     lines += ["", "Sampling a single quadric (clcsg.sample; samples/s)", "",
               "| row | scene | r | samples | whole call | whole call per core-s | subdivide_s | classify kernel | "
               "ns/sample per CU (subdivide / kernel) | paper (1 core) | per CU / paper (subdivide / kernel) |",
