@@ -41,6 +41,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 import time
 import warnings
 
@@ -312,8 +313,15 @@ def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
     from . import zoo
 
     real = np.dtype(ctx.real_dtype)
-    r = Runner(ctx, real, False)
-    kern = cl.Kernel(r.prg, "op_csg_distance")
+    api = 2 if re.search(r"csg_distance\([^)]*task_terms", programs.source("sampler.cl")) else 1
+    with open(os.path.join(KERNELS, "query.cl"), encoding="utf-8") as f:
+        src = f.read()
+    opts = programs.real_options(real) + [f"-DQUERY_API={api}", "-DMASK_WORDS=1", "-I", programs.kernels_dir()]
+    try:
+        kern = cl.Kernel(cl.Program(ctx.ctx, src).build(options=opts), "op_csg_distance")
+    except cl.Error as e:  # the sampler's internals changed under the benchmark
+        print(f"distance query benchmark skipped: bench/kernels/query.cl does not build ({str(e).splitlines()[0]})")
+        return []
     rows = []
     for m in zoo.MODELS:
         if models is not None and m.name not in models:
@@ -326,14 +334,27 @@ def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
         rng = np.random.default_rng(0)
         idx = rng.choice(len(s), size=min(len(s), 4096), replace=False)
         packed = s.packed
-        # csg_distance reads only the task's quadric and polarity
-        tasks = np.zeros(len(idx), dtype=task_dtype(real))
-        tasks["quadric"] = s.quadrics[idx]
-        tasks["sign"] = s.signs[idx]
+        # csg_distance reads the task's quadric and polarity (and, with QUERY_API 2, its term
+        # list, which is the same for every plane and sheet of a literal group)
+        if api == 2:
+            from clcsg.host.sampler import analyse, root_tasks
+
+            _rec, frames = analyse(packed)
+            all_tasks, _roots, _glits, task_terms = root_tasks(dnf, packed, frames)[:4]
+            first = {}
+            for k in range(len(all_tasks)):
+                first.setdefault((int(all_tasks["quadric"][k]), int(all_tasks["sign"][k])), k)
+            tasks = all_tasks[[first[(int(s.quadrics[i]), int(s.signs[i]))] for i in idx]]
+        else:
+            tasks = np.zeros(len(idx), dtype=task_dtype(real))
+            tasks["quadric"] = s.quadrics[idx]
+            tasks["sign"] = s.signs[idx]
+            task_terms = np.zeros(1, np.int32)
         pts = np.ascontiguousarray((s.positions[idx] - packed.origin).astype(real))
         sb = SceneBuffers(ctx, packed)
         mf = cl.mem_flags
-        tbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
+        tbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(tasks))
+        ttbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(task_terms, np.int32))
         pbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts)
         cost = {"fine_cell": models_mod.query_cost(dnf, s, 4 * radius), "root_cell": models_mod.query_cost(dnf, s, np.inf)}
         for label, enough in (("fine_cell", 4 * radius), ("root_cell", np.inf)):
@@ -344,7 +365,7 @@ def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
                 ctx.queue.finish()
                 c0 = time.process_time()
                 ev = kern(ctx.queue, (nn,), (Runner.WG,), sb.quadrics, sb.literals, sb.terms, np.int32(sb.n_terms),
-                          tbuf, pbuf, np.int32(len(idx)), np.int32(K), real.type(enough), out)
+                          ttbuf, tbuf, pbuf, np.int32(len(idx)), np.int32(K), real.type(enough), out)
                 ev.wait()
                 return event_seconds(ev), time.process_time() - c0
 
@@ -360,7 +381,7 @@ def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
             t, c = min(x for x, _ in runs), min(y for _, y in runs)
             q = n * K
             lit = cost[label]["index"]["literals_per_query"]
-            rows.append({"model": m.name, "quadrics": dnf.n_quadrics, "terms": dnf.n_terms,
+            rows.append({"model": m.name, "query_api": api, "quadrics": dnf.n_quadrics, "terms": dnf.n_terms,
                          "literals": sum(len(tt) for tt in dnf.terms), "cell": label, "enough": float(enough),
                          "queries": q, "launch_s": t, "cpu_s": c, "ns_per_query_per_cu": 1e9 * t * ctx.info.compute_units / q,
                          "ns_per_query_per_core": 1e9 * c / q, "replayed_literals_per_query": lit,

@@ -132,23 +132,3 @@ __kernel void fma_chain(int n, real a, real b, __global real *out)
     out[gid] = x;
 }
 
-/* One evaluation of eq. 22 (csg_distance, the sampler's distance query) per iteration at a
- * sample position of a real scene: K iterations per work-item on point gid % n, nudged by
- * k * 1e-9 so the query cannot be hoisted. */
-__kernel void op_csg_distance(__global const quadric_rec *qs, __global const literal_rec *lits,
-                              __global const term_rec *terms, int n_terms,
-                              __global const task_rec *tasks, __global const real *pts, int n,
-                              int K, real enough, __global real *out)
-{
-    int gid = get_global_id(0);
-    int i = gid % n;
-    task_rec t = tasks[i];
-    real3 p = (real3)(pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]);
-    real acc = 0;
-    int kmax = K + (int)(gid >> 30);
-    for (int k = 0; k < kmax; ++k) {
-        real v = csg_distance(qs, lits, terms, n_terms, t, p + (real)(k * 1e-9), enough);
-        acc += isfinite(v) ? v : 0;
-    }
-    out[gid] = acc;
-}
