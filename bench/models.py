@@ -275,8 +275,9 @@ def run(quick=False, device=None):
             print(_row_line(row), flush=True)
             if size == "medium":
                 medium_samples = s
-                info["query_cost"] = {"fine_cell": query_cost(dnf, s, 4 * radius),
-                                      "root_cell": query_cost(dnf, s, np.inf)}
+                limit = 3000 if quick else 20000
+                info["query_cost"] = {"fine_cell": query_cost(dnf, s, 4 * radius, limit=limit),
+                                      "root_cell": query_cost(dnf, s, np.inf, limit=limit)}
         if gallery and medium_samples is not None:
             os.makedirs(GALLERY_DIR, exist_ok=True)
             gcam = fit_to_silhouette(dnf, *GALLERY_RES, m.direction, fill=0.9, ctx=ctx)
