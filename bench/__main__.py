@@ -1,7 +1,8 @@
 """``python -m bench PART [--quick] [--device D] [--out DIR]``.
 
 Parts: ``micro`` (the paper's Table 1 as OpenCL microbenchmarks), ``sampler`` (sampler
-throughput), ``models`` (the model zoo: the paper's Table 2 and the gallery), ``peers``
+throughput), ``models`` (the model zoo: the paper's Table 2 and the gallery), ``render``
+(splats against the ray tracer, each overdraw optimization on and off), ``peers``
 (manifold3d on the same solids), ``plots`` (PNG plots from the JSON files).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.
 """
@@ -11,7 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-PARTS = ("micro", "sampler", "models", "peers", "plots")
+PARTS = ("micro", "sampler", "models", "render", "peers", "plots")
 
 
 def main(argv=None):
