@@ -404,6 +404,9 @@ def add_sample_parser(subparsers):
     p.add_argument("--bound", metavar="x0,y0,z0,x1,y1,z1", default=None,
                    help="box that clips unbounded terms (overrides the scene's own bound)")
     p.add_argument("--no-progress", action="store_true", help="no progress display on stderr")
+    p.add_argument("--max-samples", metavar="N", type=positive_int, default=None,
+                   help="stop with exit code 5 before sampling if the estimate passes N samples "
+                        "(default: 50000000)")
 
 
 def parse_positive(text, name) -> float:
@@ -425,7 +428,7 @@ def run_sample(args) -> int:
     ctx = get_context(args.device)
     scene = as_scene(load(args.scene), bound)
     s = sample(scene, radius, device=ctx, floor=floor, term_limit=args.term_limit,
-               progress=False if args.no_progress else None)
+               progress=False if args.no_progress else None, max_samples=args.max_samples)
     s.to_ply(args.output)
     if args.stats:
         with open(args.stats, "w") as f:

@@ -132,6 +132,11 @@ def add_render_arguments(parser) -> None:
     p.add_argument("--no-surface-aligned", action="store_true",
                    help="splat bounds from the whole ball instead of the surface-aligned slab")
     p.add_argument("--no-backface-culling", action="store_true", help="do not cull back-facing splats")
+    from .cli import positive_int
+
+    p.add_argument("--max-samples", metavar="N", type=positive_int, default=None,
+                   help="splat method: stop with exit code 5 before sampling if the estimate passes N "
+                        "samples (default: 50000000)")
     if "--device" not in getattr(p, "_option_string_actions", {}):
         p.add_argument("--device", metavar="D", default=None, help="OpenCL device ('cpu', 'gpu', 'P:D')")
 
@@ -231,7 +236,8 @@ def cli_render(args) -> int:
             diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
             radius = diag / 100 if diag > 0 else 1.0
         t0 = time.perf_counter()
-        samples = sample(scene, radius, device=ctx, progress=False)
+        samples = sample(scene, radius, device=ctx, progress=False,
+                         max_samples=getattr(args, "max_samples", None))
         t_sample = time.perf_counter() - t0
         stats["sampling"] = dict(samples.stats)
         img = render(samples, camera, device=ctx, background=background,

@@ -1,0 +1,360 @@
+"""Resource guard: estimate the work of sampling a DNF at a radius before allocating anything.
+
+:func:`estimate` bounds the area of the CSG surface from the DNF alone (no device work) and
+turns it into a sample count and a memory size; :func:`check` raises
+:class:`~clcsg.errors.LimitError` (exit code 5) when a limit is passed, with the estimate and
+how to proceed.  :func:`clcsg.host.sampler.sample` calls :func:`check` right after
+normalization, before it builds a kernel or allocates a buffer, so a radius that is far too
+small for the scene fails in milliseconds instead of exhausting memory.
+
+The estimate (documented in ``docs/robustness.md``)
+---------------------------------------------------
+Area.  Every point of the CSG surface lies on a quadric Q of some term t, inside that term's
+bound B_t and inside the box of Q's surface (the box of the literal's solid, intersected for
+both polarities: a sphere's surface lies in the sphere's box even when it is a hole in a big
+block).  So the area is at most the sum over unique quadrics Q of an upper bound of
+area(Q ∩ R) over the regions R = B_t ∩ box(Q) of the terms holding Q (taken once per term,
+or once for the box around all of them, whichever is smaller).  Per region box with face
+areas F_x, F_y, F_z and surface S = 2 (F_x + F_y + F_z):
+
+* plane with unit normal n: area <= min(sqrt(F_x^2 + F_y^2 + F_z^2), min_k F_k / |n_k|)
+  (the section projects onto each coordinate plane with area A |n_k| <= F_k);
+* quadric with a semidefinite quadratic part (ellipsoids, cylinders, paraboloids: one side is
+  convex): area <= S (a convex body's surface is at most that of any convex set containing it;
+  the patch is part of the boundary of (convex side ∩ box));
+* indefinite quadratic part (cones, hyperboloids, saddles): area <= sqrt(3) S (the part of the
+  surface whose normal is closest to axis k has |n_k| >= 1/sqrt(3) and projects at most 2-to-1
+  onto the k-face, a line meeting a quadric in at most two points).
+
+These are upper bounds, never under-estimates.  The curvature slack (sqrt 3 for saddles and
+cones) is the price of not knowing the shape inside the box: a sphere in its bounding box
+gets 6 / pi = 1.9 times its area.
+
+Samples.  A fill sample covers at most pi r^2 of surface and the sampler's covering is within
+a small factor of that (tests/test_sampler.py: at most 4x on smooth scenes), so
+
+    samples ~= AREA_FACTOR * area / (pi r^2) + EDGE_FACTOR * (sum of region box edges) / r
+               + TASK_SAMPLES * tasks
+
+where the second term accounts for the partial cells along patch borders (proportional to
+their length, bounded by the box edges) and the third for the few single samples every task
+(literal group x sampling plane x sheet) emits even when it is tiny.  The constants are
+calibrated on the test scenes (tests/test_robustness.py checks that the estimate is never
+below a quarter of the real count and not absurdly above it).
+
+Memory.  Per sample the device holds the raw sample buffer (grown by 1.5x and copied, so up to
+twice its size while growing), the finish pass outputs (normal, term, clip mask), and the
+cells of a level (bounded by a few per sample); the host holds the Samples arrays.  The byte
+counts per sample are in :data:`DEVICE_BYTES_PER_SAMPLE` / :data:`HOST_BYTES_PER_SAMPLE`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import LimitError, UsageError
+
+__all__ = [
+    "DEFAULT_MAX_SAMPLES",
+    "HARD_MAX_SAMPLES",
+    "Estimate",
+    "check",
+    "estimate",
+    "memory_limit",
+    "quadric_area_bound",
+]
+
+#: default limit of ``clcsg.sample(..., max_samples=)`` and ``--max-samples``
+DEFAULT_MAX_SAMPLES = 50_000_000
+
+#: hard limit whatever ``max_samples`` says: the kernels count samples and size buffers with
+#: 32-bit integers (``int`` capacities, ``uint`` counters, a 32-bit sample index in the splat
+#: framebuffer key); half of 2^31 leaves room for the estimate being low by 2x
+HARD_MAX_SAMPLES = 2**30
+
+#: fraction of the device's global memory the sampler may plan to use (default ``max_memory``)
+MEMORY_FRACTION = 0.8
+
+#: calibration of the sample estimate (see the module docstring)
+AREA_FACTOR = 1.0
+EDGE_FACTOR = 0.5
+TASK_SAMPLES = 4
+
+#: bytes per sample: device buffers of the sampler (raw samples twice while growing, normals,
+#: terms, clip masks, cells) and host arrays (raw copy, Samples arrays, PLY record)
+DEVICE_BYTES_PER_SAMPLE = {8: 2 * 40 + 24 + 4 + 8 + 108, 4: 2 * 24 + 12 + 4 + 8 + 60}
+HOST_BYTES_PER_SAMPLE = 40 + 24 + 24 + 24 + 8 + 5 * 4 + 8 + 32
+
+SQRT3 = math.sqrt(3.0)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What sampling a DNF at ``radius`` is expected to cost (upper-bound style estimates)."""
+
+    radius: float
+    area: float  # upper bound of the CSG surface area
+    samples: float  # estimated sample count (float: inf for absurd radii)
+    device_bytes: float
+    host_bytes: float
+    largest_buffer: float  # bytes of the largest single device buffer (raw samples)
+    edges: float = 0.0  # total length of the patch border bound
+    tasks: int = 0
+    real_itemsize: int = 8
+    quadric_areas: tuple = field(default=(), repr=False)  # per unique quadric
+
+    @property
+    def finite(self) -> bool:
+        return math.isfinite(self.samples) and math.isfinite(self.device_bytes)
+
+    def at(self, radius: float) -> "Estimate":
+        """The same estimate at another radius (no new pass over the DNF)."""
+        return _make_estimate(float(radius), self.area, self.edges, self.tasks, self.real_itemsize,
+                              self.quadric_areas)
+
+    def radius_for(self, samples: float) -> float:
+        """The smallest radius whose estimate is at most ``samples`` (inf if none is)."""
+        c = samples - TASK_SAMPLES * self.tasks
+        if c <= 0:
+            return math.inf
+        a = AREA_FACTOR * self.area / math.pi
+        b = EDGE_FACTOR * self.edges
+        if a <= 0 and b <= 0:
+            return 0.0
+        # a x^2 + b x = c with x = 1 / r
+        x = (2 * c) / (b + math.sqrt(b * b + 4 * a * c)) if a > 0 else c / b
+        return (1.0 / x) * (1 + 1e-9)
+
+    def as_dict(self) -> dict:
+        return {
+            "radius": self.radius,
+            "area_bound": self.area,
+            "samples": self.samples,
+            "device_bytes": self.device_bytes,
+            "host_bytes": self.host_bytes,
+            "largest_buffer": self.largest_buffer,
+        }
+
+
+def _make_estimate(r, area, edges, tasks, itemsize, per_quadric=()) -> Estimate:
+    samples = AREA_FACTOR * _div(area, math.pi * r * r) + EDGE_FACTOR * _div(edges, r) + TASK_SAMPLES * tasks
+    key = 8 if itemsize == 8 else 4
+    raw = 40 if key == 8 else 24
+    return Estimate(r, float(area), float(samples), float(samples * DEVICE_BYTES_PER_SAMPLE[key]),
+                    float(samples * HOST_BYTES_PER_SAMPLE), float(1.5 * raw * samples), float(edges),
+                    int(tasks), key, tuple(per_quadric))
+
+
+# -- area bounds --------------------------------------------------------------------------------
+
+
+def _kind(matrix):
+    """("plane", |unit normal|), ("convex", None) or ("saddle", None) for a quadric matrix."""
+    m = np.asarray(matrix, dtype=np.float64)
+    A = m[:3, :3]
+    scale = np.abs(m).max()
+    if np.abs(A).max() <= 1e-14 * scale:  # a plane: Q = 2 b.x + c
+        b = m[:3, 3]
+        nb = np.linalg.norm(b)
+        return ("plane", np.abs(b) / nb if nb > 0 else None)
+    lam = np.linalg.eigvalsh(0.5 * (A + A.T))
+    tol = 1e-12 * np.abs(lam).max()
+    if np.all(lam >= -tol) or np.all(lam <= tol):
+        return ("convex", None)
+    return ("saddle", None)
+
+
+def _area_bounds(kind, lo, hi) -> np.ndarray:
+    """Upper bounds of the area of a quadric of ``kind`` inside each box (lo, hi: (N, 3))."""
+    e = np.maximum(np.asarray(hi, float) - np.asarray(lo, float), 0.0)
+    F = np.stack([e[:, 1] * e[:, 2], e[:, 0] * e[:, 2], e[:, 0] * e[:, 1]], axis=1)
+    S = 2.0 * F.sum(axis=1)
+    what, n = kind
+    if what == "plane":
+        if n is None:
+            return np.zeros(len(e))
+        best = np.sqrt((F * F).sum(axis=1))
+        for k in range(3):
+            if n[k] > 1e-12:
+                best = np.minimum(best, F[:, k] / n[k])
+        return best
+    return S if what == "convex" else SQRT3 * S
+
+
+def quadric_area_bound(matrix, lo, hi) -> float:
+    """Upper bound of the area of the quadric surface ``x^T Q x = 0`` inside the box [lo, hi]."""
+    lo = np.asarray(lo, float).reshape(1, 3)
+    hi = np.asarray(hi, float).reshape(1, 3)
+    return float(_area_bounds(_kind(matrix), lo, hi)[0])
+
+
+def _div(a: float, b: float) -> float:
+    """a / b for a >= 0, b >= 0 without ZeroDivisionError or OverflowError (inf instead)."""
+    if a == 0.0:
+        return 0.0
+    try:
+        out = a / b
+    except (ZeroDivisionError, OverflowError):
+        return math.inf
+    return out if math.isfinite(out) else math.inf
+
+
+def _surface_box(q, lit_box):
+    """Box of the surface of quadric ``q``: the intersection of the boxes of its two literals."""
+    lo = np.full(3, -np.inf)
+    hi = np.full(3, np.inf)
+    for s in (1, -1):
+        b = lit_box(q, s)
+        if b is None:  # one side empty: the surface is empty too (e.g. x^2 + 1 = 0)
+            return None
+        lo = np.maximum(lo, b[0])
+        hi = np.minimum(hi, b[1])
+    return lo, hi
+
+
+def estimate(dnf, radius: float, real_itemsize: int = 8) -> Estimate:
+    """The :class:`Estimate` of sampling ``dnf`` at ``radius`` (host only, no device needed).
+
+    ``real_itemsize``: 8 for the fp64 path, 4 for float32 (device buffer sizes).
+    """
+    from ..quadric import Quadric
+    from .bounds import literal_box
+
+    r = float(radius)
+    if not (math.isfinite(r) and r > 0):
+        raise UsageError(f"radius must be a positive finite number, got {radius}")
+    if not dnf.n_terms:
+        return _make_estimate(r, 0.0, 0.0, 0, real_itemsize)
+    boxes = np.asarray(dnf.term_bounds, dtype=np.float64)
+    holders: dict[int, list[int]] = {}
+    signs: dict[int, set] = {}
+    for t, term in enumerate(dnf.terms):
+        for qi, s in term:
+            holders.setdefault(qi, []).append(t)
+            signs.setdefault(qi, set()).add(s)
+    area = 0.0
+    edges = 0.0
+    per_quadric = []
+    tasks = 0
+    for qi in range(dnf.n_quadrics):
+        terms = holders.get(qi)
+        if not terms:
+            per_quadric.append(0.0)
+            continue
+        q = Quadric(dnf.quadrics[qi])
+        sb = _surface_box(q, literal_box)
+        if sb is None:
+            per_quadric.append(0.0)
+            continue
+        lo = np.maximum(boxes[terms, 0], sb[0])
+        hi = np.minimum(boxes[terms, 1], sb[1])
+        ok = np.all(hi >= lo, axis=1)
+        if not ok.any():
+            per_quadric.append(0.0)
+            continue
+        lo, hi = lo[ok], hi[ok]
+        kind = _kind(q.matrix)
+        ulo, uhi = lo.min(axis=0, keepdims=True), hi.max(axis=0, keepdims=True)
+        separate = float(_area_bounds(kind, lo, hi).sum())
+        together = float(_area_bounds(kind, ulo, uhi)[0])
+        a = min(separate, together)
+        per_quadric.append(a)
+        area += a
+        # patch borders: at most the edges of the region boxes (the cheaper of the two ways)
+        edges += min(4.0 * float(np.sum(hi - lo)), 4.0 * float(np.sum(uhi - ulo)))
+        # tasks: one per literal polarity present x 3 planes x up to 2 sheets
+        tasks += 6 * len(signs[qi])
+    return _make_estimate(r, area, edges, tasks, real_itemsize, per_quadric)
+
+
+# -- the check ------------------------------------------------------------------------------------
+
+
+def memory_limit(info) -> tuple[float, float]:
+    """(planned device bytes, largest single buffer) a device allows by default."""
+    if info is None:
+        return math.inf, math.inf
+    return MEMORY_FRACTION * float(info.global_mem), float(info.max_mem_alloc)
+
+
+def _size(n: float) -> str:
+    if not math.isfinite(n):
+        return "an unbounded amount"
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024.0
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def _count(n: float) -> str:
+    if n >= 1e12:
+        return f"{n:.3g}"
+    return f"{int(round(n)):,}"
+
+
+def _round_up(x: float) -> float:
+    """``x`` rounded up to 3 significant digits (so the printed radius passes the guard)."""
+    if not (math.isfinite(x) and x > 0):
+        return x
+    step = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return math.ceil(x / step * (1 - 1e-12)) * step
+
+
+def _limit_value(value, name: str):
+    if value is None:
+        return None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise UsageError(f"{name} must be a positive number, got {value!r}") from None
+    if math.isnan(v) or v <= 0:
+        raise UsageError(f"{name} must be a positive number, got {value!r}")
+    return v
+
+
+def check(dnf, radius: float, info=None, *, max_samples=None, max_memory=None, source: str = "scene",
+          real_itemsize: int = 8) -> Estimate:
+    """Estimate the cost of sampling ``dnf`` at ``radius`` and raise :class:`LimitError` past a limit.
+
+    ``info``: the device's :class:`~clcsg.host.device.DeviceInfo` (None: no memory limit).
+    ``max_samples``: None for :data:`DEFAULT_MAX_SAMPLES`; ``math.inf`` disables the count
+    limit.  ``max_memory``: bytes of device memory the run may plan to use; None for
+    :data:`MEMORY_FRACTION` of the device's global memory.  Returns the :class:`Estimate`.
+    """
+    ms = _limit_value(max_samples, "max_samples")
+    mm = _limit_value(max_memory, "max_memory")
+    ms = DEFAULT_MAX_SAMPLES if ms is None else ms
+    hard = ms > HARD_MAX_SAMPLES
+    ms = min(ms, HARD_MAX_SAMPLES)
+    est = estimate(dnf, radius, real_itemsize)
+    default_mem, max_alloc = memory_limit(info)
+    mem_cap = default_mem if mm is None else mm
+    where = "" if info is None else f" on {info.describe()}"
+    # the largest sample count every limit allows, and the radius that gives it
+    allowed = min(ms, mem_cap / DEVICE_BYTES_PER_SAMPLE[est.real_itemsize],
+                  max_alloc / est.largest_buffer * est.samples if est.largest_buffer > 0 else math.inf)
+    fit = _round_up(est.radius_for(allowed))
+    how = (f"use a larger --radius (about {fit:.3g} fits)" if math.isfinite(fit)
+           else f"no radius fits (the estimate never falls below {_count(TASK_SAMPLES * est.tasks)} samples)")
+    if not est.finite:
+        raise LimitError(f"{source}: radius {est.radius:.6g} is too small for a surface of area up to "
+                         f"{est.area:.4g}: the sample count overflows; {how}")
+    head = (f"{source}: sampling at radius {est.radius:.6g} needs about {_count(est.samples)} samples "
+            f"(surface area <= {est.area:.4g}, about {_size(est.device_bytes)} of device memory)")
+    if est.samples > ms:
+        if hard:
+            raise LimitError(f"{head}, past the {_count(ms)} samples the 32-bit kernels can index; {how}")
+        raise LimitError(f"{head}, past the limit of {_count(ms)} samples; {how} or raise --max-samples")
+    if est.device_bytes > mem_cap:
+        what = "max_memory" if mm is not None else f"{MEMORY_FRACTION:.0%} of the device's global memory"
+        raise LimitError(f"{head}, past {what} ({_size(mem_cap)}{where}); {how} "
+                         "or a device with more memory (--device)")
+    if est.largest_buffer > max_alloc:
+        raise LimitError(f"{head}; its sample buffer ({_size(est.largest_buffer)}) is past the largest "
+                         f"allocation the device allows ({_size(max_alloc)}{where}); {how} "
+                         "or a device with more memory (--device)")
+    return est
