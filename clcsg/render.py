@@ -221,17 +221,28 @@ def cli_render(args) -> int:
             raise UsageError(f"--radius must be positive, got {args.radius}")
     scene = load(args.scene)
     dnf = scene.normalize()
-    if not dnf.n_terms:
-        raise UsageError(f"{args.scene}: the solid is empty; nothing to render")
-    camera = cli_camera(args, dnf.bound)
     ctx = get_context(getattr(args, "device", None))
     stats = {}
-    if args.method == "raytrace":
+    if not dnf.n_terms:
+        import warnings
+
+        from .image import Image
+
+        warnings.warn(f"{args.scene}: the solid is empty; the image is all background", stacklevel=2)
+        w, h = size
+        bg = np.round(255 * np.asarray((tuple(background) + (1.0,))[:4])).astype(np.uint8)
+        img = Image(np.broadcast_to(bg, (h, w, 4)).copy(), np.full((h, w), np.inf, np.float32),
+                    np.full((h, w), -1, np.int32), {"method": args.method, "covered_pixels": 0,
+                                                   "total_seconds": 0.0})
+        what = "empty solid"
+    elif args.method == "raytrace":
+        camera = cli_camera(args, dnf.bound)
         img = raytrace(dnf, camera, device=ctx, background=background)
         what = "ray traced"
     else:
         from .host.sampler import sample
 
+        camera = cli_camera(args, dnf.bound)
         if radius is None:
             diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
             radius = diag / 100 if diag > 0 else 1.0

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import UsageError
 from .host.buffers import LITERAL_DTYPE, PackedScene, SceneBuffers, sample_dtype
 from .host.dnf import Dnf
 
@@ -102,9 +103,12 @@ class Samples:
             "property float nx\nproperty float ny\nproperty float nz\n"
             "property int quadric\nproperty float radius\nend_header\n"
         )
-        with open(os.fspath(path), "wb") as f:
-            f.write(header.encode("ascii"))
-            f.write(rec.tobytes())
+        try:
+            with open(os.fspath(path), "wb") as f:
+                f.write(header.encode("ascii"))
+                f.write(rec.tobytes())
+        except OSError as e:
+            raise UsageError(f"{os.fspath(path)}: cannot write PLY: {e.strerror or e}") from None
 
 
 def read_ply(path) -> dict:

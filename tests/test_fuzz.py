@@ -84,14 +84,7 @@ CSG_TOKENS = [";", "{", "}", "(", ")", "[", "]", ",", "=", ":", "-", "*", "%", "
 #: bugs found by this fuzzer in other modules and reported (docs/robustness.md, "Known gaps"):
 #: tolerated here so the fuzzer keeps looking for new ones; test_known_gaps below reproduces
 #: each (xfail until fixed), then remove the entry
-KNOWN_GAPS = [
-    # a transform or size overflowing float64 in normalization (cylinder h = 1e308, a
-    # multmatrix translation of 1e300): Quadric.transform -> ValueError, exit code 1
-    (ValueError, "quadric matrix has NaN or infinite entries"),
-    # a plane whose canonical coefficients all round to zero (cube([1e170, 1, 1])):
-    # Quadric.canonical -> StopIteration, exit code 1
-    (StopIteration, ""),
-]
+KNOWN_GAPS: list = []  # none open: the overflow gaps found here were fixed in dnf.py
 
 
 def _known_gap(e: BaseException) -> bool:
@@ -359,11 +352,9 @@ def test_fuzz_sample_and_render_without_nan(cl_context, case):
         assert np.all(np.isfinite(img.depth[img.mask])) and np.all(np.isinf(img.depth[~img.mask]))
 
 
-# -- the gaps found so far (reported; these pass once they are fixed) ---------------------------
+# -- gaps the fuzzer found (fixed; kept as regression tests) --------------------------------------
 
 
-@pytest.mark.xfail(reason="normalize raises ValueError/StopIteration on overflowing sizes and transforms "
-                          "(exit code 1); reported in docs/robustness.md (Known gaps)")
 @pytest.mark.parametrize("text", [
     "cylinder(h = 1e308, r = 2);",
     "multmatrix([[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) sphere(1);",

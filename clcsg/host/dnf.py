@@ -189,7 +189,13 @@ class _Normalizer:
             lits = []
             for q in node.quadrics():
                 self.literal_instances += 1
-                lits.append(self.table.add(q.transform(m), node.color))
+                try:
+                    lits.append(self.table.add(q.transform(m), node.color))
+                except (ValueError, StopIteration, FloatingPointError):
+                    raise SceneError(
+                        f"{self.source}: {node!r}: its quadric overflows float64 after the transforms "
+                        "(sizes or offsets far too large)"
+                    ) from None
             if not neg:
                 return self._clean([frozenset(lits)])
             return self._clean([frozenset([(qi, -s)]) for qi, s in lits])

@@ -320,7 +320,8 @@ def scene_context(device):
 def _empty(radius, dnf, packed, stats) -> Samples:
     z3 = np.zeros((0, 3))
     zi = np.zeros(0, dtype=np.int32)
-    stats.update(samples=0, clip_indices=0, levels=0, cells_per_level=[], distance_queries=0)
+    stats.update({k: 0 for k in COUNTERS if k != "cells"})
+    stats.update(samples=0, clip_indices=0, levels=0, cells_per_level=[], total_s=0.0)
     return Samples(z3, z3.copy(), np.zeros(0), zi, zi.copy(), zi.copy(), zi.copy(), zi.copy(),
                    np.zeros((0, 2), dtype=np.int32), radius, dnf, packed, stats)
 
