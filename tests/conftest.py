@@ -45,7 +45,6 @@ def cl_context():
 @pytest.fixture
 def tmp_scene(tmp_path):
     """A function writing a Shape or Scene to a scene file in tmp_path; returns the path."""
-    pytest.importorskip("clcsg.scenefile", reason="clcsg.scenefile (the JSON scene format) is not there yet")
     from clcsg.scene import save
 
     def write(obj, name: str = "scene.json"):

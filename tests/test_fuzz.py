@@ -32,9 +32,8 @@ import warnings
 import numpy as np
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from clcsg.errors import ClcsgError, LimitError, SceneError, UsageError  # noqa: E402
 from clcsg.openscad import parse_csg  # noqa: E402
