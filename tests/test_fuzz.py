@@ -32,6 +32,7 @@ import warnings
 import numpy as np
 import pytest
 
+import hypothesis
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
