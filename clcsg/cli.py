@@ -502,8 +502,16 @@ def _err(msg: str) -> None:
     print(f"{PROG}: {msg}", file=sys.stderr, flush=True)
 
 
+def _format_warning(message, category, filename, lineno, line=None) -> str:
+    """Warnings as one line, like errors: ``clcsg: warning: <message>``."""
+    return f"{PROG}: warning: {' '.join(str(message).split())}\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (never raises unless ``--debug``)."""
+    import warnings
+
+    warnings.formatwarning = _format_warning
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv  # known even if parsing fails
     try:

@@ -84,8 +84,8 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     from .raytracer import choose_real, event_seconds, kernel, pack_view
 
     require_int64_atomics(context, "the splat renderer (64-bit atom_min depth test)")
-    if len(samples) >= 1 << 32:
-        raise UsageError(f"too many samples for the 32-bit splat index: {len(samples)}")
+    if len(samples) >= 1 << 31:
+        raise UsageError(f"too many samples for the kernel's int splat index: {len(samples)}")
     t_start = time.perf_counter()
     real = choose_real(context, precision)
     culling = bool(backface_culling)

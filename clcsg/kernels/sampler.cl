@@ -718,7 +718,7 @@ __kernel void finish(__global const quadric_rec *quadrics, __global const litera
     normals[3 * gid] = g.x;
     normals[3 * gid + 1] = g.y;
     normals[3 * gid + 2] = g.z;
-    __global uint *mask = masks + (MASK_WORDS + 1) * gid;
+    uint mask[MASK_WORDS + 1]; /* built privately, stored once */
     for (int w = 0; w <= MASK_WORDS; ++w) mask[w] = 0;
     int best_term = -1;
     real best = INFINITY;
@@ -749,5 +749,6 @@ __kernel void finish(__global const quadric_rec *quadrics, __global const litera
         }
     }
     if (always) mask[0] = 1;
+    for (int w = 0; w <= MASK_WORDS; ++w) masks[(MASK_WORDS + 1) * gid + w] = mask[w];
     sample_terms[gid] = best_term;
 }
