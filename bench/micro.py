@@ -115,20 +115,13 @@ def quadrics() -> list[Quadric]:
 def pack_quadrics(qs, real):
     from clcsg.host.analysis import principal_frame
     from clcsg.host.buffers import quadric_dtype
-    from clcsg.host.sampler import frame_dtype
+    from clcsg.host.sampler import frame_records
 
     rec = np.zeros(len(qs), dtype=quadric_dtype(real))
-    fr = np.zeros(len(qs), dtype=frame_dtype(real))
     for i, q in enumerate(qs):
         rec["coef"][i] = q.coefficients()
         rec["lam_min"][i], rec["lam_max"][i] = q.eigenvalue_range()
-        f = principal_frame(q)
-        fr["U"][i] = f.U.reshape(9)
-        fr["center"][i] = f.center
-        fr["lam"][i] = f.lam
-        fr["beta"][i] = f.beta
-        fr["gamma"][i] = f.gamma
-    return rec, fr
+    return rec, frame_records([principal_frame(q) for q in qs], real)
 
 
 def build_micro(ctx, real, dependent=False):

@@ -102,3 +102,21 @@ def uncovered(points, point_quadrics, samples, radius, slack=1e-5):
                     hit = todo[live][d <= r]
                     found[hit] = True
     return np.flatnonzero(~found)
+
+
+def _canonical_order(s):
+    key = np.column_stack([s.positions, s.quadrics, s.terms, s.radii])
+    return np.lexsort(key.T[::-1])
+
+
+def assert_same_samples(a, b, stats=("distance_queries", "unresolved", "filled", "single")):
+    """Two runs gave the same samples (in any order), clip sets and the named counters."""
+    assert len(a) == len(b)
+    ia, ib = _canonical_order(a), _canonical_order(b)
+    for name in ("positions", "normals", "radii", "quadrics", "signs", "terms"):
+        np.testing.assert_array_equal(getattr(a, name)[ia], getattr(b, name)[ib], err_msg=name)
+    ca = [tuple(map(tuple, a.clip_literals[f:f + c])) for f, c in zip(a.clip_first[ia], a.clip_count[ia])]
+    cb = [tuple(map(tuple, b.clip_literals[f:f + c])) for f, c in zip(b.clip_first[ib], b.clip_count[ib])]
+    assert ca == cb
+    for k in stats:
+        assert a.stats[k] == b.stats[k], k

@@ -46,10 +46,9 @@ from clcsg.render import raytrace, render
 from clcsg.samples import read_ply
 
 import oracle
-from coverage import surface_residuals, uncovered
+from coverage import assert_same_samples, surface_residuals, uncovered
 from test_raytrace import compare as compare_with_oracle
 from test_sampler import SCENES as SAMPLER_SCENES
-from test_sampler import _canonical_order
 from test_splat import check as check_splats
 from test_splat import views
 
@@ -594,19 +593,9 @@ CAPACITY_SCENES = ["sphere", "rounded_cube", "sharp_tips", "flush_tops", "cone_f
 
 
 def _same_samples(big, tiny):
-    assert len(big) == len(tiny) > 0
-    a, b = _canonical_order(big), _canonical_order(tiny)
-    np.testing.assert_array_equal(big.positions[a], tiny.positions[b])
-    np.testing.assert_array_equal(big.normals[a], tiny.normals[b])
-    np.testing.assert_array_equal(big.radii[a], tiny.radii[b])
-    np.testing.assert_array_equal(big.quadrics[a], tiny.quadrics[b])
-    np.testing.assert_array_equal(big.signs[a], tiny.signs[b])
-    np.testing.assert_array_equal(big.terms[a], tiny.terms[b])
-    ca = [tuple(map(tuple, big.clip_literals[f:f + c])) for f, c in zip(big.clip_first[a], big.clip_count[a])]
-    cb = [tuple(map(tuple, tiny.clip_literals[f:f + c])) for f, c in zip(tiny.clip_first[b], tiny.clip_count[b])]
-    assert ca == cb
-    for k in ("distance_queries", "unresolved", "filled", "single", "discarded", "split", "levels"):
-        assert big.stats[k] == tiny.stats[k], k
+    assert len(big) > 0
+    assert_same_samples(big, tiny, ("distance_queries", "unresolved", "filled", "single", "discarded", "split",
+                                     "levels"))
 
 
 @pytest.mark.parametrize("name", CAPACITY_SCENES)

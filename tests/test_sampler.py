@@ -19,7 +19,7 @@ from clcsg.host.sampler import sample
 from clcsg.samples import read_ply
 from clcsg.solids import _make
 
-from coverage import surface_residuals, uncovered
+from coverage import assert_same_samples, surface_residuals, uncovered
 from oracle import surface_points
 
 B = clcsg.box(2)
@@ -164,28 +164,12 @@ def test_coincident_geometry_terminates_with_bounded_work(cl_context):
         assert sum(s.stats["cells_per_level"]) < 200 * len(s)
 
 
-def _canonical_order(s):
-    key = np.column_stack([s.positions, s.quadrics, s.terms, s.radii])
-    order = np.lexsort(key.T[::-1])
-    return order
-
-
 def test_forced_overflow_gives_identical_results(cl_context):
     shape, r = SCENES["drilled_block"]
     big = sample(shape, r, device=cl_context)
     tiny = sample(shape, r, device=cl_context, capacity=(2, 2))
     assert tiny.stats["buffer_growths"]["cells"] > 0 and tiny.stats["buffer_growths"]["samples"] > 0
-    assert len(big) == len(tiny)
-    a, b = _canonical_order(big), _canonical_order(tiny)
-    np.testing.assert_array_equal(big.positions[a], tiny.positions[b])
-    np.testing.assert_array_equal(big.radii[a], tiny.radii[b])
-    np.testing.assert_array_equal(big.quadrics[a], tiny.quadrics[b])
-    np.testing.assert_array_equal(big.terms[a], tiny.terms[b])
-    clips_a = [tuple(map(tuple, big.clip_literals[f:f + c])) for f, c in zip(big.clip_first[a], big.clip_count[a])]
-    clips_b = [tuple(map(tuple, tiny.clip_literals[f:f + c])) for f, c in zip(tiny.clip_first[b], tiny.clip_count[b])]
-    assert clips_a == clips_b
-    for k in ("distance_queries", "unresolved", "filled", "single"):
-        assert big.stats[k] == tiny.stats[k]
+    assert_same_samples(big, tiny)
 
 
 def _blocks(s, i):

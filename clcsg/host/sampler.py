@@ -112,17 +112,22 @@ def raw_sample_dtype(real) -> np.dtype:
     return np.dtype([("pos", real, 3), ("radius", real), ("task", np.int32), ("pad", np.int32)], align=True)
 
 
-def analyse(packed: PackedScene) -> tuple[np.ndarray, list]:
-    """Principal frames of all quadrics (device coordinates) as ``frame_rec`` records."""
-    frames = [principal_frame_of(m) for m in packed.local_matrices]
-    rec = np.zeros(len(frames), dtype=frame_dtype(packed.real))
+def frame_records(frames, real) -> np.ndarray:
+    """Principal frames as ``frame_rec`` records (``kernels/layout.h``)."""
+    rec = np.zeros(len(frames), dtype=frame_dtype(real))
     for i, f in enumerate(frames):
         rec["U"][i] = f.U.reshape(9)
         rec["center"][i] = f.center
         rec["lam"][i] = f.lam
         rec["beta"][i] = f.beta
         rec["gamma"][i] = f.gamma
-    return rec, frames
+    return rec
+
+
+def analyse(packed: PackedScene) -> tuple[np.ndarray, list]:
+    """Principal frames of all quadrics (device coordinates) as ``frame_rec`` records."""
+    frames = [principal_frame_of(m) for m in packed.local_matrices]
+    return frame_records(frames, packed.real), frames
 
 
 def principal_frame_of(matrix):
