@@ -48,9 +48,9 @@ import warnings
 import numpy as np
 
 import clcsg
-from clcsg.host import programs
-from clcsg.host.device import get_context
-from clcsg.quadric import Quadric
+from clcsg.cl import programs
+from clcsg.cl.device import get_context
+from clcsg.model.quadric import Quadric
 
 from .common import environment, write
 
@@ -99,7 +99,7 @@ def sampling_text() -> str:
 
 
 def quadrics() -> list[Quadric]:
-    rot = clcsg.csg.rotation_matrix((1, 2, 3), 35.0)
+    rot = clcsg.model.csg.rotation_matrix((1, 2, 3), 35.0)
     return [
         Quadric.sphere((0.1, 0.0, -0.1), 0.8),
         Quadric.ellipsoid((0.0, 0.1, 0.0), (0.9, 0.6, 0.4), rotation=rot),
@@ -113,9 +113,9 @@ def quadrics() -> list[Quadric]:
 
 
 def pack_quadrics(qs, real):
-    from clcsg.host.analysis import principal_frame
-    from clcsg.host.buffers import quadric_dtype
-    from clcsg.host.sampler import frame_records
+    from clcsg.compile.frames import principal_frame
+    from clcsg.cl.records import quadric_dtype
+    from clcsg.sampling.sampler import frame_records
 
     rec = np.zeros(len(qs), dtype=quadric_dtype(real))
     for i, q in enumerate(qs):
@@ -130,7 +130,7 @@ def build_micro(ctx, real, dependent=False):
 
     with open(os.path.join(KERNELS, "micro.cl"), encoding="utf-8") as f:
         src = f.read()
-    opts = programs.real_options(real) + [f"-DDEPENDENT={int(bool(dependent))}", "-DMASK_WORDS=1", "-I", programs.kernels_dir(), "-I", KERNELS]
+    opts = programs.real_options(real) + [f"-DDEPENDENT={int(bool(dependent))}", "-DMASK_WORDS=1", "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("sampling"), "-I", programs.package_dir("rendering"), "-I", KERNELS]
     return cl.Program(ctx.ctx, src).build(options=opts)
 
 
@@ -299,17 +299,17 @@ def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
     of CPU time, beside the replayed count of literal distances it computes (models.query_cost)."""
     import pyopencl as cl
 
-    from clcsg.host.buffers import SceneBuffers
-    from clcsg.host.sampler import task_dtype
+    from clcsg.cl.records import SceneBuffers
+    from clcsg.sampling.sampler import task_dtype
 
     from . import models as models_mod
     from . import zoo
 
     real = np.dtype(ctx.real_dtype)
-    api = 2 if re.search(r"csg_distance\([^)]*task_terms", programs.source("sampler.cl")) else 1
+    api = 2 if re.search(r"csg_distance\([^)]*task_terms", programs.source("sampling/sampler.cl")) else 1
     with open(os.path.join(KERNELS, "query.cl"), encoding="utf-8") as f:
         src = f.read()
-    opts = programs.real_options(real) + [f"-DQUERY_API={api}", "-DMASK_WORDS=1", "-I", programs.kernels_dir()]
+    opts = programs.real_options(real) + [f"-DQUERY_API={api}", "-DMASK_WORDS=1", "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("sampling"), "-I", programs.package_dir("rendering")]
     try:
         kern = cl.Kernel(cl.Program(ctx.ctx, src).build(options=opts), "op_csg_distance")
     except cl.Error as e:  # the sampler's internals changed under the benchmark
@@ -330,7 +330,7 @@ def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
         # csg_distance reads the task's quadric and polarity (and, with QUERY_API 2, its term
         # list, which is the same for every plane and sheet of a literal group)
         if api == 2:
-            from clcsg.host.sampler import analyse, root_tasks
+            from clcsg.sampling.sampler import analyse, root_tasks
 
             _rec, frames = analyse(packed)
             all_tasks, _roots, _glits, task_terms = root_tasks(dnf, packed, frames)[:4]

@@ -35,8 +35,8 @@ import warnings
 import numpy as np
 
 import clcsg
-from clcsg.camera import Camera
-from clcsg.host.device import get_context
+from clcsg.rendering.camera import Camera
+from clcsg.cl.device import get_context
 
 from . import common, micro, zoo
 from .common import environment, write
@@ -114,7 +114,7 @@ def query_cost(dnf, samples, enough, limit=20000, seed=0) -> dict:
     its bound box is at least ``enough`` or the nearest other term so far away; an evaluated
     term computes the distances of all its literals except those on the sample's quadric.
     Terms are visited in index order (as the kernel does) and nearest-box-first."""
-    from clcsg.quadric import Quadric
+    from clcsg.model.quadric import Quadric
 
     rng = np.random.default_rng(seed)
     n = len(samples)

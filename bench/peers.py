@@ -34,8 +34,8 @@ import warnings
 import numpy as np
 
 import clcsg
-from clcsg.csg import Complement, Difference, Intersection, Primitive, Transformed, Union
-from clcsg.host.device import get_context
+from clcsg.model.csg import Complement, Difference, Intersection, Primitive, Transformed, Union
+from clcsg.cl.device import get_context
 
 from . import zoo
 from .common import environment, write
@@ -51,7 +51,7 @@ class Unsupported(Exception):
 
 def _frame_to(axis):
     """3x3 rotation taking +z to ``axis``."""
-    from clcsg.quadric import frame_z_to
+    from clcsg.model.quadric import frame_z_to
 
     return frame_z_to(np.asarray(axis, dtype=float))
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import warnings
 
 import clcsg
-from clcsg.host.device import get_context
+from clcsg.cl.device import get_context
 
 from .common import environment, write
 

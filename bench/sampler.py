@@ -12,8 +12,8 @@ import math
 import warnings
 
 import clcsg
-from clcsg.host.device import get_context
-from clcsg.solids import _make
+from clcsg.cl.device import get_context
+from clcsg.model.solids import _make
 
 from .common import best_of, environment, write
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import clcsg
-from clcsg.solids import _make
+from clcsg.model.solids import _make
 
 ZOO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "zoo")
 

@@ -1,14 +1,14 @@
 """clcsg: exact point sampling and pixel-perfect splat rendering of quadric CSG solids."""
-from .csg import Shape, contains, difference, intersection, union
+from .model.csg import Shape, contains, difference, intersection, union
 from .errors import ClcsgError
-from .quadric import Quadric
-from .solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
+from .model.quadric import Quadric
+from .model.solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
 
 __version__ = "0.1.0"
-from .scene import Scene, load, save
-from .host.device import devices
-from .host.sampler import sample
-from .samples import Samples
-from .camera import Camera, orbit
-from .image import Image
-from .render import raytrace, render
+from .model.scene import Scene, load, save
+from .cl.device import devices
+from .sampling.sampler import sample
+from .sampling.samples import Samples
+from .rendering.camera import Camera, orbit
+from .rendering.image import Image
+from .rendering.api import raytrace, render

@@ -32,7 +32,7 @@ except ImportError:  # pragma: no cover - hypothesis is in the [test] extra
 @pytest.fixture(scope="session")
 def cl_context():
     from clcsg.errors import DeviceError
-    from clcsg.host.device import get_context
+    from clcsg.cl.device import get_context
 
     try:
         return get_context()
@@ -45,7 +45,7 @@ def cl_context():
 @pytest.fixture
 def tmp_scene(tmp_path):
     """A function writing a Shape or Scene to a scene file in tmp_path; returns the path."""
-    from clcsg.scene import save
+    from clcsg.model.scene import save
 
     def write(obj, name: str = "scene.json"):
         path = tmp_path / name

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clcsg.quadric import Quadric
+from clcsg.model.quadric import Quadric
 
 CHUNK = 1 << 17
 
@@ -44,12 +44,12 @@ CHUNK = 1 << 17
 
 def parts(scene):
     """(quadrics (U, 4, 4) float64, terms: list of tuples of (quadric index, sign))."""
-    from clcsg.csg import Shape
-    from clcsg.host.dnf import Dnf
-    from clcsg.scene import Scene
+    from clcsg.model.csg import Shape
+    from clcsg.compile.dnf import Dnf
+    from clcsg.model.scene import Scene
 
     if isinstance(scene, (Shape, Scene)):
-        from clcsg.scene import as_scene
+        from clcsg.model.scene import as_scene
 
         scene = as_scene(scene).normalize()
     if isinstance(scene, Dnf):
@@ -201,7 +201,7 @@ def cast_camera(scene, camera, tol=0.0) -> Hits:
 
 def scene_scale(scene) -> float:
     """A length scale of the scene: the largest |coordinate| of the term bounds, else 1."""
-    from clcsg.host.dnf import Dnf
+    from clcsg.compile.dnf import Dnf
 
     if isinstance(scene, Dnf) and scene.n_terms:
         return float(max(np.abs(scene.bound).max(), 1e-300))
@@ -215,11 +215,11 @@ def fragile(scene, origins, directions, rel=1e-9, scale=None) -> np.ndarray:
     tie within ``rel`` relative depth.  Exclude these when comparing an implementation with
     the oracle pixel by pixel."""
     if not (isinstance(scene, tuple)):
-        from clcsg.csg import Shape
-        from clcsg.scene import Scene
+        from clcsg.model.csg import Shape
+        from clcsg.model.scene import Scene
 
         if isinstance(scene, (Shape, Scene)):
-            from clcsg.scene import as_scene
+            from clcsg.model.scene import as_scene
 
             scene = as_scene(scene).normalize()
     s = scene_scale(scene) if scale is None else float(scale)
@@ -298,16 +298,16 @@ def surface_points(scene, n_dirs=32, res=96, first_only=False, eps=1e-7, bound=N
     """
     Q, terms = parts(scene)
     if bound is None:
-        from clcsg.host.dnf import Dnf
+        from clcsg.compile.dnf import Dnf
 
         if isinstance(scene, Dnf):
             bound = scene.bound
         else:
-            from clcsg.scene import Scene
-            from clcsg.csg import Shape
+            from clcsg.model.scene import Scene
+            from clcsg.model.csg import Shape
 
             if isinstance(scene, (Shape, Scene)):
-                from clcsg.scene import as_scene
+                from clcsg.model.scene import as_scene
 
                 bound = as_scene(scene).normalize().bound
             else:

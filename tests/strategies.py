@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from hypothesis import strategies as st
 
-from clcsg import csg, solids
-from clcsg.quadric import Quadric, affine, frame_z_to
+from clcsg.model import csg, solids
+from clcsg.model.quadric import Quadric, affine, frame_z_to
 
 
 # -- numbers and vectors ------------------------------------------------------------------------

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from clcsg.camera import Camera, orbit
+from clcsg.rendering.camera import Camera, orbit
 from clcsg.errors import UsageError
 
 

@@ -11,9 +11,9 @@ import sys
 import pytest
 
 import clcsg
-from clcsg import cli
+from clcsg.cli import app as cli
 from clcsg.errors import SceneError, UsageError
-from clcsg.scene import Scene
+from clcsg.model.scene import Scene
 
 
 def run(capsys, *argv):
@@ -138,7 +138,7 @@ def test_devices(capsys, monkeypatch):
         assert i.spec in out and i.name in out
     marked = [line for line in out.splitlines() if re.match(r"^\*\s+\d+:\d+\s", line)]
     assert len(marked) == 1
-    from clcsg.host.device import choose
+    from clcsg.cl.device import choose
 
     assert infos[choose(infos, None, {})].spec in marked[0]
     assert "64-bit atomics" in out and "fp64" in out
@@ -224,18 +224,18 @@ def test_scene_info_unbounded_needs_bound():
 
 @pytest.fixture
 def scene_loader(monkeypatch):
-    """``clcsg.scene.load`` returning demo_scene() for '*.demo' paths (the file formats are
+    """``clcsg.model.scene.load`` returning demo_scene() for '*.demo' paths (the file formats are
     tested elsewhere; this tests the CLI around the loader)."""
-    import clcsg.scene
+    import clcsg.model.scene
 
-    real = clcsg.scene.load
+    real = clcsg.model.scene.load
 
     def load(path):
         if str(path).endswith(".demo"):
             return demo_scene()
         return real(path)
 
-    monkeypatch.setattr(clcsg.scene, "load", load)
+    monkeypatch.setattr(clcsg.model.scene, "load", load)
 
 
 def test_info_text(capsys, scene_loader):
@@ -300,7 +300,7 @@ def test_sample_writes_ply_and_stats(tmp_path):
     import json as _json
 
     from clcsg.cli import main as _main
-    from clcsg.samples import read_ply
+    from clcsg.sampling.samples import read_ply
 
     out, stats = tmp_path / "s.ply", tmp_path / "s.json"
     scene = tmp_path / "scene.json"

@@ -9,8 +9,8 @@ import pytest
 
 import clcsg
 from clcsg.errors import DeviceError
-from clcsg.host import device as D
-from clcsg.host.device import DeviceInfo, choose
+from clcsg.cl import device as D
+from clcsg.cl.device import DeviceInfo, choose
 
 
 # -- the rule on synthetic lists ----------------------------------------------------------------

@@ -17,12 +17,12 @@ from hypothesis import HealthCheck, given, reject, settings
 from hypothesis import strategies as st
 
 import clcsg
-from clcsg import csg, solids
+from clcsg.model import csg, solids
 from clcsg.errors import DnfLimitError, SceneError, UnboundedError
-from clcsg.host import bounds as bounds_module
-from clcsg.host import dnf as dnf_module
-from clcsg.host.dnf import normalize
-from clcsg.quadric import Quadric
+from clcsg.compile import bounds as bounds_module
+from clcsg.compile import dnf as dnf_module
+from clcsg.compile.dnf import normalize
+from clcsg.model.quadric import Quadric
 from strategies import any_primitives, bounded_primitives, shapes
 
 EXAMPLES = int(os.environ.get("CLCSG_HYPOTHESIS_EXAMPLES", 30))
@@ -368,7 +368,7 @@ def test_normalize_rejects_non_shapes():
 
 
 def test_complement_of_empty_union_is_everything():
-    from clcsg.csg import Difference, Union, contains
+    from clcsg.model.csg import Difference, Union, contains
 
     s = Difference([solids.box(1), Union([])])
     d = normalize(s)

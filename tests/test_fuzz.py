@@ -37,8 +37,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from clcsg.errors import ClcsgError, LimitError, SceneError, UsageError  # noqa: E402
-from clcsg.openscad import parse_csg  # noqa: E402
-from clcsg.scenefile import loads_json  # noqa: E402
+from clcsg.io.openscad import parse_csg  # noqa: E402
+from clcsg.io.scenefile import loads_json  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -322,9 +322,9 @@ def sampled_mutant(draw):
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much])
 @given(sampled_mutant())
 def test_fuzz_sample_and_render_without_nan(cl_context, case):
-    from clcsg.camera import Camera
-    from clcsg.host.sampler import sample
-    from clcsg.render import render
+    from clcsg.rendering.camera import Camera
+    from clcsg.sampling.sampler import sample
+    from clcsg.rendering.api import render
 
     fmt, text = case
     scene, dnf = _load_and_normalize(text, fmt, normalize=True)

@@ -7,10 +7,10 @@ import pyopencl as cl
 import pytest
 
 import clcsg
-from clcsg.host.buffers import SceneBuffers, pack
-from clcsg.host.device import real_dtype
-from clcsg.host.programs import build
-from clcsg.quadric import Quadric
+from clcsg.cl.records import SceneBuffers, pack
+from clcsg.cl.device import real_dtype
+from clcsg.cl.programs import build
+from clcsg.model.quadric import Quadric
 
 
 def _out(ctx, n, dtype):
@@ -23,7 +23,7 @@ def test_kernel_reads_back_packed_buffers(cl_context):
     real = real_dtype(cl_context)
     p = pack(dnf, real)
     b = SceneBuffers(cl_context, p)
-    prg = build(cl_context, "layout_check.cl", real=real)
+    prg = build(cl_context, "cl/layout_check.cl", real=real)
     q = cl_context.queue
     U, L, T = len(p.quadrics), len(p.literals), len(p.terms)
     coef, bc = _out(cl_context, U * 10, real)
@@ -74,7 +74,7 @@ def test_quadric_header_matches_reference(name, cl_context):
     dirs = rng.normal(size=(n, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     b = SceneBuffers(cl_context, p)
-    prg = build(cl_context, "quadric_check.cl", real=real)
+    prg = build(cl_context, "cl/quadric_check.cl", real=real)
     mf = cl.mem_flags
     bp = cl.Buffer(cl_context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts.astype(real))
     bd = cl.Buffer(cl_context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=dirs.astype(real))

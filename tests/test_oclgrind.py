@@ -159,10 +159,10 @@ DRIVER = textwrap.dedent(
     cl.enqueue_fill_buffer = fill_by_host_write
 
     import clcsg
-    from clcsg.camera import Camera
-    from clcsg.cli import main
-    from clcsg.host.device import get_context
-    from clcsg.render import raytrace, render
+    from clcsg.rendering.camera import Camera
+    from clcsg.cli.main import main
+    from clcsg.cl.device import get_context
+    from clcsg.rendering.api import raytrace, render
 
     warnings.simplefilter("ignore")
     args = json.loads(sys.argv[1])

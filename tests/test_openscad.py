@@ -15,11 +15,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from clcsg import box, cone, cylinder, sphere
-from clcsg.csg import Difference, Intersection, Primitive, Transformed, Union, contains, difference, union, walk
+from clcsg.model.csg import Difference, Intersection, Primitive, Transformed, Union, contains, difference, union, walk
 from clcsg.errors import SceneError
-from clcsg.host.dnf import normalize
-from clcsg.openscad import MAX_DEPTH, WEB_COLORS, OpenScadWarning, load_csg, parse_csg
-from clcsg.scene import Scene, load
+from clcsg.compile.dnf import normalize
+from clcsg.io.openscad import MAX_DEPTH, WEB_COLORS, OpenScadWarning, load_csg, parse_csg
+from clcsg.model.scene import Scene, load
 
 DATA = Path(__file__).parent / "data" / "openscad"
 EXAMPLES = Path(__file__).parent.parent / "examples"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import clcsg
-from clcsg.openscad import parse_csg
+from clcsg.io.openscad import parse_csg
 
 CSG = """
 color([0.8, 0.3, 0.2, 1]) {

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from clcsg.errors import TransformError
-from clcsg.quadric import Quadric, affine, check_affine
+from clcsg.model.quadric import Quadric, affine, check_affine
 from strategies import (
     QUADRIC_KINDS,
     affine_maps,

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import clcsg
-from clcsg.camera import Camera, orbit
+from clcsg.rendering.camera import Camera, orbit
 from clcsg.errors import UsageError
-from clcsg.quadric import Quadric
-from clcsg.render import raytrace
+from clcsg.model.quadric import Quadric
+from clcsg.rendering.api import raytrace
 
 import oracle
 
@@ -184,8 +184,8 @@ def test_view_record_layout(cl_context):
     """The numpy view dtype mirrors view_rec (kernels/shade.h) field by field."""
     import pyopencl as cl
 
-    from clcsg.host import programs
-    from clcsg.host.raytracer import view_dtype
+    from clcsg.cl import programs
+    from clcsg.rendering.raytracer import view_dtype
 
     names = view_dtype(np.float64).names
     src = '#include "shade.h"\n__kernel void k(__global long *out) {\n'
@@ -193,7 +193,7 @@ def test_view_record_layout(cl_context):
     for n, name in enumerate(names):
         src += f"out[{n + 1}] = (long)&(((view_rec *)0)->{name});\n"
     src += "}\n"
-    prg = cl.Program(cl_context.ctx, src).build(options=["-DCLCSG_DOUBLE", "-I", programs.kernels_dir()])
+    prg = cl.Program(cl_context.ctx, src).build(options=["-DCLCSG_DOUBLE", "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("rendering")])
     out = np.zeros(len(names) + 1, dtype=np.int64)
     buf = cl.Buffer(cl_context.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
     prg.k(cl_context.queue, (1,), None, buf)

@@ -28,8 +28,8 @@ import numpy as np
 import pytest
 
 import clcsg
-from clcsg import cli
-from clcsg.camera import Camera
+from clcsg.cli import app as cli
+from clcsg.rendering.camera import Camera
 from clcsg.errors import (
     ClcsgError,
     DeviceError,
@@ -39,11 +39,11 @@ from clcsg.errors import (
     TransformError,
     UsageError,
 )
-from clcsg.host import guard
-from clcsg.host.device import DeviceInfo, choose, require_int64_atomics
-from clcsg.host.sampler import sample
-from clcsg.render import raytrace, render
-from clcsg.samples import read_ply
+from clcsg.sampling import guard
+from clcsg.cl.device import DeviceInfo, choose, require_int64_atomics
+from clcsg.sampling.sampler import sample
+from clcsg.rendering.api import raytrace, render
+from clcsg.sampling.samples import read_ply
 
 import oracle
 from coverage import assert_same_samples, surface_residuals, uncovered
@@ -337,7 +337,7 @@ def test_dnf_past_its_limit_is_caught_in_seconds(tmp_path, capsys):
 
 
 def _dnf(shape):
-    return clcsg.scene.as_scene(shape).normalize()
+    return clcsg.model.scene.as_scene(shape).normalize()
 
 
 def test_area_bounds_are_upper_bounds():
@@ -374,7 +374,7 @@ GUARD_EXAMPLES = ["saddle.json", "bracket.json", "flange.csg", "spheres.json"]
 def test_estimate_is_never_far_below_the_real_count(cl_context, name):
     if name in SAMPLER_SCENES:
         shape, r = SAMPLER_SCENES[name]
-        sc = clcsg.scene.as_scene(shape)
+        sc = clcsg.model.scene.as_scene(shape)
     else:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -390,7 +390,7 @@ def test_estimate_is_never_far_below_the_real_count(cl_context, name):
 
 
 def test_tiny_radius_fails_fast_before_any_kernel(cl_context, monkeypatch):
-    from clcsg.host import sampler
+    from clcsg.sampling import sampler
 
     def forbidden(*a, **k):
         raise AssertionError("the guard must stop before packing, building or launching")

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 import clcsg
-from clcsg.host.sampler import sample
-from clcsg.samples import read_ply
-from clcsg.solids import _make
+from clcsg.sampling.sampler import sample
+from clcsg.sampling.samples import read_ply
+from clcsg.model.solids import _make
 
 from coverage import assert_same_samples, surface_residuals, uncovered
 from oracle import surface_points

@@ -14,14 +14,15 @@ from hypothesis import HealthCheck, given, reject, settings
 from hypothesis import strategies as st
 
 import clcsg
-from clcsg import csg, scenefile, solids
+from clcsg.model import csg, solids
+from clcsg.io import scenefile
 from clcsg.errors import DnfLimitError, SceneError, TransformError
-from clcsg.scene import Scene
+from clcsg.model.scene import Scene
 from strategies import any_primitives, affine_maps, shapes, shared_nodes
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLES = sorted(glob.glob(os.path.join(ROOT, "examples", "*.json")))
-SCHEMA_PATH = os.path.join(ROOT, "clcsg", "schema", "scene.schema.json")
+SCHEMA_PATH = os.path.join(ROOT, "clcsg", "io", "schema", "scene.schema.json")
 UB = np.array([[-3.5, -3.5, -3.5], [3.5, 3.5, 3.5]])
 N_EXAMPLES = int(os.environ.get("CLCSG_HYPOTHESIS_EXAMPLES", 40))
 

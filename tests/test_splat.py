@@ -15,19 +15,19 @@ import numpy as np
 import pytest
 
 import clcsg
-from clcsg.camera import Camera, orbit
+from clcsg.rendering.camera import Camera, orbit
 from clcsg.errors import DeviceError, UsageError
-from clcsg.host.buffers import pack
-from clcsg.quadric import Quadric
-from clcsg.render import raytrace, render
-from clcsg.samples import Samples
+from clcsg.cl.records import pack
+from clcsg.model.quadric import Quadric
+from clcsg.rendering.api import raytrace, render
+from clcsg.sampling.samples import Samples
 
 import oracle
 
 try:
     from clcsg import sample
 except ImportError:  # until clcsg/__init__.py exports it
-    from clcsg.host.sampler import sample
+    from clcsg.sampling.sampler import sample
 
 W, H = 96, 72
 FLAGS = [(False, False), (True, False), (False, True), (True, True)]
@@ -386,7 +386,7 @@ def test_single_splat_fragments_are_exact(cl_context, name):
 def _run_cli(argv):
     import argparse
 
-    from clcsg.render import add_render_parser, cli_render
+    from clcsg.rendering.api import add_render_parser, cli_render
 
     parser = argparse.ArgumentParser(prog="clcsg")
     add_render_parser(parser.add_subparsers(dest="command"))

@@ -15,7 +15,7 @@ from typing import Iterable
 
 import numpy as np
 
-from .errors import TransformError
+from ..errors import TransformError
 
 #: Order of the 10 unique coefficients of the symmetric matrix (upper triangle, row-major).
 #: The kernels use the same order (``clcsg/kernels/layout.h``).

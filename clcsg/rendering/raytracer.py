@@ -122,7 +122,7 @@ def pack_view(camera, origin, real, shading: Shading | None = None) -> np.ndarra
 
 def context_of(device):
     """A clcsg Context from None / a device spec string / a Context."""
-    from .device import get_context
+    from ..cl.device import get_context
 
     if device is None or isinstance(device, str):
         return get_context(device)
@@ -134,7 +134,7 @@ def context_of(device):
 def choose_real(context, precision="auto"):
     """numpy float type for the kernels: 'auto' (double where the device has fp64, unless
     CLCSG_PRECISION=float forces float32; see device.real_dtype), 'double', 'float'."""
-    from .device import real_dtype
+    from ..cl.device import real_dtype
 
     if precision in (None, "auto"):
         return np.dtype(real_dtype(context))
@@ -175,9 +175,9 @@ def trace(context, dnf, camera, shading: Shading | None = None, precision="auto"
     """Ray trace ``dnf`` from ``camera`` on ``context``; returns a :class:`clcsg.image.Image`."""
     import pyopencl as cl
 
-    from ..image import Image
-    from . import programs
-    from .buffers import SceneBuffers, pack
+    from .image import Image
+    from ..cl import programs
+    from ..cl.records import SceneBuffers, pack
 
     t_start = time.perf_counter()
     real = choose_real(context, precision)
@@ -194,7 +194,7 @@ def trace(context, dnf, camera, shading: Shading | None = None, precision="auto"
     i_buf = cl.Buffer(context.ctx, mf.WRITE_ONLY, ids.nbytes)
     c_buf = cl.Buffer(context.ctx, mf.WRITE_ONLY, rgba.nbytes)
     t_build = time.perf_counter()
-    prg = programs.build(context, "raytrace.cl", real=real)
+    prg = programs.build(context, "rendering/raytrace.cl", real=real)
     t_built = time.perf_counter()
     diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0])) if dnf.n_terms else 1.0
     pad = real.type(1e-6 * diag + 1e-30)

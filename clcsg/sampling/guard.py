@@ -220,8 +220,8 @@ def estimate(dnf, radius: float, real_itemsize: int = 8) -> Estimate:
 
     ``real_itemsize``: 8 for the fp64 path, 4 for float32 (device buffer sizes).
     """
-    from ..quadric import Quadric
-    from .bounds import literal_box
+    from ..model.quadric import Quadric
+    from ..compile.bounds import literal_box
 
     r = float(radius)
     if not (math.isfinite(r) and r > 0):

@@ -59,13 +59,13 @@ import warnings
 import numpy as np
 
 from ..errors import UsageError
-from ..samples import Samples
-from ..scene import as_scene
-from . import device as _device
-from .analysis import principal_frame
-from .buffers import PackedScene, SceneBuffers, pack
-from .dnf import Dnf
-from .programs import build
+from .samples import Samples
+from ..model.scene import as_scene
+from ..cl import device as _device
+from ..compile.frames import principal_frame
+from ..cl.records import PackedScene, SceneBuffers, pack
+from ..compile.dnf import Dnf
+from ..cl.programs import build
 
 COUNTERS = ("cells", "samples", "distance_queries", "unresolved", "discarded", "filled", "single", "split",
             "box_tests", "box_resolved")
@@ -131,7 +131,7 @@ def analyse(packed: PackedScene) -> tuple[np.ndarray, list]:
 
 
 def principal_frame_of(matrix):
-    from ..quadric import Quadric
+    from ..model.quadric import Quadric
 
     return principal_frame(Quadric(matrix))
 
@@ -291,7 +291,7 @@ def sample(
 
     mask_words = max(1, (int(tasks["group_count"].max(initial=1)) + 31) // 32)
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "MASK_WORDS": mask_words}
-    prg = build(ctx, "sampler.cl", defines, real)
+    prg = build(ctx, "sampling/sampler.cl", defines, real)
     raw, raw_buf, level_stats, totals = _subdivide(ctx, prg, packed, frames_rec, tasks, task_terms, roots, radius, floor,
                                           capacity, estimate_samples(dnf, radius), progress, max_levels)
     t2 = time.perf_counter()

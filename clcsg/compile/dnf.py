@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
+from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..errors import DnfLimitError, SceneError, UnboundedError
-from ..quadric import Quadric
+from ..model.quadric import Quadric
 from . import bounds as _bounds
 
 DEFAULT_TERM_LIMIT = 100_000

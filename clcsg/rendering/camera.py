@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import UsageError
+from ..errors import UsageError
 
 #: default view direction of :meth:`Camera.fit` (from the target towards the eye): a 3/4 view
 #: from the front-right and above, with z up.

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .csg import Shape
-from .errors import SceneError
+from ..errors import SceneError
 
 
 @dataclass
@@ -23,7 +23,7 @@ class Scene:
 
     def normalize(self, term_limit: int | None = None):
         """The scene's :class:`~clcsg.host.dnf.Dnf`."""
-        from .host.dnf import DEFAULT_TERM_LIMIT, normalize
+        from ..compile.dnf import DEFAULT_TERM_LIMIT, normalize
 
         return normalize(
             self.shape,
@@ -54,11 +54,11 @@ def load(path) -> Scene:
         raise SceneError(f"{p}: no such file")
     ext = os.path.splitext(p)[1].lower()
     if ext == ".json":
-        from .scenefile import load_json
+        from ..io.scenefile import load_json
 
         return load_json(p)
     if ext == ".csg":
-        from .openscad import load_csg
+        from ..io.openscad import load_csg
 
         return load_csg(p)
     raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json or .csg)")
@@ -69,6 +69,6 @@ def save(obj, path) -> None:
     p = os.fspath(path)
     if os.path.splitext(p)[1].lower() != ".json":
         raise SceneError(f"{p}: scenes are saved as .json")
-    from .scenefile import save_json
+    from ..io.scenefile import save_json
 
     save_json(as_scene(obj), p)

@@ -7,9 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import UsageError
-from .host.buffers import LITERAL_DTYPE, PackedScene, SceneBuffers, sample_dtype
-from .host.dnf import Dnf
+from ..errors import UsageError
+from ..cl.records import LITERAL_DTYPE, PackedScene, SceneBuffers, sample_dtype
+from ..compile.dnf import Dnf
 
 
 @dataclass

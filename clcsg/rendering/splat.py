@@ -44,7 +44,7 @@ def _buffers(samples, context, real):
     """(SceneBuffers, sample buffer, clip buffer) in precision ``real``."""
     import pyopencl as cl
 
-    from .buffers import LITERAL_DTYPE, SceneBuffers, pack, sample_dtype
+    from ..cl.records import LITERAL_DTYPE, SceneBuffers, pack, sample_dtype
 
     if np.dtype(samples.packed.real) == real:
         return samples.device_buffers(context)
@@ -78,9 +78,9 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     """Render ``samples`` from ``camera``; returns a :class:`clcsg.image.Image`."""
     import pyopencl as cl
 
-    from ..image import Image
-    from . import programs
-    from .device import require_int64_atomics
+    from .image import Image
+    from ..cl import programs
+    from ..cl.device import require_int64_atomics
     from .raytracer import choose_real, event_seconds, kernel, pack_view
 
     require_int64_atomics(context, "the splat renderer (64-bit atom_min depth test)")
@@ -114,8 +114,8 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
         "BACKFACE_CULLING": int(culling),
         "CLCSG_STATS": int(bool(stats)),
     }
-    splat_prg = programs.build(context, "splat.cl", defines=defines, real=real)
-    resolve_prg = programs.build(context, "resolve.cl", real=real)
+    splat_prg = programs.build(context, "rendering/splat.cl", defines=defines, real=real)
+    resolve_prg = programs.build(context, "rendering/resolve.cl", real=real)
     t_built = time.perf_counter()
 
     ev_clear = cl.enqueue_fill_buffer(q, fb, EMPTY, 0, W * H * 8)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..quadric import Quadric
+from ..model.quadric import Quadric
 
 #: eigenvalues below this fraction of the largest count as zero
 EIGEN_SNAP = 1e-12

@@ -24,8 +24,8 @@ from typing import Callable
 
 import numpy as np
 
-from . import __version__
-from .errors import ClcsgError, DeviceError, UsageError
+from .. import __version__
+from ..errors import ClcsgError, DeviceError, UsageError
 
 PROG = "clcsg"
 
@@ -171,7 +171,7 @@ def add_devices_parser(subparsers):
 
 
 def run_devices(args) -> int:
-    from .host.device import choose, list_devices
+    from ..cl.device import choose, list_devices
 
     infos = list_devices()
     problem = None
@@ -222,7 +222,7 @@ def run_devices(args) -> int:
 
 
 def add_info_parser(subparsers):
-    from .host.dnf import DEFAULT_TERM_LIMIT
+    from ..compile.dnf import DEFAULT_TERM_LIMIT
 
     p = add_subcommand(
         subparsers,
@@ -272,7 +272,7 @@ def scene_info(
     result's ``"device"`` is that device's info, or None with ``"device_problem"`` set when no
     device is available and none was asked for explicitly.
     """
-    from .scene import as_scene
+    from ..model.scene import as_scene
 
     sc = as_scene(scene, bound)
     dnf = sc.normalize(term_limit)
@@ -300,7 +300,7 @@ def device_summary(spec: str | None) -> dict:
     With ``spec`` None and no usable device: ``{"device": None, "device_problem": message}``
     (host-only commands still work); an explicit ``spec`` that fails raises DeviceError.
     """
-    from .host.device import choose, list_devices
+    from ..cl.device import choose, list_devices
 
     try:
         infos = list_devices()
@@ -358,7 +358,7 @@ def format_info(info: dict) -> str:
 
 
 def run_info(args) -> int:
-    from .scene import load
+    from ..model.scene import load
 
     bound = None if args.bound is None else parse_bound(args.bound, "--bound")
     dev = device_summary(args.device)  # a bad --device fails before the scene is read
@@ -375,7 +375,7 @@ def run_info(args) -> int:
 
 
 def add_sample_parser(subparsers):
-    from .host.dnf import DEFAULT_TERM_LIMIT
+    from ..compile.dnf import DEFAULT_TERM_LIMIT
 
     p = add_subcommand(
         subparsers,
@@ -417,13 +417,13 @@ def parse_positive(text, name) -> float:
 
 
 def run_sample(args) -> int:
-    from .host.sampler import sample
-    from .scene import as_scene, load
+    from ..sampling.sampler import sample
+    from ..model.scene import as_scene, load
 
     radius = parse_positive(args.radius, "--radius")
     floor = None if args.floor is None else parse_positive(args.floor, "--floor")
     bound = None if args.bound is None else parse_bound(args.bound, "--bound")
-    from .host.device import get_context
+    from ..cl.device import get_context
 
     ctx = get_context(args.device)
     scene = as_scene(load(args.scene), bound)
@@ -468,7 +468,7 @@ COMMANDS: dict[str, tuple[Callable, Callable]] = {
     "info": (add_info_parser, run_info),
     # ---- more subcommands go here, in the same style: ----
     "sample": (add_sample_parser, run_sample),
-    "render": (_lazy("render", "add_render_parser"), _lazy("render", "cli_render")),
+    "render": (_lazy("rendering.api", "add_render_parser"), _lazy("rendering.api", "cli_render")),
 }
 
 

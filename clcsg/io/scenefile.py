@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from . import solids
-from .csg import (
+from ..model import solids
+from ..model.csg import (
     DEFAULT_COLOR,
     Complement,
     Difference,
@@ -49,8 +49,8 @@ from .csg import (
     Transformed,
     Union,
 )
-from .errors import SceneError, TransformError
-from .scene import Scene
+from ..errors import SceneError, TransformError
+from ..model.scene import Scene
 
 #: the format version this module reads and writes (``"clcsg": 1``)
 FORMAT_VERSION = 1

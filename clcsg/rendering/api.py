@@ -11,14 +11,14 @@ for the same hit they produce the same pixel.
 from __future__ import annotations
 
 from .camera import Camera
-from .errors import UsageError
+from ..errors import UsageError
 from .image import Image
 
 
 def as_dnf(obj):
     """A :class:`~clcsg.host.dnf.Dnf` from a Dnf, Samples, Scene, Shape or scene file path."""
-    from .host.dnf import Dnf
-    from .scene import as_scene
+    from ..compile.dnf import Dnf
+    from ..model.scene import as_scene
 
     if isinstance(obj, Dnf):
         return obj
@@ -51,7 +51,7 @@ def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 
     Per pixel, per DNF term: all roots of the term's quadrics along the ray (eqs. 5, 6), the
     first root at which every other literal of the term holds, the nearest over terms.
     """
-    from .host.raytracer import Shading, context_of, trace
+    from .raytracer import Shading, context_of, trace
 
     dnf = as_dnf(scene)
     cam = _camera(camera, dnf.bound)
@@ -78,8 +78,8 @@ def render(samples, camera: Camera | None = None, device=None, background=(1.0, 
     little faster).  Other arguments as in :func:`raytrace`.  Requires 64-bit atomics
     (``cl_khr_int64_extended_atomics``), else :class:`~clcsg.errors.DeviceError`.
     """
-    from .host.raytracer import Shading, context_of
-    from .host.splat import rasterize
+    from .raytracer import Shading, context_of
+    from .splat import rasterize
 
     if not hasattr(samples, "device_buffers"):
         raise UsageError(f"render needs Samples (see clcsg.sample), got {type(samples).__name__}")
@@ -132,7 +132,7 @@ def add_render_arguments(parser) -> None:
     p.add_argument("--no-surface-aligned", action="store_true",
                    help="splat bounds from the whole ball instead of the surface-aligned slab")
     p.add_argument("--no-backface-culling", action="store_true", help="do not cull back-facing splats")
-    from .cli import positive_int
+    from ..cli.app import positive_int
 
     p.add_argument("--max-samples", metavar="N", type=positive_int, default=None,
                    help="splat method: stop with exit code 5 before sampling if the estimate passes N "
@@ -143,7 +143,7 @@ def add_render_arguments(parser) -> None:
 
 def add_render_parser(subparsers):
     """``add_<name>_parser`` for the dispatch table of clcsg/cli.py."""
-    from .cli import add_subcommand
+    from ..cli.app import add_subcommand
 
     p = add_subcommand(subparsers, "render", help="render a scene to PNG (splats or exact ray tracing)",
                        description=RENDER_DESCRIPTION, epilog=RENDER_EPILOG)
@@ -167,7 +167,7 @@ def parse_size(text) -> tuple[int, int]:
 
 def parse_background(text) -> tuple[float, ...]:
     """``"R,G,B[,A]"``: components in [0, 1], or 0-255 if any is above 1."""
-    from .cli import parse_floats
+    from ..cli.app import parse_floats
 
     parts = str(text).replace(",", " ").split()
     if len(parts) not in (3, 4):
@@ -182,7 +182,7 @@ def parse_background(text) -> tuple[float, ...]:
 
 def cli_camera(args, bound) -> Camera:
     """The camera of ``clcsg render``'s options: fitted to ``bound`` unless --eye/--target."""
-    from .cli import parse_floats
+    from ..cli.app import parse_floats
 
     w, h = parse_size(args.size)
     (fov,) = parse_floats(args.fov, 1, "--fov")
@@ -208,9 +208,9 @@ def cli_render(args) -> int:
 
     import numpy as np
 
-    from .cli import parse_floats
-    from .host.device import get_context
-    from .scene import load
+    from ..cli.app import parse_floats
+    from ..cl.device import get_context
+    from ..model.scene import load
 
     background = parse_background(args.background)
     size = parse_size(args.size)
@@ -240,7 +240,7 @@ def cli_render(args) -> int:
         img = raytrace(dnf, camera, device=ctx, background=background)
         what = "ray traced"
     else:
-        from .host.sampler import sample
+        from ..sampling.sampler import sample
 
         camera = cli_camera(args, dnf.bound)
         if radius is None:

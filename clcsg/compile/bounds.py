@@ -21,8 +21,8 @@ from itertools import combinations
 
 import numpy as np
 
-from ..quadric import Quadric
-from .analysis import principal_frame
+from ..model.quadric import Quadric
+from .frames import principal_frame
 
 #: far box used to detect unbounded polytopes
 FAR = 1e9

@@ -9,7 +9,6 @@
 #include "quadric.h"
 #include "shade.h"
 
-#define EMPTY_KEY 0xffffffffffffffffUL
 
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
                       __global const view_rec *view, __global const ulong *framebuffer,

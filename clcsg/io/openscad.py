@@ -71,9 +71,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .csg import Difference, Intersection, Shape, Transformed, Union
-from .errors import SceneError
-from .scene import Scene
+from ..model.csg import Difference, Intersection, Shape, Transformed, Union
+from ..errors import SceneError
+from ..model.scene import Scene
 
 __all__ = ["load_csg", "parse_csg", "OpenScadWarning", "WEB_COLORS", "SUPPORTED_NODES", "MAX_DEPTH"]
 
@@ -875,7 +875,7 @@ class _Evaluator:
         return False
 
     def _make(self, node, factory, ctx, **params):
-        from . import solids
+        from ..model import solids
 
         try:
             return getattr(solids, factory)(color=ctx.color, **params)

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..quadric import Quadric, affine
-from .dnf import Dnf
+from ..model.quadric import Quadric, affine
+from ..compile.dnf import Dnf
 
 
 def quadric_dtype(real) -> np.dtype:

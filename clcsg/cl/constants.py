@@ -1,0 +1,39 @@
+"""Constants that host and kernels share, defined once here.
+
+:func:`defines` turns them into ``-D`` build options (:mod:`clcsg.cl.programs` adds them to
+every program), so a kernel's counter slot or sentinel is never typed twice.  Counter slots are
+given as tuples of names; slot ``k`` of ``NAMES`` becomes ``-DC_<NAME>=k`` and ``N_<GROUP>`` is
+their count.
+"""
+
+from __future__ import annotations
+
+#: counters of the sampler's classify kernel, in slot order
+SAMPLER_COUNTERS = (
+    "cells", "samples", "distance_queries", "leaf_distances", "unresolved", "discarded", "filled",
+    "single", "split", "prune_evaluations", "pruned_decided", "tape_instructions", "tapes_written",
+    "arena",
+)
+
+#: counters of the splat kernel, in slot order
+SPLAT_COUNTERS = (
+    "splats_drawn", "splats_culled", "splats_offscreen", "bound_pixels", "fragments",
+    "clip_evaluations", "fragments_passed", "atomics",
+)
+
+#: the framebuffer word of a pixel no fragment reached (depth bits << 32 | index)
+EMPTY_KEY = 0xFFFFFFFFFFFFFFFF
+
+
+def _slots(prefix: str, group: str, names) -> dict:
+    out = {f"{prefix}_{n.upper()}": k for k, n in enumerate(names)}
+    out[f"N_{group}"] = len(names)
+    return out
+
+
+def defines() -> dict:
+    d = {}
+    d.update(_slots("SC", "SAMPLER_COUNTERS", SAMPLER_COUNTERS))
+    d.update(_slots("PC", "SPLAT_COUNTERS", SPLAT_COUNTERS))
+    d["EMPTY_KEY"] = f"0x{EMPTY_KEY:016x}UL"
+    return d
