@@ -1,14 +1,30 @@
-"""clcsg: exact point sampling and pixel-perfect splat rendering of quadric CSG solids."""
-from .model.csg import Shape, contains, difference, intersection, union
+"""clcsg: exact point sampling and pixel-perfect splat rendering of quadric CSG solids.
+
+The data flows one way, one package per stage:
+
+1. ``model``: the scene — quadrics, primitives, the CSG graph (:class:`Shape`), :class:`Scene`;
+   ``io`` reads and writes it (JSON scene files, OpenSCAD ``.csg`` / ``.scad``, PLY samples).
+2. ``compile``: the graph becomes a tape over unique canonical quadrics (transforms and
+   complements pushed to the leaves, shared sub-graphs once), with primitive instances, bounds
+   and principal frames; the paper's DNF is one shape of tape.
+3. ``sampling``: per (quadric, sampling plane, sheet) an adaptive subdivision on the device,
+   each cell with its pruned tape: :func:`sample` returns :class:`Samples`.
+4. ``rendering``: splats with local ray tracing and clipping by tape (:func:`render`) and the
+   exact tree ray tracer (:func:`raytrace`), both into an :class:`Image`.
+5. ``cl`` is the OpenCL plumbing (devices, programs, records, shared constants); ``cli`` the
+   command line, one module per command.
+"""
 from .errors import ClcsgError
+from .model.csg import Shape, contains, difference, intersection, union
 from .model.quadric import Quadric
 from .model.solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
 
-__version__ = "0.1.0"
-from .model.scene import Scene, load, save
+__version__ = "0.2.0"
 from .cl.device import devices
-from .sampling.sampler import sample
-from .sampling.samples import Samples
+from .model.scene import Scene, load, save
 from .rendering.camera import Camera, orbit
 from .rendering.image import Image
-from .rendering.api import raytrace, render
+from .rendering.raytracer import raytrace
+from .rendering.splat import render
+from .sampling.sampler import sample
+from .sampling.samples import Samples

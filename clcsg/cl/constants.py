@@ -11,7 +11,7 @@ from __future__ import annotations
 #: counters of the sampler's classify kernel, in slot order
 SAMPLER_COUNTERS = (
     "cells", "samples", "distance_queries", "leaf_distances", "unresolved", "discarded", "filled",
-    "single", "split", "prune_evaluations", "pruned_decided", "tape_instructions", "tapes_written",
+    "single", "split", "prune_evaluations", "pruned_decided", "tape_rows", "tape_max", "tapes_written",
     "arena",
 )
 
@@ -32,7 +32,9 @@ def _slots(prefix: str, group: str, names) -> dict:
 
 
 def defines() -> dict:
-    d = {}
+    from ..compile.tape import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+
+    d = {"OP_LEAF": OP_LEAF, "OP_AND": OP_AND, "OP_OR": OP_OR, "OP_COPY": OP_COPY, "OP_CONST": OP_CONST}
     d.update(_slots("SC", "SAMPLER_COUNTERS", SAMPLER_COUNTERS))
     d.update(_slots("PC", "SPLAT_COUNTERS", SPLAT_COUNTERS))
     d["EMPTY_KEY"] = f"0x{EMPTY_KEY:016x}UL"

@@ -35,7 +35,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import DeviceError
+from ..errors import DeviceError, UsageError
 
 __all__ = [
     "Context",
@@ -367,3 +367,26 @@ def real_dtype(context):
     if forced in ("float", "float32", "single"):
         return np.float32
     return np.float64 if _info_of(context).fp64 else np.float32
+
+
+def context_of(device):
+    """A clcsg Context from None / a device spec string / a Context."""
+    if device is None or isinstance(device, str):
+        return get_context(device)
+    if hasattr(device, "ctx") and hasattr(device, "queue"):
+        return device
+    raise UsageError(f"device must be a device spec string or a clcsg Context, got {type(device).__name__}")
+
+
+def choose_real(context, precision="auto"):
+    """numpy float type for the kernels: 'auto' (double where the device has fp64, unless
+    CLCSG_PRECISION=float forces float32; see device.real_dtype), 'double', 'float'."""
+    if precision in (None, "auto"):
+        return np.dtype(real_dtype(context))
+    if precision in ("double", "float64", np.float64):
+        if not context.info.fp64:
+            raise DeviceError(f"device {context.info.describe()} has no fp64 (cl_khr_fp64); use precision='float'")
+        return np.dtype(np.float64)
+    if precision in ("float", "float32", np.float32):
+        return np.dtype(np.float32)
+    raise UsageError(f"precision must be 'auto', 'double' or 'float', got {precision!r}")

@@ -74,3 +74,24 @@ def build(context, path: str, defines: dict | None = None, real=np.float64):
             prg = cl.Program(context.ctx, src).build(options=options)
             _cache[key] = prg
     return prg
+
+
+_kernels: dict = {}
+
+
+def kernel(prg, name: str):
+    """The kernel ``name`` of a built program, retrieved once per program."""
+    import pyopencl as cl
+
+    key = (id(prg), name)
+    k = _kernels.get(key)
+    if k is None or k[0] is not prg:
+        k = _kernels[key] = (prg, cl.Kernel(prg, name))
+    return k[1]
+
+
+def event_seconds(ev) -> float:
+    try:
+        return (ev.profile.end - ev.profile.start) * 1e-9
+    except Exception:  # queue without profiling
+        return float("nan")

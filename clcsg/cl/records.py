@@ -1,9 +1,11 @@
-"""Packing a :class:`~clcsg.host.dnf.Dnf` into the device buffers of ``kernels/layout.h``.
+"""numpy mirrors of the device records (``cl/include/layout.h``, ``rendering/shade.h``) and the
+packing of a compiled :class:`~clcsg.compile.tape.Tape` into device buffers.
 
-The numpy dtypes below mirror the C structs field by field (``align=True`` gives C's natural
-alignment, which OpenCL uses for structs in global memory).  Coordinates on the device are
-relative to ``origin`` (the center of the scene bound): every quadric is translated by
-``-origin`` before packing, which keeps float32 devices precise far from the world origin.
+The dtypes use ``align=True`` (C's natural alignment, which OpenCL uses for structs in global
+memory); ``tests/test_records.py`` checks every one's size and field offsets on the device.
+Coordinates on the device are relative to ``origin`` (the center of the scene bound): every
+quadric is translated by ``-origin`` before packing, which keeps float32 precise far from the
+world origin.
 """
 
 from __future__ import annotations
@@ -13,101 +15,148 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.quadric import Quadric, affine
-from ..compile.dnf import Dnf
+
+TAPE_OP_DTYPE = np.dtype([("op", np.int32), ("out", np.int32), ("a", np.int32), ("b", np.int32)], align=True)
+OWNER_DTYPE = np.dtype([("first", np.int32), ("count", np.int32)], align=True)
+PRIM_DTYPE = np.dtype([("lit_first", np.int32), ("lit_count", np.int32), ("color", np.float32, 4)], align=True)
 
 
 def quadric_dtype(real) -> np.dtype:
-    return np.dtype(
-        [("coef", real, 10), ("lam_min", real), ("lam_max", real), ("color", np.float32, 4)],
-        align=True,
-    )
-
-
-LITERAL_DTYPE = np.dtype([("quadric", np.int32), ("sign", np.int32)], align=True)
-
-
-def term_dtype(real) -> np.dtype:
-    return np.dtype(
-        [("first", np.int32), ("count", np.int32), ("lo", real, 3), ("hi", real, 3)], align=True
-    )
+    return np.dtype([("coef", real, 10), ("lam_min", real), ("lam_max", real)], align=True)
 
 
 def sample_dtype(real) -> np.dtype:
     return np.dtype(
-        [
-            ("pos", real, 3),
-            ("normal", real, 3),
-            ("radius", real),
-            ("quadric", np.int32),
-            ("sign", np.int32),
-            ("term", np.int32),
-            ("clip_first", np.int32),
-            ("clip_count", np.int32),
-        ],
+        [("pos", real, 3), ("normal", real, 3), ("radius", real), ("quadric", np.int32), ("sign", np.int32),
+         ("primitive", np.int32), ("clip_first", np.int32), ("clip_count", np.int32)],
         align=True,
     )
 
 
+def frame_dtype(real) -> np.dtype:
+    return np.dtype(
+        [("U", real, 9), ("center", real, 3), ("lam", real, 3), ("beta", real, 3), ("gamma", real)], align=True
+    )
+
+
+def task_dtype(real) -> np.dtype:
+    return np.dtype(
+        [("quadric", np.int32), ("plane", np.int32), ("sheet", np.int32), ("pad", np.int32),
+         ("zlo", real, 3), ("zhi", real, 3)],
+        align=True,
+    )
+
+
+def cell_dtype(real) -> np.dtype:
+    return np.dtype(
+        [("x0", real), ("y0", real), ("x1", real), ("y1", real), ("d", real, 4), ("task", np.int32),
+         ("level", np.int32), ("tape_first", np.int32), ("tape_count", np.int32)],
+        align=True,
+    )
+
+
+def raw_sample_dtype(real) -> np.dtype:
+    return np.dtype(
+        [("pos", real, 3), ("radius", real), ("task", np.int32), ("tape_first", np.int32),
+         ("tape_count", np.int32), ("pad", np.int32)],
+        align=True,
+    )
+
+
+#: (C struct name, header, dtype factory) of every record: the layout test walks this list
+RECORDS = (
+    ("quadric_rec", "layout.h", quadric_dtype),
+    ("prim_rec", "layout.h", lambda real: PRIM_DTYPE),
+    ("owner_rec", "layout.h", lambda real: OWNER_DTYPE),
+    ("sample_rec", "layout.h", sample_dtype),
+    ("frame_rec", "layout.h", frame_dtype),
+    ("task_rec", "layout.h", task_dtype),
+    ("cell_rec", "layout.h", cell_dtype),
+    ("raw_sample_rec", "layout.h", raw_sample_dtype),
+    ("tape_op", "tape.h", lambda real: TAPE_OP_DTYPE),
+)
+
+
+def tape_rows(ops) -> np.ndarray:
+    """(N, 4) int32 tape rows as ``tape_op`` records."""
+    ops = np.ascontiguousarray(np.asarray(ops, dtype=np.int32).reshape(-1, 4))
+    return ops.view(TAPE_OP_DTYPE).reshape(-1)
+
+
 @dataclass
 class PackedScene:
-    """Host copies of the scene buffers, in device coordinates (world - origin)."""
+    """Host copies of the scene buffers of a tape, in device coordinates (world - origin)."""
 
     real: np.dtype
     origin: np.ndarray  # (3,) float64
     quadrics: np.ndarray  # quadric_dtype
-    literals: np.ndarray  # LITERAL_DTYPE
-    terms: np.ndarray  # term_dtype
     local_matrices: np.ndarray  # (U, 4, 4) float64 quadrics in device coordinates
+    tape: np.ndarray  # TAPE_OP_DTYPE rows of the root tape
+    prims: np.ndarray  # PRIM_DTYPE
+    prim_literals: np.ndarray  # (L, 2) int32
+    owners: np.ndarray  # OWNER_DTYPE per quadric
+    owner_list: np.ndarray  # int32
+    n_regs: int
 
 
-def pack(dnf: Dnf, real=np.float64, origin=None) -> PackedScene:
+def pack(tape, real=np.float64, origin=None) -> PackedScene:
+    """The device buffers of ``tape`` (a :class:`~clcsg.compile.tape.Tape`)."""
     real = np.dtype(real)
     if origin is None:
-        origin = 0.5 * (dnf.bound[0] + dnf.bound[1]) if dnf.n_terms else np.zeros(3)
+        origin = 0.5 * (tape.bound[0] + tape.bound[1])
     origin = np.asarray(origin, dtype=np.float64)
     shift = affine(translation=-origin)
-    U = dnf.n_quadrics
+    U = tape.n_quadrics
     q = np.zeros(U, dtype=quadric_dtype(real))
     local = np.zeros((U, 4, 4))
     for i in range(U):
-        ql = Quadric(dnf.quadrics[i]).transform(shift)
+        ql = Quadric(tape.quadrics[i]).transform(shift)
         local[i] = ql.matrix
         q["coef"][i] = ql.coefficients()
-        lmin, lmax = ql.eigenvalue_range()
-        q["lam_min"][i] = lmin
-        q["lam_max"][i] = lmax
-    q["color"] = dnf.colors
-    lits = [lit for term in dnf.terms for lit in term]
-    literals = np.zeros(len(lits), dtype=LITERAL_DTYPE)
-    if lits:
-        literals["quadric"] = [qi for qi, _ in lits]
-        literals["sign"] = [s for _, s in lits]
-    terms = np.zeros(dnf.n_terms, dtype=term_dtype(real))
-    counts = np.array([len(t) for t in dnf.terms], dtype=np.int32)
-    terms["count"] = counts
-    terms["first"] = np.concatenate([[0], np.cumsum(counts)[:-1]]) if len(counts) else []
-    if dnf.n_terms:
-        terms["lo"] = dnf.term_bounds[:, 0] - origin
-        terms["hi"] = dnf.term_bounds[:, 1] - origin
-    return PackedScene(real, origin, q, literals, terms, local)
+        q["lam_min"][i], q["lam_max"][i] = ql.eigenvalue_range()
+    prims = np.zeros(len(tape.instances), dtype=PRIM_DTYPE)
+    lits = []
+    for k, inst in enumerate(tape.instances):
+        prims["lit_first"][k] = len(lits)
+        prims["lit_count"][k] = len(inst.literals)
+        prims["color"][k] = inst.color
+        lits.extend(inst.literals)
+    owners = np.zeros(U, dtype=OWNER_DTYPE)
+    owner_list = []
+    for qi, insts in enumerate(tape.owners()):
+        owners["first"][qi] = len(owner_list)
+        owners["count"][qi] = len(insts)
+        owner_list.extend(insts)
+    return PackedScene(
+        real, origin, q, local, tape_rows(tape.ops), prims,
+        np.array(lits, dtype=np.int32).reshape(-1, 2), owners, np.array(owner_list, dtype=np.int32), tape.n_regs,
+    )
 
 
 class SceneBuffers:
-    """The packed scene uploaded to a device (read-only buffers)."""
+    """A packed scene uploaded to a device (read-only buffers)."""
 
     def __init__(self, context, packed: PackedScene):
-        import pyopencl as cl
-
-        mf = cl.mem_flags
         self.packed = packed
+        self.quadrics = upload(context, packed.quadrics)
+        self.tape = upload(context, packed.tape)
+        self.prims = upload(context, packed.prims)
+        self.prim_literals = upload(context, packed.prim_literals)
+        self.owners = upload(context, packed.owners)
+        self.owner_list = upload(context, packed.owner_list)
 
-        def up(a):
-            # zero-sized buffers are not allowed: upload one dummy element instead
-            data = a if a.size else np.zeros(1, dtype=a.dtype)
-            return cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=data)
+    def colour_args(self):
+        """The buffers of ``primitive_at`` (cl/include/primitives.h), in its argument order."""
+        return (self.owners, self.owner_list, self.prims, self.prim_literals)
 
-        self.quadrics = up(packed.quadrics)
-        self.literals = up(packed.literals)
-        self.terms = up(packed.terms)
-        self.n_quadrics = len(packed.quadrics)
-        self.n_terms = len(packed.terms)
+
+def upload(context, array, writable=False):
+    """A device buffer initialized from ``array`` (a one-element dummy if it is empty: zero-size
+    buffers are not allowed)."""
+    import pyopencl as cl
+
+    mf = cl.mem_flags
+    a = np.ascontiguousarray(array)
+    data = a if a.size else np.zeros(1, dtype=a.dtype)
+    flags = (mf.READ_WRITE if writable else mf.READ_ONLY) | mf.COPY_HOST_PTR
+    return cl.Buffer(context.ctx, flags, hostbuf=data)

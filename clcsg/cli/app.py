@@ -468,7 +468,7 @@ COMMANDS: dict[str, tuple[Callable, Callable]] = {
     "info": (add_info_parser, run_info),
     # ---- more subcommands go here, in the same style: ----
     "sample": (add_sample_parser, run_sample),
-    "render": (_lazy("rendering.api", "add_render_parser"), _lazy("rendering.api", "cli_render")),
+    "render": (_lazy("cli.render", "add_render_parser"), _lazy("cli.render", "cli_render")),
 }
 
 

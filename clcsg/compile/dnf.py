@@ -101,11 +101,31 @@ class _Table:
         return len(self.coefs) - 1, s
 
 
+class _SharedTable:
+    """A :class:`~clcsg.compile.tape.QuadricTable` seen through :class:`_Table`'s interface,
+    so that the DNF and the tree tape of one scene number their quadrics alike."""
+
+    def __init__(self, table):
+        self.table = table
+        self.colors = []
+
+    @property
+    def coefs(self):
+        return self.table.coefs
+
+    def add(self, q: Quadric, color) -> Literal:
+        idx, s = self.table.add(q.matrix)
+        while len(self.colors) < len(self.table.coefs):
+            self.colors.append(color)
+        return idx, s
+
+
 def normalize(
     shape: Shape,
     term_limit: int = DEFAULT_TERM_LIMIT,
     user_bound=None,
     source: str = "scene",
+    table=None,
 ) -> Dnf:
     """Normalize ``shape`` to a :class:`Dnf`.
 
@@ -119,7 +139,7 @@ def normalize(
         if ub.shape != (2, 3) or not np.all(np.isfinite(ub)) or np.any(ub[1] <= ub[0]):
             raise SceneError(f"{source}: bound must be two finite corners lo < hi, got {ub.tolist()}")
         user_bound = ub
-    n = _Normalizer(term_limit, source)
+    n = _Normalizer(term_limit, source, table)
     raw_terms = n.visit(shape, np.eye(4), False)
     terms_before = len(raw_terms)
     quadrics = np.array([Quadric.from_coefficients(c).matrix for c in n.table.coefs]).reshape(-1, 4, 4)
@@ -165,10 +185,10 @@ def normalize(
 
 
 class _Normalizer:
-    def __init__(self, term_limit: int, source: str):
+    def __init__(self, term_limit: int, source: str, table=None):
         self.limit = int(term_limit)
         self.source = source
-        self.table = _Table()
+        self.table = _Table() if table is None else _SharedTable(table)
         self.primitives = 0
         self.literal_instances = 0
         self.pruned_contradiction = 0

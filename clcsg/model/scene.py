@@ -1,7 +1,9 @@
 """A scene: a CSG shape plus the optional bound that unbounded terms are clipped to.
 
 ``load`` and ``save`` pick the format from the file name: ``.json`` is clcsg's own scene
-format (:mod:`clcsg.scenefile`), ``.csg`` is OpenSCAD's CSG export (:mod:`clcsg.openscad`).
+format (:mod:`clcsg.io.scenefile`), ``.csg`` is OpenSCAD's CSG export (:mod:`clcsg.io.openscad`)
+and ``.scad`` an OpenSCAD program, exported to CSG by the ``openscad`` binary first
+(:mod:`clcsg.io.scad`).
 """
 
 from __future__ import annotations
@@ -21,8 +23,16 @@ class Scene:
     bound: np.ndarray | None = None  # (2, 3) lo, hi corners, or None
     source: str = "scene"  # file name or description, used in error messages
 
+    def compile(self, normal_form: str = "tree", term_limit: int | None = None):
+        """The scene's :class:`~clcsg.compile.tape.Tape`: the CSG tree itself (``"tree"``, the
+        default) or the paper's disjunctive normal form as an OR of ANDs (``"dnf"``; the term
+        limit applies to it only)."""
+        from ..compile.tape import compile_scene
+
+        return compile_scene(self, normal_form, term_limit)
+
     def normalize(self, term_limit: int | None = None):
-        """The scene's :class:`~clcsg.host.dnf.Dnf`."""
+        """The scene's :class:`~clcsg.compile.dnf.Dnf`."""
         from ..compile.dnf import DEFAULT_TERM_LIMIT, normalize
 
         return normalize(
@@ -48,7 +58,7 @@ def as_scene(obj, bound=None) -> Scene:
 
 
 def load(path) -> Scene:
-    """Load a scene file (``.json`` or OpenSCAD ``.csg``)."""
+    """Load a scene file (``.json``, OpenSCAD ``.csg``, or OpenSCAD ``.scad`` via ``openscad``)."""
     p = os.fspath(path)
     if not os.path.exists(p):
         raise SceneError(f"{p}: no such file")
@@ -61,7 +71,11 @@ def load(path) -> Scene:
         from ..io.openscad import load_csg
 
         return load_csg(p)
-    raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json or .csg)")
+    if ext == ".scad":
+        from ..io.scad import load_scad
+
+        return load_scad(p)
+    raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json, .csg or .scad)")
 
 
 def save(obj, path) -> None:

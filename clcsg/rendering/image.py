@@ -17,13 +17,16 @@ class Image:
 
     ``rgba``: (H, W, 4) uint8, row 0 at the top.  ``depth``: (H, W) float32, the distance along
     the unit view ray to the visible surface point (+inf on background).  ``ids``: (H, W) int32,
-    the index of the visible quadric in the scene's DNF (-1 on background).  ``stats``: timings
-    in seconds and renderer counters (see :func:`clcsg.render.render`).
+    the index of the visible quadric in the scene's tape (``tape.quadrics``, -1 on background).
+    ``primitives``: (H, W) int32, the primitive instance (``tape.instances``, tree order) whose
+    boundary holds the visible point, whose colour the pixel shows (-1 on background).
+    ``stats``: timings in seconds and renderer counters (see :func:`clcsg.render`).
     """
 
     rgba: np.ndarray
     depth: np.ndarray
     ids: np.ndarray
+    primitives: np.ndarray | None = None
     stats: dict = field(default_factory=dict)
 
     @property

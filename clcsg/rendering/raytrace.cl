@@ -1,91 +1,142 @@
-/* Exact global CSG ray tracing of a DNF (paper section 7.2's reference renderer), one work-item
- * per pixel.  For the pixel's ray eye + t v (unit v):
+/* Exact CSG ray tracer on the tape (the reference every render is tested against), with the
+ * tape pruned per screen tile (driven by clcsg/rendering/raytracer.py).
  *
- *   for every term a, every literal b of a, every root t of Q_ab(eye + t v) = 0 (eqs. 5, 6):
- *       t is a hit of term a if t > 0 and every other literal j != b of a holds at
- *       p = eye + t v:  s_aj Q_aj(p) <= 0
- *   depth = the nearest hit over all terms.
+ * prune_tiles: one work-item per TILE x TILE pixel tile.  The tile's rays, between the depths
+ * at which they can meet the scene bound, fill the frustum hull of 8 points (the tile's corner
+ * directions d, whose forward component is 1, scaled to the depth range [z0, z1]); the tape
+ * pruned over that box cut by the scene bound is written to the tile arena (overflow: the host
+ * grows it and re-runs).
  *
- * For a viewer outside the solid the first boundary point of the union of the (closed) terms
- * is the nearest first boundary point of a term, so no 1-D interval CSG is needed.  The roots
- * of a literal come sorted, so the first valid one is that literal's nearest; roots beyond the
- * current best are skipped, and terms whose (padded) bound the ray misses are skipped.
- *
- * Outputs depth (distance along the unit ray, +inf on background), ids (quadric index, -1)
- * and RGBA8 shaded with shade.h from the solid's outward normal s * grad Q (eq. 4).  The winning
- * depth is refined by one more solve from the hit point (accurate in float as well).
+ * raytrace: one work-item per pixel, ray e + t v (unit v).  Walk the roots of the tile tape's
+ * leaves in increasing t > 0 (the next root is the smallest one past the current; roots at
+ * the same t are all tried): a root t on quadric q is a hit iff the tape's membership at
+ * p = e + t v with q substituted differs between q's two sides, i.e. p is on the CSG
+ * surface.  No 1-D interval CSG and no "outside view" assumption: views from inside the solid
+ * are exact.  The winning depth is refined by one more solve from the hit point (accurate in
+ * float as well).  Outputs depth (+inf on background), quadric and primitive ids and RGBA8
+ * shaded with shade.h from the quadric's normal, in the hit primitive's colour.
  */
-#include "quadric.h"
+#include "tape.h"
+#include "primitives.h"
 #include "shade.h"
 
-/* Does every literal of the term except literal `skip` hold at p? */
-inline bool term_holds_except(__global const quadric_rec *quadrics, __global const literal_rec *literals,
-                              int first, int count, int skip, real3 p)
+#ifndef TILE
+#define TILE 16
+#endif
+
+__kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
+                          __global const view_rec *view, real3 blo, real3 bhi,
+                          __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
+                          __global int2 *tiles)
 {
-    for (int l = 0; l < count; ++l) {
-        if (l == skip) continue;
-        literal_rec lit = literals[first + l];
-        if (lit.sign * quadric_value(quadric_load(quadrics, lit.quadric), p) > 0) return false;
+    int tx = get_global_id(0), ty = get_global_id(1);
+    int ntx = (view->width + TILE - 1) / TILE, nty = (view->height + TILE - 1) / TILE;
+    if (tx >= ntx || ty >= nty) return;
+    real3 e = view_eye(view), fw = vload3(0, view->forward);
+    /* depth range of the bound along the forward axis */
+    real z0 = INFINITY, z1 = -INFINITY;
+    for (int m = 0; m < 8; ++m) {
+        real3 c = (real3)((m & 1) ? bhi.x : blo.x, (m & 2) ? bhi.y : blo.y, (m & 4) ? bhi.z : blo.z);
+        real z = dot(c - e, fw);
+        z0 = fmin(z0, z);
+        z1 = fmax(z1, z);
     }
-    return true;
+    z0 = fmax(z0, (real)0);
+    int tile = ty * ntx + tx;
+    if (!(z1 > 0)) {
+        tiles[tile] = (int2)(0, 0);
+        return;
+    }
+    int i0 = ty * TILE, i1 = min(i0 + TILE, view->height) - 1;
+    int j0 = tx * TILE, j1 = min(j0 + TILE, view->width) - 1;
+    real3 lo = (real3)(INFINITY), hi = (real3)(-INFINITY);
+    for (int m = 0; m < 4; ++m) {
+        int i = (m & 1) ? i1 : i0, j = (m & 2) ? j1 : j0;
+        real3 d = vload3(0, view->d00) + (real)j * vload3(0, view->dx) + (real)i * vload3(0, view->dy);
+        real3 p0 = e + z0 * d, p1 = e + z1 * d;
+        lo = fmin(lo, fmin(p0, p1));
+        hi = fmax(hi, fmax(p0, p1));
+    }
+    lo = fmax(lo, blo);
+    hi = fmin(hi, bhi);
+    if (any(lo > hi)) {
+        tiles[tile] = (int2)(0, 0);
+        return;
+    }
+    real3 h = 0.5 * (hi - lo);
+    prune_region g = {0.5 * (lo + hi), (real3)(h.x, 0, 0), (real3)(0, h.y, 0), (real3)(0, 0, h.z), 0};
+    uint evals = 0;
+    uint base = atomic_add(&counters[0], (uint)(n + 1));
+    if (base + (uint)(n + 1) > cap_arena) return;
+    int first, count;
+    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
+    atomic_add(&counters[1], evals);
+    atomic_add(&counters[2], (uint)count);
+    tiles[tile] = (int2)((int)base + first, count);
 }
 
-/* Slab test of the ray against the term bound padded by `pad`: may the ray meet it before tmax? */
-inline bool ray_meets_box(__global const term_rec *t, real3 e, real3 v, real tmax, real pad)
-{
-    real3 lo = vload3(0, t->lo) - pad, hi = vload3(0, t->hi) + pad;
-    real3 inv = 1 / v; /* +-inf for zero components: the slab test still works */
-    real3 a = (lo - e) * inv, b = (hi - e) * inv;
-    real3 tn = fmin(a, b), tf = fmax(a, b);
-    /* NaN (0 * inf: the ray lies in a slab plane) counts as "inside the slab" via fmin/fmax */
-    real t0 = fmax(fmax(tn.x, tn.y), fmax(tn.z, (real)0));
-    real t1 = fmin(fmin(tf.x, tf.y), tf.z);
-    return t0 <= t1 && t0 <= tmax;
-}
-
-__kernel void raytrace(__global const quadric_rec *quadrics, __global const literal_rec *literals,
-                       __global const term_rec *terms, int n_terms, real bound_pad,
-                       __global const view_rec *view, __global float *depth_out,
-                       __global int *id_out, __global uchar4 *rgba_out)
+__kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena,
+                       __global const int2 *tiles, __global const owner_rec *owners,
+                       __global const int *owner_list, __global const prim_rec *prims,
+                       __global const int2 *prim_lits, __global const view_rec *view,
+                       __global float *depth_out, __global int *id_out, __global int *prim_out,
+                       __global uchar4 *rgba_out)
 {
     int j = get_global_id(0), i = get_global_id(1);
     if (i >= view->height || j >= view->width) return;
     int pix = i * view->width + j;
+    int ntx = (view->width + TILE - 1) / TILE;
+    int2 tt = tiles[(i / TILE) * ntx + j / TILE];
+    __global const tape_op *tape = arena + tt.x;
+    int n = tt.y;
     real3 e = view_eye(view);
     real3 v = view_ray(view, i, j);
 
     real best = INFINITY;
-    int best_q = -1, best_s = 0;
-    for (int a = 0; a < n_terms; ++a) {
-        if (!ray_meets_box(&terms[a], e, v, best, bound_pad)) continue;
-        int first = terms[a].first, count = terms[a].count;
-        for (int b = 0; b < count; ++b) {
-            literal_rec lit = literals[first + b];
+    int best_q = -1;
+    real t_cur = 0;
+    bool searching = n > 0 && !(n == 1 && tape[0].op == OP_CONST);
+    while (searching) {
+        /* the smallest root past t_cur over the tape's leaves */
+        real t_next = INFINITY;
+        for (int k = 0; k < n; ++k) {
+            tape_op o = tape[k];
+            if (o.op != OP_LEAF) continue;
             real r[2];
-            int n = quadric_intersect(quadric_load(quadrics, lit.quadric), e, v, &r[0], &r[1]);
-            for (int k = 0; k < n; ++k) {
-                real t = r[k];
-                if (!(t > 0) || !(t < best)) continue;
-                if (term_holds_except(quadrics, literals, first, count, b, e + t * v)) {
-                    best = t;
-                    best_q = lit.quadric;
-                    best_s = lit.sign;
-                    break;
-                }
+            int nr = quadric_intersect(quadric_load(qs, o.a), e, v, &r[0], &r[1]);
+            for (int m = 0; m < nr; ++m)
+                if (r[m] > t_cur && r[m] < t_next) t_next = r[m];
+        }
+        if (!isfinite(t_next)) break;
+        real3 p = e + t_next * v;
+        for (int k = 0; k < n && best_q < 0; ++k) {
+            tape_op o = tape[k];
+            if (o.op != OP_LEAF) continue;
+            real r[2];
+            int nr = quadric_intersect(quadric_load(qs, o.a), e, v, &r[0], &r[1]);
+            bool at = (nr > 0 && r[0] == t_next) || (nr > 1 && r[1] == t_next);
+            if (!at) continue;
+            uint bits = tape_member(tape, n, qs, p, o.a);
+            if (bits == 1 || bits == 2) {
+                best = t_next;
+                best_q = o.a;
             }
         }
+        if (best_q >= 0) break;
+        t_cur = t_next;
     }
 
     if (best_q < 0) {
         depth_out[pix] = INFINITY;
         id_out[pix] = -1;
+        prim_out[pix] = -1;
         rgba_out[pix] = shade_background(view);
         return;
     }
     /* refine the depth by solving again from the hit, Q(p0 + tau v) = 0, p0 = e + best v, and
      * taking the root nearest 0: Q(p0) is then tiny and the roots are as accurate as the splat
      * renderer's near-sample solve (matters in float; a no-op up to rounding in double) */
-    quadric q = quadric_load(quadrics, best_q);
+    quadric q = quadric_load(qs, best_q);
     real3 p0 = e + best * v;
     real tau[2];
     int nr = quadric_intersect(q, p0, v, &tau[0], &tau[1]);
@@ -94,9 +145,10 @@ __kernel void raytrace(__global const quadric_rec *quadrics, __global const lite
         if (fabs(d) < 1e-3 * best) best += d;
     }
     real3 p = e + best * v;
-    real3 g = best_s * quadric_gradient(q, p);
+    int prim = primitive_at(owners, owner_list, prims, prim_lits, qs, best_q, p);
+    float4 color = prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
     depth_out[pix] = (float)best;
     id_out[pix] = best_q;
-    rgba_out[pix] = shade(view, vload4(0, quadrics[best_q].color), convert_float3(normalize(g)),
-                          convert_float3(v));
+    prim_out[pix] = prim;
+    rgba_out[pix] = shade(view, color, convert_float3(normalize(quadric_gradient(q, p))), convert_float3(v));
 }

@@ -1,223 +1,134 @@
-"""Host side of the exact ray tracer (``kernels/raytrace.cl``) and of the view record and
-shading options it shares with the splat renderer (``kernels/shade.h``).
+"""The exact CSG ray tracer on the tape (``raytrace.cl``): the reference renderer.
 
-:func:`trace` renders a :class:`~clcsg.host.dnf.Dnf` with one work-item per pixel: per DNF
-term all roots of the term's quadrics along the pixel's ray, the first root at which every
-other literal of the term holds, the nearest over terms.  The public entry point is
-:func:`clcsg.render.raytrace`.
+:func:`raytrace` compiles a scene (or takes the tape of :class:`~clcsg.sampling.samples.Samples`)
+and traces one ray per pixel: the tape is first pruned per 16 x 16 tile over the part of the
+tile's frustum inside the scene bound (so a ray tests only the leaves near it), then every
+root along the ray is tried in depth order until one is on the CSG surface (the membership
+with the root's quadric substituted differs between its two sides).  Exact from any eye
+position, inside the solid included.
 """
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import DeviceError, UsageError
+from ..cl.device import choose_real, context_of
+from ..cl.programs import build, event_seconds, kernel
+from ..cl.records import SceneBuffers, pack, upload
+from ..errors import UsageError
+from .camera import Camera
+from .image import Image
+from .view import Shading, pack_view
+
+TILE = 16
 
 
-# -- the view record (kernels/shade.h) ------------------------------------------------------------
+def as_tape(obj, normal_form: str = "tree"):
+    """A :class:`~clcsg.compile.tape.Tape` from a Tape, Samples, Scene, Shape or scene file path."""
+    from ..compile.tape import Tape
+    from ..model.scene import as_scene
+
+    if isinstance(obj, Tape):
+        return obj
+    tape = getattr(obj, "tape", None)
+    if isinstance(tape, Tape):
+        return tape
+    return as_scene(obj).compile(normal_form)
 
 
-def view_dtype(real) -> np.dtype:
-    """numpy mirror of ``view_rec`` in kernels/shade.h (C natural alignment)."""
-    return np.dtype(
-        [
-            ("eye", real, 3),
-            ("d00", real, 3),
-            ("dx", real, 3),
-            ("dy", real, 3),
-            ("forward", real, 3),
-            ("right", real, 3),
-            ("up", real, 3),
-            ("focal", real),
-            ("width", np.int32),
-            ("height", np.int32),
-            ("background", np.float32, 4),
-            ("key", np.float32, 3),
-            ("ambient", np.float32),
-            ("diffuse", np.float32),
-            ("specular", np.float32),
-            ("shininess", np.float32),
-            ("gamma", np.float32),
-        ],
-        align=True,
-    )
+def camera_or_fit(camera, bound) -> Camera:
+    if camera is None:
+        return Camera.fit(bound)
+    if not isinstance(camera, Camera):
+        raise UsageError(f"camera must be a clcsg.Camera, got {type(camera).__name__}")
+    return camera
 
 
-def parse_color(c, what="background") -> tuple[float, float, float, float]:
-    """RGBA in [0, 1] from 3 or 4 numbers in [0, 1] (alpha defaults to 1)."""
-    try:
-        v = [float(x) for x in c]
-    except (TypeError, ValueError):
-        raise UsageError(f"{what} must be 3 or 4 numbers in [0, 1], got {c!r}") from None
-    if len(v) == 3:
-        v.append(1.0)
-    if len(v) != 4 or not all(math.isfinite(x) and 0.0 <= x <= 1.0 for x in v):
-        raise UsageError(f"{what} must be 3 or 4 numbers in [0, 1], got {list(c)}")
-    return tuple(v)
+def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 1.0, 1.0),
+             precision: str = "auto", normal_form: str = "tree", **shading) -> Image:
+    """Exact ray tracing of a CSG scene (the reference renderer).
 
-
-@dataclass(frozen=True)
-class Shading:
-    """Blinn-Phong shading shared by both renderers (kernels/shade.h).
-
-    Two white lights: a headlight at the eye and a key light whose direction is given in the
-    camera frame as weights of (right, up, backward = -forward).  Quadric colors are taken as
-    display values, linearized with ``gamma``, lit, and encoded again with 1 / ``gamma``.
-    ``background`` (RGBA in [0, 1]) is written unlit.
+    ``scene``: a Shape, Scene, scene file path, Tape or Samples (its tape is traced).
+    ``camera``: a :class:`~clcsg.Camera` (default: :meth:`Camera.fit` to the scene bound at
+    640x480).  ``device``: None (default device), a spec string (``"cpu"``, ``"0:1"``) or a
+    Context.  ``background``: RGBA/RGB in [0, 1].  ``precision``: ``"auto"`` (double where the
+    device has fp64), ``"double"`` or ``"float"``.  ``normal_form``: ``"tree"`` or ``"dnf"``
+    (the same image either way).  Further keywords are :class:`~clcsg.rendering.view.Shading`
+    options (ambient, diffuse, specular, shininess, gamma, key).
     """
-
-    background: tuple = (1.0, 1.0, 1.0, 1.0)
-    ambient: float = 0.12
-    diffuse: float = 0.85
-    specular: float = 0.25
-    shininess: float = 40.0
-    gamma: float = 2.2
-    key: tuple = (-0.4, 0.6, 0.7)
-
-    def with_options(self, **kw) -> "Shading":
-        unknown = set(kw) - set(self.__dataclass_fields__)
-        if unknown:
-            raise UsageError(f"unknown shading option {sorted(unknown)[0]!r}; known: {', '.join(self.__dataclass_fields__)}")
-        if "background" in kw and kw["background"] is not None:
-            kw["background"] = parse_color(kw["background"])
-        kw = {k: v for k, v in kw.items() if v is not None}
-        s = replace(self, **kw)
-        for name in ("ambient", "diffuse", "specular", "shininess", "gamma"):
-            v = float(getattr(s, name))
-            if not (math.isfinite(v) and v >= 0) or (name == "gamma" and v == 0):
-                raise UsageError(f"shading option {name} must be a non-negative number, got {getattr(s, name)}")
-        return s
+    tape = as_tape(scene, normal_form)
+    cam = camera_or_fit(camera, tape.bound)
+    shade = Shading().with_options(background=background, **shading)
+    return trace(context_of(device), tape, cam, shade, precision)
 
 
-def pack_view(camera, origin, real, shading: Shading | None = None) -> np.ndarray:
-    """The ``view_rec`` of ``camera`` in device coordinates (eye - origin), one element."""
-    shading = shading or Shading()
-    rec = np.zeros(1, dtype=view_dtype(real))
-    d00, dx, dy = camera.pixel_basis()
-    rec["eye"] = np.asarray(camera.eye, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
-    rec["d00"] = d00
-    rec["dx"] = dx
-    rec["dy"] = dy
-    rec["forward"] = camera.forward
-    rec["right"] = camera.right
-    rec["up"] = camera.up
-    rec["focal"] = camera.focal
-    rec["width"] = camera.width
-    rec["height"] = camera.height
-    rec["background"] = parse_color(shading.background)
-    kr, ku, kb = shading.key
-    key = kr * camera.right + ku * camera.up - kb * camera.forward
-    rec["key"] = key / np.linalg.norm(key)
-    for name in ("ambient", "diffuse", "specular", "shininess", "gamma"):
-        rec[name] = getattr(shading, name)
-    return rec
-
-
-# -- device and precision -------------------------------------------------------------------------
-
-
-def context_of(device):
-    """A clcsg Context from None / a device spec string / a Context."""
-    from ..cl.device import get_context
-
-    if device is None or isinstance(device, str):
-        return get_context(device)
-    if hasattr(device, "ctx") and hasattr(device, "queue"):
-        return device
-    raise UsageError(f"device must be a device spec string or a clcsg Context, got {type(device).__name__}")
-
-
-def choose_real(context, precision="auto"):
-    """numpy float type for the kernels: 'auto' (double where the device has fp64, unless
-    CLCSG_PRECISION=float forces float32; see device.real_dtype), 'double', 'float'."""
-    from ..cl.device import real_dtype
-
-    if precision in (None, "auto"):
-        return np.dtype(real_dtype(context))
-    if precision in ("double", "float64", np.float64):
-        if not context.info.fp64:
-            raise DeviceError(f"device {context.info.describe()} has no fp64 (cl_khr_fp64); use precision='float'")
-        return np.dtype(np.float64)
-    if precision in ("float", "float32", np.float32):
-        return np.dtype(np.float32)
-    raise UsageError(f"precision must be 'auto', 'double' or 'float', got {precision!r}")
-
-
-_kernels: dict = {}
-
-
-def kernel(prg, name: str):
-    """The kernel ``name`` of a built program, retrieved once per program."""
+def trace(context, tape, camera, shading: Shading | None = None, precision="auto", origin=None) -> Image:
+    """Ray trace ``tape`` from ``camera`` on ``context``."""
     import pyopencl as cl
-
-    key = (id(prg), name)
-    k = _kernels.get(key)
-    if k is None or k[0] is not prg:
-        k = _kernels[key] = (prg, cl.Kernel(prg, name))
-    return k[1]
-
-
-def event_seconds(ev) -> float:
-    try:
-        return (ev.profile.end - ev.profile.start) * 1e-9
-    except Exception:  # queue without profiling
-        return float("nan")
-
-
-# -- the ray tracer ------------------------------------------------------------------------------
-
-
-def trace(context, dnf, camera, shading: Shading | None = None, precision="auto", origin=None):
-    """Ray trace ``dnf`` from ``camera`` on ``context``; returns a :class:`clcsg.image.Image`."""
-    import pyopencl as cl
-
-    from .image import Image
-    from ..cl import programs
-    from ..cl.records import SceneBuffers, pack
 
     t_start = time.perf_counter()
     real = choose_real(context, precision)
-    packed = pack(dnf, real=real, origin=origin)
+    packed = pack(tape, real=real, origin=origin)
     scene = SceneBuffers(context, packed)
     W, H = camera.width, camera.height
-    view = pack_view(camera, packed.origin, real, shading)
+    view_buf = upload(context, pack_view(camera, packed.origin, real, shading))
     mf = cl.mem_flags
-    view_buf = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=view)
+    q = context.queue
     depth = np.empty((H, W), dtype=np.float32)
     ids = np.empty((H, W), dtype=np.int32)
+    prims = np.empty((H, W), dtype=np.int32)
     rgba = np.empty((H, W, 4), dtype=np.uint8)
-    d_buf = cl.Buffer(context.ctx, mf.WRITE_ONLY, depth.nbytes)
-    i_buf = cl.Buffer(context.ctx, mf.WRITE_ONLY, ids.nbytes)
-    c_buf = cl.Buffer(context.ctx, mf.WRITE_ONLY, rgba.nbytes)
+    outs = [cl.Buffer(context.ctx, mf.WRITE_ONLY, a.nbytes) for a in (depth, ids, prims, rgba)]
     t_build = time.perf_counter()
-    prg = programs.build(context, "rendering/raytrace.cl", real=real)
+    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE}
+    prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()
-    diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0])) if dnf.n_terms else 1.0
-    pad = real.type(1e-6 * diag + 1e-30)
-    knl = kernel(prg, "raytrace")
-    q = context.queue
-    ev = knl(q, (W, H), None, scene.quadrics, scene.literals, scene.terms, np.int32(scene.n_terms), pad,
-             view_buf, d_buf, i_buf, c_buf)
-    cl.enqueue_copy(q, depth, d_buf, wait_for=[ev])
-    cl.enqueue_copy(q, ids, i_buf, wait_for=[ev])
-    cl.enqueue_copy(q, rgba, c_buf, wait_for=[ev])
+
+    # per-tile pruning, with the overflow protocol of the sampler's arena
+    ntx, nty = -(-W // TILE), -(-H // TILE)
+    n = len(packed.tape)
+    lo = (tape.bound[0] - packed.origin).astype(real)
+    hi = (tape.bound[1] - packed.origin).astype(real)
+    real3 = cl.cltypes.double3 if real == np.float64 else cl.cltypes.float3
+    blo = np.array([(lo[0], lo[1], lo[2], 0)], dtype=real3)[0]
+    bhi = np.array([(hi[0], hi[1], hi[2], 0)], dtype=real3)[0]
+    tiles = cl.Buffer(context.ctx, mf.READ_WRITE, ntx * nty * 8)
+    counters = np.zeros(3, dtype=np.uint32)
+    counters_buf = upload(context, counters, writable=True)
+    cap = max(ntx * nty * min(n + 1, 64), 4 * (n + 1))
+    while True:
+        arena = cl.Buffer(context.ctx, mf.READ_WRITE, cap * packed.tape.itemsize)
+        counters[:] = 0
+        cl.enqueue_copy(q, counters_buf, counters)
+        ev_prune = kernel(prg, "prune_tiles")(q, (ntx, nty), None, scene.quadrics, scene.tape, np.int32(n), view_buf,
+                                              blo, bhi, arena, np.uint32(cap), counters_buf, tiles)
+        cl.enqueue_copy(q, counters, counters_buf, wait_for=[ev_prune])
+        if int(counters[0]) <= cap:
+            break
+        cap = int(counters[0]) + int(counters[0]) // 2
+    ev = kernel(prg, "raytrace")(q, (W, H), None, scene.quadrics, arena, tiles, *scene.colour_args(), view_buf,
+                                 *outs)
+    for a, b in zip((depth, ids, prims, rgba), outs):
+        cl.enqueue_copy(q, a, b, wait_for=[ev])
     q.finish()
     t_end = time.perf_counter()
     stats = {
         "method": "raytrace",
+        "normal_form": tape.shape,
         "device": context.info.describe(),
         "precision": "double" if real == np.float64 else "float",
         "width": W,
         "height": H,
-        "terms": dnf.n_terms,
-        "quadrics": dnf.n_quadrics,
+        "quadrics": tape.n_quadrics,
+        "tape_instructions": int(n),
+        "tile_tape_mean": int(counters[2]) / (ntx * nty),
+        "prune_evaluations": int(counters[1]),
         "covered_pixels": int((ids >= 0).sum()),
-        "kernel_seconds": event_seconds(ev),
+        "prune_seconds": event_seconds(ev_prune),
+        "kernel_seconds": event_seconds(ev) + event_seconds(ev_prune),
         "build_seconds": t_built - t_build,
         "total_seconds": t_end - t_start,
     }
-    return Image(rgba, depth, ids, stats)
+    return Image(rgba, depth, ids, prims, stats)

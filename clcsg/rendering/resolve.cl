@@ -3,16 +3,18 @@
  * is recomputed from the winning sample's quadric and the pixel's ray, solved near the sample
  * as in splat.cl (o = e + ((s - e).v) v, Q(o + tau v) = 0, eqs. 5, 6) in `real` precision,
  * taking the root whose depth (s - e).v + tau is nearest the stored float depth.  Outputs the
- * depth (distance along the unit view ray), the quadric id and the color shaded with shade.h
- * from the solid's outward normal sign * grad Q(p) (eq. 4) — the same shading as the ray
- * tracer. */
-#include "quadric.h"
+ * depth (distance along the unit view ray), the quadric and primitive ids and the colour of
+ * the primitive whose boundary holds the hit (primitives.h), shaded with shade.h — the same
+ * shading as the ray tracer.  EMPTY_KEY comes from clcsg/cl/constants.py. */
+#include "primitives.h"
 #include "shade.h"
 
-
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
+                      __global const owner_rec *owners, __global const int *owner_list,
+                      __global const prim_rec *prims, __global const int2 *prim_lits,
                       __global const view_rec *view, __global const ulong *framebuffer,
-                      __global float *depth_out, __global int *id_out, __global uchar4 *rgba_out)
+                      __global float *depth_out, __global int *id_out, __global int *prim_out,
+                      __global uchar4 *rgba_out)
 {
     int j = get_global_id(0), i = get_global_id(1);
     if (i >= view->height || j >= view->width) return;
@@ -21,6 +23,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     if (key == EMPTY_KEY) {
         depth_out[pix] = INFINITY;
         id_out[pix] = -1;
+        prim_out[pix] = -1;
         rgba_out[pix] = shade_background(view);
         return;
     }
@@ -41,9 +44,10 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
     }
     real3 p = o + t * v;
-    real3 g = sp->sign * quadric_gradient(q, p);
+    int prim = primitive_at(owners, owner_list, prims, prim_lits, quadrics, sp->quadric, p);
+    float4 color = prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
     depth_out[pix] = (float)(tc + t);
     id_out[pix] = sp->quadric;
-    rgba_out[pix] = shade(view, vload4(0, quadrics[sp->quadric].color), convert_float3(normalize(g)),
-                          convert_float3(v));
+    prim_out[pix] = prim;
+    rgba_out[pix] = shade(view, color, convert_float3(normalize(quadric_gradient(q, p))), convert_float3(v));
 }

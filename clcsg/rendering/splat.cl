@@ -1,29 +1,34 @@
-/* Splat rasterizer with local quadric ray tracing and clipping (paper section 6, design note
- * section 5).  One work-item per sample s (radius r, quadric Q, literal sign, clip set C):
+/* Splat rasterizer with local quadric ray tracing and clipping by tape (paper section 6 on the
+ * CSG tree).  One work-item per sample s (radius r, quadric Q, clip program C):
  *
  * 1. screen bound: the projection of the ball B(s, r) (exact tangent bound, screen_ball);
  *    with SURFACE_ALIGNED also the projection of a flat cylinder aligned with the normal that
  *    holds the quadric patch inside the ball (splat_slab; paper section 6.1), intersected;
  * 2. per pixel of the bound, with unit view ray v from the eye e: skip rays that miss the ball
  *    (with SURFACE_ALIGNED: whose chord through the ball misses the slab); then solve near the
- *    sample: o = e + ((s - e).v) v, Q(o + tau v) = 0
- *    (eqs. 5, 6), depth = (s - e).v + tau.  The root nearer the eye is tried first, the other
- *    one if it fails: |p - s| <= r, depth > 0, and every literal of C holds, s_c Q_c(p) <= 0;
+ *    sample: o = e + ((s - e).v) v, Q(o + tau v) = 0 (eqs. 5, 6), depth = (s - e).v + tau.
+ *    The root nearer the eye is tried first, the other one if it fails: |p - s| <= r,
+ *    depth > 0, and the clip program: C is the sample's tape pruned over B(s, r) with Q
+ *    substituted, and p (on Q) is on the CSG surface iff C's membership differs between Q's two
+ *    sides.  This is exact from any eye position, inside the solid included.  An empty C
+ *    means the whole ball is surface on Q: no clipping;
  * 3. depth test: atom_min of ((ulong)as_uint((float)depth) << 32 | sample index) into the
  *    64-bit framebuffer (positive floats order like their bit patterns), after a plain read
  *    that skips atomics which cannot win.
  *
  * BACKFACE_CULLING (outside views only; the host turns it off when the eye is inside the
- * solid) skips splats whose patch faces away from the eye everywhere (splat_backfacing) and
- * fragments whose outward normal s grad Q(p) faces away from the view ray: a back-facing point
- * is where a ray leaves the solid, so a front-facing surface point is nearer on the same ray.
+ * solid) skips splats whose patch faces away from the eye everywhere (splat_backfacing; only
+ * unclipped splats, whose orientation is constant) and fragments whose outward normal faces
+ * away from the view ray: a back-facing point is where a ray leaves the solid, so a
+ * front-facing surface point is nearer on the same ray.
  *
- * Build options: SURFACE_ALIGNED, BACKFACE_CULLING, CLCSG_STATS (0 or 1).  With CLCSG_STATS the
- * C_* counters below are accumulated per work-item and added with one atomic each at the end.
+ * Build options: SURFACE_ALIGNED, BACKFACE_CULLING, CLCSG_STATS (0 or 1), TAPE_REGS.  With
+ * CLCSG_STATS the PC_* counters (clcsg/cl/constants.py) are accumulated per work-item and
+ * added with one atomic each at the end.
  */
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
-#include "quadric.h"
+#include "tape.h"
 #include "shade.h"
 
 #ifndef SURFACE_ALIGNED
@@ -35,17 +40,6 @@
 #ifndef CLCSG_STATS
 #define CLCSG_STATS 1
 #endif
-
-/* counter slots (clcsg/host/splat.py: COUNTERS) */
-#define C_SPLATS_DRAWN 0
-#define C_SPLATS_CULLED 1
-#define C_SPLATS_OFFSCREEN 2
-#define C_BOUND_PIXELS 3
-#define C_FRAGMENTS 4
-#define C_CLIP_EVALS 5
-#define C_FRAGMENTS_PASSED 6
-#define C_ATOMICS 7
-#define N_COUNTERS 8
 
 /* rounding slack for conservative tests, relative to the magnitudes involved */
 #define SLACK (64 * REAL_EPS)
@@ -210,17 +204,19 @@ inline bool splat_backfacing(quadric q, real lam_min, real lam_max, int sign, re
 }
 
 __kernel void splat(__global const quadric_rec *quadrics, __global const sample_rec *samples, int n_samples,
-                    __global const literal_rec *clip, __global const view_rec *view,
+                    __global const tape_op *clip, __global const view_rec *view,
                     __global ulong *framebuffer, __global ulong *counters)
 {
     int idx = get_global_id(0);
     if (idx >= n_samples) return;
-    ulong cnt[N_COUNTERS] = {0, 0, 0, 0, 0, 0, 0, 0};
+    ulong cnt[N_SPLAT_COUNTERS];
+    for (int k = 0; k < N_SPLAT_COUNTERS; ++k) cnt[k] = 0;
 
     __global const sample_rec *sp = &samples[idx];
     real3 s = vload3(0, sp->pos);
     real r = sp->radius;
     int sign = sp->sign;
+    int c0 = sp->clip_first, nc = sp->clip_count;
     quadric q = quadric_load(quadrics, sp->quadric);
     real lam_min = quadrics[sp->quadric].lam_min, lam_max = quadrics[sp->quadric].lam_max;
     real3 e = view_eye(view);
@@ -229,8 +225,9 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
 
     rect bound = screen_ball(view, a, r);
 #if BACKFACE_CULLING
-    if (bound.x0 <= bound.x1 && bound.y0 <= bound.y1 && splat_backfacing(q, lam_min, lam_max, sign, s, a, r)) {
-        cnt[C_SPLATS_CULLED] = 1;
+    if (nc == 0 && bound.x0 <= bound.x1 && bound.y0 <= bound.y1 &&
+        splat_backfacing(q, lam_min, lam_max, sign, s, a, r)) {
+        cnt[PC_SPLATS_CULLED] = 1;
         bound = (rect){0, 0, -1, -1};
     }
 #endif
@@ -240,14 +237,13 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     if (has_slab && bound.x0 <= bound.x1 && bound.y0 <= bound.y1) bound = rect_meet(bound, screen_slab(view, a, &slab));
 #endif
     if (bound.x0 <= bound.x1 && bound.y0 <= bound.y1)
-        cnt[C_SPLATS_DRAWN] = 1;
-    else if (!cnt[C_SPLATS_CULLED])
-        cnt[C_SPLATS_OFFSCREEN] = 1;
+        cnt[PC_SPLATS_DRAWN] = 1;
+    else if (!cnt[PC_SPLATS_CULLED])
+        cnt[PC_SPLATS_OFFSCREEN] = 1;
 
-    int c0 = sp->clip_first, nc = sp->clip_count;
     for (int y = bound.y0; y <= bound.y1; ++y) {
         for (int x = bound.x0; x <= bound.x1; ++x) {
-            cnt[C_BOUND_PIXELS]++;
+            cnt[PC_BOUND_PIXELS]++;
             real3 v = view_ray(view, y, x);
             real tc = dot(a, v);
             real3 w0 = tc * v - a; /* o - s: o = e + tc v, the ray point closest to s */
@@ -256,7 +252,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
 #if SURFACE_ALIGNED
             if (has_slab && !chord_meets_slab(&slab, a, v, tc, sqrt(m2))) continue;
 #endif
-            cnt[C_FRAGMENTS]++;
+            cnt[PC_FRAGMENTS]++;
             real3 o = e + tc * v;
             real tau[2];
             int nr = quadric_intersect(q, o, v, &tau[0], &tau[1]);
@@ -266,31 +262,21 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
                 real depth = tc + tau[k];
                 if (!(depth > 0)) continue;
                 real3 p = o + tau[k] * v;
-#if BACKFACE_CULLING
-                if (sign * dot(quadric_gradient(q, p), v) > 0) continue;
-#endif
-                /* the clip set is a union of blocks (separated by quadric -1), each an
-                 * intersection of literals: keep the fragment if every literal of some block
-                 * holds (one block in the common case) */
-                bool keep = false, block = true;
-                for (int c = 0; c < nc; ++c) {
-                    literal_rec lit = clip[c0 + c];
-                    if (lit.quadric < 0) {
-                        if (block) break;
-                        block = true;
-                        continue;
-                    }
-                    if (!block) continue;
-                    cnt[C_CLIP_EVALS]++;
-                    block = lit.sign * quadric_value(quadric_load(quadrics, lit.quadric), p) <= 0;
+                int side = sign;
+                if (nc > 0) {
+                    cnt[PC_CLIP_EVALUATIONS]++;
+                    uint bits = tape_member(clip + c0, nc, quadrics, p, sp->quadric);
+                    if (bits == 0 || bits == 3) continue; /* same membership on both sides */
+                    side = (bits & 1) ? 1 : -1;
                 }
-                keep = block;
-                if (!keep) continue;
-                cnt[C_FRAGMENTS_PASSED]++;
+#if BACKFACE_CULLING
+                if (side * dot(quadric_gradient(q, p), v) > 0) continue;
+#endif
+                cnt[PC_FRAGMENTS_PASSED]++;
                 ulong key = ((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx;
                 __global ulong *slot = &framebuffer[y * W + x];
                 if (key < *slot) {
-                    cnt[C_ATOMICS]++;
+                    cnt[PC_ATOMICS]++;
                     atom_min(slot, key);
                 }
                 break;
@@ -298,7 +284,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
         }
     }
 #if CLCSG_STATS
-    for (int k = 0; k < N_COUNTERS; ++k)
+    for (int k = 0; k < N_SPLAT_COUNTERS; ++k)
         if (cnt[k]) atom_add(&counters[k], cnt[k]);
 #endif
 }

@@ -1,6 +1,6 @@
-"""Host side of the splat renderer (paper section 6): ``kernels/splat.cl`` rasterizes every
-sample into a 64-bit depth|index framebuffer, ``kernels/resolve.cl`` recomputes the winning
-hit per pixel and shades it.  The public entry point is :func:`clcsg.render.render`.
+"""The splat renderer (paper section 6): ``splat.cl`` rasterizes every sample into a 64-bit
+depth|index framebuffer with local ray tracing and clipping by tape, ``resolve.cl`` recomputes
+the winning hit per pixel and shades it in its primitive's colour.  Entry point: :func:`render`.
 
 Statistics (``Image.stats``; counters only with ``stats=True``):
 
@@ -24,64 +24,54 @@ import time
 
 import numpy as np
 
+from ..cl.constants import EMPTY_KEY, SPLAT_COUNTERS
+from ..cl.device import choose_real, context_of, require_int64_atomics
+from ..cl.programs import build, event_seconds, kernel
+from ..cl.records import upload
 from ..errors import UsageError
-
-COUNTERS = (
-    "splats_drawn",
-    "splats_culled",
-    "splats_offscreen",
-    "bound_pixels",
-    "fragments",
-    "clip_evaluations",
-    "fragments_passed",
-    "atomics",
-)
-
-EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
+from .image import Image
+from .raytracer import camera_or_fit
+from .view import Shading, pack_view
 
 
-def _buffers(samples, context, real):
-    """(SceneBuffers, sample buffer, clip buffer) in precision ``real``."""
-    import pyopencl as cl
+def render(samples, camera=None, device=None, background=(1.0, 1.0, 1.0), precision: str = "auto",
+           surface_aligned: bool = True, backface_culling: bool = True, stats: bool = True, **shading) -> Image:
+    """Pixel-perfect splat rendering of :class:`~clcsg.Samples` (paper section 6).
 
-    from ..cl.records import LITERAL_DTYPE, SceneBuffers, pack, sample_dtype
+    Per sample, one work-item loops over the screen bound of its splat; per pixel it solves
+    the view ray against the sample's quadric near the sample (eqs. 5, 6), keeps the hit if it
+    lies within the sample's radius and its clip program says it is on the CSG surface, and
+    depth-tests it with a 64-bit ``atom_min``; a resolve pass recomputes the winning hit and
+    shades it like :func:`clcsg.raytrace`.
 
-    if np.dtype(samples.packed.real) == real:
-        return samples.device_buffers(context)
-    packed = pack(samples.dnf, real=real, origin=samples.packed.origin)
-    src = samples.records()
-    rec = np.zeros(len(src), dtype=sample_dtype(real))
-    for name in src.dtype.names:
-        rec[name] = src[name]
-    clip = np.zeros(len(samples.clip_literals), dtype=LITERAL_DTYPE)
-    if len(clip):
-        clip["quadric"] = samples.clip_literals[:, 0]
-        clip["sign"] = samples.clip_literals[:, 1]
-    mf = cl.mem_flags
-
-    def up(a):
-        data = a if a.size else np.zeros(1, dtype=a.dtype)
-        return cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=data)
-
-    return SceneBuffers(context, packed), up(rec), up(clip)
+    ``surface_aligned``: bound each splat by a box aligned with its normal whose height comes
+    from the eigenvalue bound of the patch (paper section 6.1) instead of the whole ball.
+    ``backface_culling``: skip splats and fragments that face away from the eye (only valid
+    from outside; turned off automatically when the eye is inside the solid).  ``stats``:
+    count fragments, clip evaluations, ... with atomic counters (``Image.stats``; off is a
+    little faster).  Other arguments as in :func:`clcsg.raytrace`.  Requires 64-bit atomics
+    (``cl_khr_int64_extended_atomics``), else :class:`~clcsg.errors.DeviceError`.
+    """
+    if not hasattr(samples, "device_buffers"):
+        raise UsageError(f"render needs Samples (see clcsg.sample), got {type(samples).__name__}")
+    cam = camera_or_fit(camera, samples.tape.bound)
+    shade = Shading().with_options(background=background, **shading)
+    return rasterize(context_of(device), samples, cam, shade, precision, surface_aligned, backface_culling, stats)
 
 
-def eye_inside(dnf, eye) -> bool:
+def eye_inside(tape, eye) -> bool:
     """Is the eye inside (or on) the solid?  Back-face culling is only valid from outside."""
-    if not dnf.n_terms:
+    from ..compile.interpret import contains
+
+    if tape.empty:
         return False
-    return bool(dnf.contains(np.asarray(eye, dtype=np.float64).reshape(1, 3))[0])
+    return bool(contains(tape.ops, tape.quadrics, np.asarray(eye, dtype=np.float64).reshape(1, 3))[0])
 
 
 def rasterize(context, samples, camera, shading=None, precision="auto", surface_aligned=True,
-              backface_culling=True, stats=True):
-    """Render ``samples`` from ``camera``; returns a :class:`clcsg.image.Image`."""
+              backface_culling=True, stats=True) -> Image:
+    """Render ``samples`` from ``camera`` on ``context``."""
     import pyopencl as cl
-
-    from .image import Image
-    from ..cl import programs
-    from ..cl.device import require_int64_atomics
-    from .raytracer import choose_real, event_seconds, kernel, pack_view
 
     require_int64_atomics(context, "the splat renderer (64-bit atom_min depth test)")
     if len(samples) >= 1 << 31:
@@ -90,49 +80,45 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     real = choose_real(context, precision)
     culling = bool(backface_culling)
     culling_note = None
-    if culling and eye_inside(samples.dnf, camera.eye):
+    if culling and eye_inside(samples.tape, camera.eye):
         culling, culling_note = False, "off: the eye is inside the solid"
-    scene, sample_buf, clip_buf = _buffers(samples, context, real)
+    scene, sample_buf, clip_buf = samples.device_buffers(context, real)
     W, H = camera.width, camera.height
-    view = pack_view(camera, samples.packed.origin, real, shading)
     mf = cl.mem_flags
     ctx, q = context.ctx, context.queue
-    view_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=view)
+    view_buf = upload(context, pack_view(camera, scene.packed.origin, real, shading))
     fb = cl.Buffer(ctx, mf.READ_WRITE, W * H * 8)
-    counters = np.zeros(len(COUNTERS), dtype=np.uint64)
-    cnt_buf = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=counters)
+    counters = np.zeros(len(SPLAT_COUNTERS), dtype=np.uint64)
+    cnt_buf = upload(context, counters, writable=True)
     depth = np.empty((H, W), dtype=np.float32)
     ids = np.empty((H, W), dtype=np.int32)
+    prims = np.empty((H, W), dtype=np.int32)
     rgba = np.empty((H, W, 4), dtype=np.uint8)
-    d_buf = cl.Buffer(ctx, mf.WRITE_ONLY, depth.nbytes)
-    i_buf = cl.Buffer(ctx, mf.WRITE_ONLY, ids.nbytes)
-    c_buf = cl.Buffer(ctx, mf.WRITE_ONLY, rgba.nbytes)
+    outs = [cl.Buffer(ctx, mf.WRITE_ONLY, a.nbytes) for a in (depth, ids, prims, rgba)]
 
     t_build = time.perf_counter()
     defines = {
         "SURFACE_ALIGNED": int(bool(surface_aligned)),
         "BACKFACE_CULLING": int(culling),
         "CLCSG_STATS": int(bool(stats)),
+        "TAPE_REGS": scene.packed.n_regs,
     }
-    splat_prg = programs.build(context, "rendering/splat.cl", defines=defines, real=real)
-    resolve_prg = programs.build(context, "rendering/resolve.cl", real=real)
+    splat_prg = build(context, "rendering/splat.cl", defines=defines, real=real)
+    resolve_prg = build(context, "rendering/resolve.cl", real=real)
     t_built = time.perf_counter()
 
-    ev_clear = cl.enqueue_fill_buffer(q, fb, EMPTY, 0, W * H * 8)
+    ev_clear = cl.enqueue_fill_buffer(q, fb, np.uint64(EMPTY_KEY), 0, W * H * 8)
     n = len(samples)
     events = [ev_clear]
     if n:
-        ev_splat = kernel(splat_prg, "splat")(
+        events.append(kernel(splat_prg, "splat")(
             q, (n,), None, scene.quadrics, sample_buf, np.int32(n), clip_buf, view_buf, fb, cnt_buf,
-            wait_for=[ev_clear],
-        )
-        events.append(ev_splat)
+            wait_for=[ev_clear]))
     ev_resolve = kernel(resolve_prg, "resolve")(
-        q, (W, H), None, scene.quadrics, sample_buf, view_buf, fb, d_buf, i_buf, c_buf, wait_for=events[-1:]
-    )
-    cl.enqueue_copy(q, depth, d_buf, wait_for=[ev_resolve])
-    cl.enqueue_copy(q, ids, i_buf, wait_for=[ev_resolve])
-    cl.enqueue_copy(q, rgba, c_buf, wait_for=[ev_resolve])
+        q, (W, H), None, scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, *outs,
+        wait_for=events[-1:])
+    for a, b in zip((depth, ids, prims, rgba), outs):
+        cl.enqueue_copy(q, a, b, wait_for=[ev_resolve])
     cl.enqueue_copy(q, counters, cnt_buf, wait_for=events[-1:])
     q.finish()
     t_end = time.perf_counter()
@@ -157,7 +143,7 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     if culling_note:
         st["backface_culling_note"] = culling_note
     if stats:
-        st.update({name: int(v) for name, v in zip(COUNTERS, counters)})
+        st.update({name: int(v) for name, v in zip(SPLAT_COUNTERS, counters)})
         st["overdraw"] = st["fragments"] / covered if covered else 0.0
     st["kernel_seconds"] = st["splat_seconds"] + st["resolve_seconds"]
-    return Image(rgba, depth, ids, st)
+    return Image(rgba, depth, ids, prims, st)

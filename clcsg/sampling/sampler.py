@@ -1,52 +1,49 @@
-"""Driver of the adaptive subdivision sampler (``kernels/sampler.cl``); paper sections 3-5.
+"""Driver of the adaptive subdivision sampler (``sampler.cl``, ``finish.cl``); paper sections 3-5
+on the CSG tape.
 
 Decomposition
 -------------
-Every literal b of every DNF term a is sampled on its quadric Q from each of the three
-sampling planes of Q's principal frame (``analysis.py``) and, for two-sheet heightfields,
-from both sheets.  A *task* is one (term, literal, plane, sheet); its root cell is the
-term's bound projected into the plane's local (x, y) coordinates.  Cells are axis-aligned
-rectangles of that plane (the design note's "simpler cells") instead of the paper's basic
-regions; the kernel bounds every quantity exactly over a cell, because R(x, y) is separable.
+Every unique quadric q that a leaf of the tape uses is sampled from each of the three sampling
+planes of its principal frame (:mod:`clcsg.compile.frames`) and, for two-sheet heightfields,
+from both sheets.  A *task* is one (quadric, plane, sheet); its root cell is the box of the
+primitive instances that have q as a literal (the CSG surface lies on the union of the
+primitives' boundaries), cut by the scene bound, projected into the plane's local (x, y).
+Cells are axis-aligned rectangles of that plane with exact interval bounds (R(x, y) is
+separable); each carries a tape pruned over its parent's patch grown by the radius.
 
 Guarantee
 ---------
-*Every sample lies on the CSG surface*: a sample is emitted at a point p of a cell only when
-the cell was proven to lie on the CSG surface (fill) or p is a corner with d_Q(S, p) < 0
-(single sample), and eq. 22 is negative only on the surface.
+*Every sample lies on the CSG surface*: a sample is emitted at a point p of a cell only if the
+cell's pruned tape decides the whole patch as surface (both substituted sides constant and
+different), the corner discs prove it (fill), or p has d_q(p) < 0 (single sample); d_q is
+negative only on the surface (see :mod:`clcsg.compile.interpret`).
 
-*Every point x of the CSG surface, on literal b of term a, with a non-zero normal, has a sample
-on the same quadric within r*: let k be the plane whose axis has the largest |n_k| at x.  x
-projects into the root cell of task (a, b, k, sheet of x) because the term's bound contains x.
-Follow the chain of cells that contain the projection.  A cell in the chain is never dropped as
-"no surface" (the heightfield is defined at x), nor as "not owned" (at x no in-plane
-component exceeds |n_k|), nor as outside the term bound (x is inside it).  It is discarded by
-the discs only if x lies in a disc of a corner p with d_Q(S, p) > 0: the 2-D radius
-|d| / delta maps to a 3-D distance of at most |d| along the straight segment inside the cell
-(delta = sqrt(max n_i^2 + max n_j^2 + max n_k^2) / min |n_k| bounds |dp| / |dx| over the
-cell), and eq. 22 says no point of Q within |d| of p is on the surface — contradiction.  So
-the chain ends in (i) a fill, which puts every cell point within r of a sample (see below),
-(ii) a single sample whose radius covers the patch's whole 3-D box, or (iii) the
-floor: cells whose 3-D box is smaller than the floor (default r / 10) and still unresolved are
-dropped and counted as ``unresolved`` in the stats; the guarantee holds for every feature wider
-than the floor.  The paper makes the same trade (section 4.2).
+*Every point x of the CSG surface, on quadric q, with a non-zero normal, has a sample on q
+within r*: let k be the plane whose axis has the largest |n_k| at x.  x projects into the root
+cell of task (q, k, sheet of x): x lies on the boundary of a primitive instance holding q, so
+in that instance's box and in the scene bound.  Follow the chain of cells that contain the
+projection.  A cell in the chain is never dropped as "no surface" (the heightfield is defined
+at x), nor as "not owned" (at x no in-plane component exceeds |n_k|), nor as outside the task
+box; it is not decided "no surface" by pruning (the pruned tape is exact over the patch, which
+holds x, and the sides differ at x).  It is discarded by the discs only if x lies in a disc of
+a corner p with d_q(p) > 0: the 2-D radius |d| / delta maps to a 3-D distance of at most |d|
+(delta bounds |dp| / |dx| over the cell), and no point of q within |d| of p is on the surface
+— contradiction.  Pruning keeps every tape exact where it is used: a leaf is replaced by a
+constant only where it has one sign over the whole region (planes are tested exactly on the
+patch box, other quadrics by their conservative distance), and the children's region (the
+parent's patch grown by r) holds their patches and every splat ball of their samples.  So the
+chain ends in (i) a fill, which puts every cell point within r of a sample (the anisotropic
+slope bound in ``fill.h``), (ii) a single sample whose radius covers the patch's whole 3-D
+box, or (iii) the floor: cells whose 3-D box is smaller than the floor (default r / 10) and
+still unresolved are dropped and counted as ``unresolved`` (the paper makes the same trade,
+section 4.2); the guarantee holds for every feature wider than the floor.
 
-Fill (beyond the paper's isotropic distortion bound): a cell on the surface is covered by
-rows of sub-rectangles with half-sizes (a, b), a sample at each center.  For two points of a
-sub-rectangle p2 - p1 = (dx, dy, t2 - t1) and, by the mean value theorem,
-|t2 - t1| <= mx |dx| + my |dy| with the slope bounds mx = max|n_i| / min|n_k|,
-my = max|n_j| / min|n_k| over the sub-rectangle.  So every point is within
-sqrt(a^2 + b^2 + (mx a + my b)^2) of the center, and (a, b) are chosen with that <= r and the
-area a b as large as possible: on a steep patch only the steep direction shrinks.  On a
-sphere this needs 37% fewer samples than the isotropic sqrt 3 bound (paper Fig. 14: 36% for
-its distortion estimate).
-
-Shared surfaces (design note, "Coincident and shared surfaces") are handled inside eq. 22:
-terms that hold the sampled quadric with the same polarity are left out, terms holding it with
-the opposite polarity enter without that literal.
+The substitution is per quadric, not per leaf, so coincident faces of different solids,
+surfaces shared by several parts of the tree and shared sub-graphs need no special rule.
 
 Nothing is lost: each level runs with buffers sized from an estimate; the kernel counts past
-the capacity without writing, the host sees it, grows the buffer and re-runs the level.
+the capacity without writing, the host sees it, grows the buffer (cells, samples, tape arena)
+and re-runs the level; the finish pass does the same with the clip buffer.
 """
 
 from __future__ import annotations
@@ -58,62 +55,33 @@ import warnings
 
 import numpy as np
 
-from ..errors import UsageError
-from .samples import Samples
-from ..model.scene import as_scene
 from ..cl import device as _device
-from ..compile.frames import principal_frame
-from ..cl.records import PackedScene, SceneBuffers, pack
-from ..compile.dnf import Dnf
+from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build
-
-COUNTERS = ("cells", "samples", "distance_queries", "unresolved", "discarded", "filled", "single", "split",
-            "box_tests", "box_resolved")
-
+from ..cl.records import (SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype, upload)
+from ..compile.frames import principal_frame
+from ..compile.tape import OP_LEAF
+from ..errors import LimitError, UsageError
+from ..model.quadric import Quadric
+from ..model.scene import as_scene
+from .samples import Samples
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
 WORK_GROUP = 64
+
+#: counters summed over levels into the stats (the others are per-level positions)
+_SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
+           "prune_evaluations", "pruned_decided", "tapes_written")
+_SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
 
 
 def launch_size(n: int) -> tuple[int]:
     return (max(1, -(-n // WORK_GROUP)) * WORK_GROUP,)
 
 
-def frame_dtype(real) -> np.dtype:
-    return np.dtype(
-        [("U", real, 9), ("center", real, 3), ("lam", real, 3), ("beta", real, 3), ("gamma", real)],
-        align=True,
-    )
-
-
-def task_dtype(real) -> np.dtype:
-    return np.dtype(
-        [
-            ("group_first", np.int32), ("group_count", np.int32), ("terms_first", np.int32),
-            ("terms_count", np.int32), ("quadric", np.int32), ("sign", np.int32), ("plane", np.int32),
-            ("sheet", np.int32), ("far_other", real), ("zlo", real, 3), ("zhi", real, 3),
-        ],
-        align=True,
-    )
-
-
-GROUP_LITERAL_DTYPE = np.dtype([("term", np.int32), ("literal", np.int32)], align=True)
-
-
-def cell_dtype(real) -> np.dtype:
-    return np.dtype(
-        [("x0", real), ("y0", real), ("x1", real), ("y1", real), ("d", real, 4), ("task", np.int32), ("level", np.int32)],
-        align=True,
-    )
-
-
-def raw_sample_dtype(real) -> np.dtype:
-    return np.dtype([("pos", real, 3), ("radius", real), ("task", np.int32), ("pad", np.int32)], align=True)
-
-
 def frame_records(frames, real) -> np.ndarray:
-    """Principal frames as ``frame_rec`` records (``kernels/layout.h``)."""
+    """Principal frames as ``frame_rec`` records (``cl/include/layout.h``)."""
     rec = np.zeros(len(frames), dtype=frame_dtype(real))
     for i, f in enumerate(frames):
         rec["U"][i] = f.U.reshape(9)
@@ -124,63 +92,36 @@ def frame_records(frames, real) -> np.ndarray:
     return rec
 
 
-def analyse(packed: PackedScene) -> tuple[np.ndarray, list]:
-    """Principal frames of all quadrics (device coordinates) as ``frame_rec`` records."""
-    frames = [principal_frame_of(m) for m in packed.local_matrices]
-    return frame_records(frames, packed.real), frames
+def quadric_boxes(tape) -> dict:
+    """World box per sampled quadric: the union of the boxes of the primitive instances that
+    have it as a literal, cut by the scene bound (None where that is empty)."""
+    used = set(int(q) for q in tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
+    owners = tape.owners()
+    lo_b, hi_b = tape.bound
+    out = {}
+    for q in sorted(used):
+        boxes = [tape.instances[i].box for i in owners[q] if tape.instances[i].box is not None]
+        if not boxes:
+            continue
+        lo = np.maximum(np.min([b[0] for b in boxes], axis=0), lo_b)
+        hi = np.minimum(np.max([b[1] for b in boxes], axis=0), hi_b)
+        if np.all(hi >= lo):
+            out[q] = (lo, hi)
+    return out
 
 
-def principal_frame_of(matrix):
-    from ..model.quadric import Quadric
-
-    return principal_frame(Quadric(matrix))
-
-
-def literal_groups(dnf: Dnf) -> dict:
-    """(quadric, sign) -> the terms holding that literal, in term order."""
-    groups: dict = {}
-    for a, term in enumerate(dnf.terms):
-        for lit in term:
-            groups.setdefault(lit, []).append(a)
-    return groups
-
-
-def root_tasks(dnf: Dnf, packed: PackedScene, frames: list):
-    """One task per (literal group, plane, sheet), its root cell, and the group-literal table.
-
-    A literal shared by several terms is sampled once for all of them (see
-    ``kernels/sampler.cl:csg_distance``); its root cell covers the union of their bounds.
-    """
-    offsets = np.concatenate([[0], np.cumsum([len(t) for t in dnf.terms])]).astype(int)
-    tasks, cells, glits, task_terms = [], [], [], []
-    lo_all = packed.terms["lo"].astype(np.float64)
-    hi_all = packed.terms["hi"].astype(np.float64)
-    scale = float(np.abs(np.concatenate([lo_all.ravel(), hi_all.ravel()])).max(initial=1.0))
-    for (qi, s), members in literal_groups(dnf).items():
-        first = len(glits)
-        for a in members:
-            others = [(a, offsets[a] + j) for j, (q2, _) in enumerate(dnf.terms[a]) if q2 != qi]
-            glits.extend(others or [(a, -1)])  # -1: the term is the literal alone
-        lo = lo_all[members].min(0)
-        hi = hi_all[members].max(0)
-        # other terms whose bound misses the group's: out of the queries, their distance to
-        # the group's bound stands in (a lower bound for every point of the group's patches)
-        gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo_all - hi, lo - hi_all)), axis=1)
-        near = gap <= 1e-9 * scale
-        near[members] = False
-        far = ~near
-        far[members] = False
-        far_other = float(gap[far].min()) if far.any() else np.inf
-        terms_first = len(task_terms)
-        task_terms.extend(~np.int64(a) for a in members)
-        task_terms.extend(np.flatnonzero(near).tolist())
-        terms_count = len(task_terms) - terms_first
+def root_tasks(tape, packed, frames):
+    """One task per (quadric, plane, sheet) and its root cell (holding the root tape)."""
+    tasks, cells = [], []
+    scale = float(np.abs(tape.bound).max(initial=1.0))
+    for q, (lo, hi) in quadric_boxes(tape).items():
+        lo, hi = lo - packed.origin, hi - packed.origin
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        f = frames[qi]
+        f = frames[q]
         z = (corners - f.center) @ f.U
-        # pad by a relative epsilon: surface points on the bound's faces (a box face is the
+        # pad by a relative epsilon: surface points on the box's faces (a box face is the
         # bound) must not be lost to rounding in the local coordinates
-        pad = 1e-7 * (np.abs(z).max() + np.abs(hi - lo).max())
+        pad = 1e-7 * (np.abs(z).max() + np.abs(hi - lo).max()) + 1e-12 * scale
         zlo, zhi = z.min(0) - pad, z.max(0) + pad
         for k in range(3):
             if f.lam[k] != 0.0:
@@ -191,24 +132,21 @@ def root_tasks(dnf: Dnf, packed: PackedScene, frames: list):
                 continue  # a cylinder along u_k: plane k owns no point
             i, j = [m for m in range(3) if m != k]
             for sheet in sheets:
-                tasks.append((first, len(glits) - first, terms_first, terms_count, qi, s, k, sheet,
-                              far_other, zlo, zhi))
-                cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0))
+                tasks.append((q, k, sheet, 0, zlo, zhi))
+                cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0, 0, len(tape.ops)))
     t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
     for n, row in enumerate(tasks):
         t[n] = row
     c = np.array(cells, dtype=cell_dtype(packed.real)) if cells else np.zeros(0, cell_dtype(packed.real))
-    g = np.array(glits, dtype=GROUP_LITERAL_DTYPE) if glits else np.zeros(1, GROUP_LITERAL_DTYPE)
-    tt = np.array(task_terms, dtype=np.int32) if task_terms else np.zeros(1, np.int32)
-    return t, c, g, tt
+    return t, c
 
 
-def estimate_samples(dnf: Dnf, radius: float) -> int:
-    """Rough sample count: surface area of the term boxes over the area of a splat."""
-    if not dnf.n_terms:
-        return 0
-    ext = dnf.term_bounds[:, 1] - dnf.term_bounds[:, 0]
-    area = 2 * (ext[:, 0] * ext[:, 1] + ext[:, 1] * ext[:, 2] + ext[:, 0] * ext[:, 2]).sum()
+def estimate_samples(tape, radius: float) -> int:
+    """Rough sample count for the first buffer sizes: box areas of the sampled quadrics."""
+    area = 0.0
+    for lo, hi in quadric_boxes(tape).values():
+        e = hi - lo
+        area += 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2])
     return int(area / (math.pi * radius * radius)) + 1
 
 
@@ -237,24 +175,27 @@ def sample(
     radius: float,
     device=None,
     *,
+    normal_form: str = "tree",
     floor: float | None = None,
     term_limit: int | None = None,
     bound=None,
     distortion: bool = True,
-    capacity: tuple[int, int] | None = None,
+    capacity: tuple | None = None,
     progress: bool | None = None,
-    max_levels: int = 200,
+    max_levels: int = 400,
     max_samples: float | None = None,
     max_memory: float | None = None,
 ) -> Samples:
     """Samples on the CSG surface of ``scene`` with the coverage guarantee for ``radius``.
 
     ``scene``: a Shape, Scene or scene file path.  ``device``: None (default selection),
-    'cpu', 'gpu', 'P:D' or a context from :func:`clcsg.host.device.get_context`.  ``floor``:
-    size below which unresolved cells are dropped (default radius / 10).  ``distortion``:
-    use the interval distortion bound (True) or the worst case max(sqrt 3, bound) (False).
-    ``capacity``: initial (cells, samples) buffer sizes (tests force tiny ones).
-    ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.host.guard`;
+    'cpu', 'gpu', 'P:D' or a context from :func:`clcsg.cl.device.get_context`.
+    ``normal_form``: ``"tree"`` (the CSG tape, default) or ``"dnf"`` (the paper's disjunctive
+    normal form as an OR of ANDs, with its term limit ``term_limit``).  ``floor``: size below
+    which unresolved cells are dropped (default radius / 10).  ``distortion``: use the interval
+    distortion bound (True) or the worst case max(sqrt 3, bound) (False).  ``capacity``: initial
+    (cells, samples[, arena[, clip]]) buffer sizes (tests force tiny ones).
+    ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.sampling.guard`;
     None: 50 million samples / 80% of the device's global memory); past them
     :class:`~clcsg.errors.LimitError` is raised before anything is allocated.
     """
@@ -270,48 +211,58 @@ def sample(
     timings = {}
     t0 = time.perf_counter()
     sc = as_scene(scene, bound)
-    dnf = sc.normalize(term_limit)
-    timings["normalize_s"] = time.perf_counter() - t0
+    tape = sc.compile(normal_form, term_limit)
+    timings["compile_s"] = time.perf_counter() - t0
 
     ctx = scene_context(device)
-    real = _device.real_dtype(ctx)
-    from .guard import check as _guard  # resource guard: LimitError before any allocation
+    real = np.dtype(_device.real_dtype(ctx))
+    from . import guard
 
-    _guard(dnf, radius, ctx.info, max_samples=max_samples, max_memory=max_memory, source=sc.source,
-           real_itemsize=np.dtype(real).itemsize)
+    if hasattr(guard, "check_tape"):  # TODO(wire): after the guard takes tapes
+        guard.check_tape(tape, radius, ctx.info, max_samples=max_samples, max_memory=max_memory, source=sc.source,
+                         real_itemsize=real.itemsize)
     t1 = time.perf_counter()
-    packed = pack(dnf, real)
-    frames_rec, frames = analyse(packed)
-    tasks, roots, glits, task_terms = root_tasks(dnf, packed, frames)
+    packed = pack(tape, real)
+    frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
+    frames_rec = frame_records(frames, real)
+    tasks, roots = root_tasks(tape, packed, frames)
     timings["analyse_s"] = time.perf_counter() - t1
-    stats = {"radius": radius, "floor": floor, "tasks": len(tasks), **{f"dnf_{k}": v for k, v in dnf.stats.items()}}
-    if len(roots) == 0:
-        warnings.warn(f"{sc.source}: the solid has no surface; no samples", stacklevel=2)
-        return _empty(radius, dnf, packed, stats)
+    stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
+             **{f"tape_{k}": v for k, v in tape.stats.items()}}
+    if len(roots) == 0 or tape.empty:
+        warnings.warn(f"{sc.source}: the solid is empty; no samples", stacklevel=2)
+        return _empty(radius, tape, packed, stats)
 
-    mask_words = max(1, (int(tasks["group_count"].max(initial=1)) + 31) // 32)
-    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "MASK_WORDS": mask_words}
+    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
-    raw, raw_buf, level_stats, totals = _subdivide(ctx, prg, packed, frames_rec, tasks, task_terms, roots, radius, floor,
-                                          capacity, estimate_samples(dnf, radius), progress, max_levels)
+    scene_buf = SceneBuffers(ctx, packed)
+    sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity,
+                       estimate_samples(tape, radius), progress, max_levels)
+    sub.run()
     t2 = time.perf_counter()
     timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
-    normals, terms, masks = _finish(ctx, prg, packed, frames_rec, tasks, glits, raw_buf, len(raw), mask_words)
-    samples = _assemble(raw, normals, terms, masks, tasks, glits, dnf, packed, radius)
-    if len(samples) == 0:
-        warnings.warn(f"{sc.source}: the solid has no surface; no samples", stacklevel=2)
+    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
+    samples = _finish(ctx, fin, scene_buf, frames_rec, tasks, sub, tape, packed, radius, capacity)
     timings["finish_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
-    stats.update(totals)
+    if len(samples) == 0:
+        warnings.warn(f"{sc.source}: the solid has no surface at radius {radius:.6g}; no samples", stacklevel=2)
+    stats.update(sub.totals)
     stats.update(
-        samples=len(samples.positions),
-        clip_indices=int(len(samples.clip_literals)),
-        levels=len(level_stats),
-        cells_per_level=[ls["cells"] for ls in level_stats],
+        samples=len(samples),
+        clip_rows=int(len(samples.clip_ops)),
+        clipped_samples=int((samples.clip_count > 0).sum()),
+        levels=len(sub.levels),
+        cells_per_level=[lv["cells"] for lv in sub.levels],
+        tape_mean_per_level=[lv["tape_mean"] for lv in sub.levels],
+        tape_max_per_level=[lv["tape_max"] for lv in sub.levels],
+        leaf_distances_per_query=(sub.totals["leaf_distances"] / sub.totals["distance_queries"]
+                                  if sub.totals["distance_queries"] else 0.0),
         device=ctx.info.name,
         compute_units=ctx.info.compute_units,
         **timings,
     )
+    stats.update(samples.stats)
     samples.stats = stats
     return samples
 
@@ -322,181 +273,218 @@ def scene_context(device):
     return _device.get_context(device)
 
 
-def _empty(radius, dnf, packed, stats) -> Samples:
-    z3 = np.zeros((0, 3))
-    zi = np.zeros(0, dtype=np.int32)
-    stats.update({k: 0 for k in COUNTERS if k != "cells"})
-    stats.update(samples=0, clip_indices=0, levels=0, cells_per_level=[], total_s=0.0)
-    return Samples(z3, z3.copy(), np.zeros(0), zi, zi.copy(), zi.copy(), zi.copy(), zi.copy(),
-                   np.zeros((0, 2), dtype=np.int32), radius, dnf, packed, stats)
-
-
-def _subdivide(ctx, prg, packed, frames_rec, tasks, task_terms, roots, radius, floor, capacity, estimate, progress,
-               max_levels):
-    import pyopencl as cl
-
-    mf = cl.mem_flags
-    queue = ctx.queue
-    real = packed.real
-    scene = SceneBuffers(ctx, packed)
-    frames_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=frames_rec)
-    tasks_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=tasks)
-    task_terms_buf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=task_terms)
-    cdt = cell_dtype(real)
-    sdt = raw_sample_dtype(real)
-    if capacity is None:
-        cap_cells = max(4 * len(roots), 4096)
-        cap_samples = max(2 * estimate, 4096)
-    else:
-        cap_cells, cap_samples = (max(2, int(c)) for c in capacity)
-    cells_in = cl.Buffer(ctx.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=roots)
-    n_in = len(roots)
-    cells_out = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_cells * cdt.itemsize)
-    samples_buf = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_samples * sdt.itemsize)
-    counters = np.zeros(len(COUNTERS), dtype=np.uint32)
-    counters_buf = cl.Buffer(ctx.ctx, mf.READ_WRITE, counters.nbytes)
-    totals = {k: 0 for k in COUNTERS if k != "cells"}
-    n_samples = 0
-    levels = []
-    prog = _Progress(progress)
-    kernel = cl.Kernel(prg, "classify")
-    level = 0
-    grown = {"cells": 0, "samples": 0}
-    while n_in > 0:
-        if level >= max_levels:
-            raise RuntimeError(f"sampler did not finish in {max_levels} levels ({n_in} cells left)")
-        while True:
-            counters[:] = 0
-            counters[1] = n_samples
-            cl.enqueue_copy(queue, counters_buf, counters)
-            kernel(queue, launch_size(n_in), (WORK_GROUP,),
-                   scene.quadrics, scene.literals, scene.terms, task_terms_buf,
-                   frames_buf, tasks_buf, cells_in, np.int32(n_in), cells_out, np.int32(cap_cells),
-                   samples_buf, np.int32(cap_samples), counters_buf,
-                   real.type(radius), real.type(floor))
-            cl.enqueue_copy(queue, counters, counters_buf)
-            n_cells_out, n_samples_out = int(counters[0]), int(counters[1])
-            ok = True
-            if n_cells_out > cap_cells:
-                cap_cells = _grow(cap_cells, n_cells_out)
-                cells_out = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_cells * cdt.itemsize)
-                grown["cells"] += 1
-                ok = False
-            if n_samples_out > cap_samples:
-                new_cap = _grow(cap_samples, n_samples_out)
-                bigger = cl.Buffer(ctx.ctx, mf.READ_WRITE, new_cap * sdt.itemsize)
-                if n_samples:
-                    cl.enqueue_copy(queue, bigger, samples_buf, byte_count=n_samples * sdt.itemsize)
-                samples_buf, cap_samples = bigger, new_cap
-                grown["samples"] += 1
-                ok = False
-            if ok:
-                break
-        for k, name in enumerate(COUNTERS):
-            if name not in ("cells", "samples"):
-                totals[name] += int(counters[k])
-        levels.append({"cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples})
-        n_samples = n_samples_out
-        prog.level(level, n_in, n_samples)
-        cells_in, cells_out = cells_out, cells_in
-        # the old input buffer becomes the next output: make sure it is large enough
-        if cap_cells * cdt.itemsize > cells_out.size:
-            cells_out = cl.Buffer(ctx.ctx, mf.READ_WRITE, cap_cells * cdt.itemsize)
-        n_in = n_cells_out
-        level += 1
-    prog.done()
-    raw = np.zeros(n_samples, dtype=sdt)
-    if n_samples:
-        cl.enqueue_copy(queue, raw, samples_buf)
-    totals["buffer_growths"] = grown
-    return raw, samples_buf, levels, totals
+def _empty(radius, tape, packed, stats) -> Samples:
+    stats.update({k: 0 for k in _SUMMED})
+    stats.update(samples=0, clip_rows=0, clipped_samples=0, levels=0, cells_per_level=[], total_s=0.0)
+    return Samples.empty(radius, tape, packed, stats)
 
 
 def _grow(cap, needed):
     return int(max(2 * cap, needed + needed // 2))
 
 
-def _finish(ctx, prg, packed, frames_rec, tasks, glits, raw_buf, n, mask_words):
-    """Normals, terms and clip masks, computed on the device from the samples still there."""
+def check_allocation(ctx, nbytes: int, what: str) -> None:
+    """Refuse a buffer the device cannot allocate, with the guard's error (never a driver
+    error): its max_mem_alloc_size and global memory."""
+    info = ctx.info
+    if nbytes > info.max_mem_alloc or nbytes > info.global_mem:
+        raise LimitError(
+            f"the sampler needs a {what} buffer of {nbytes / 2**20:.1f} MiB, more than {info.describe()} can "
+            f"allocate ({info.max_mem_alloc / 2**20:.0f} MiB per buffer); use a larger radius"
+        )
+
+
+class _Subdivision:
+    """The level loop: buffers, the overflow protocol, per-level statistics."""
+
+    def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
+                 max_levels):
+        self.ctx, self.prg, self.scene = ctx, prg, scene
+        self.real = np.dtype(scene.packed.real)
+        self.radius, self.floor = radius, floor
+        self.max_levels = max_levels
+        self.frames = upload(ctx, frames_rec)
+        self.tasks = upload(ctx, tasks)
+        self.roots = roots
+        self.cdt = cell_dtype(self.real)
+        self.sdt = raw_sample_dtype(self.real)
+        tape = scene.packed.tape
+        cap = tuple(capacity or ())
+        self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(4 * len(roots), 4096)
+        self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(2 * estimate, 4096)
+        self.cap_arena = max(len(tape) + 2, int(cap[2])) if len(cap) > 2 else max(64 * len(tape), 1 << 16)
+        self.progress = _Progress(progress)
+        self.levels = []
+        self.totals = {k: 0 for k in _SUMMED}
+        self.grown = {"cells": 0, "samples": 0, "arena": 0}
+
+    def _buffer(self, nbytes, what):
+        import pyopencl as cl
+
+        check_allocation(self.ctx, nbytes, what)
+        return cl.Buffer(self.ctx.ctx, cl.mem_flags.READ_WRITE, max(int(nbytes), 16))
+
+    def _grown_copy(self, old, used_bytes, new_bytes, what):
+        import pyopencl as cl
+
+        new = self._buffer(new_bytes, what)
+        if used_bytes:
+            cl.enqueue_copy(self.ctx.queue, new, old, byte_count=used_bytes)
+        return new
+
+    def run(self):
+        import pyopencl as cl
+
+        queue = self.ctx.queue
+        tape = self.scene.packed.tape
+        self.arena = self._buffer(self.cap_arena * tape.itemsize, "tape arena")
+        cl.enqueue_copy(queue, self.arena, tape)
+        arena_used = len(tape)
+        cells_in = upload(self.ctx, self.roots, writable=True)
+        n_in = len(self.roots)
+        cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+        self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
+        counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
+        counters_buf = self._buffer(counters.nbytes, "counter")
+        kernel = cl.Kernel(self.prg, "classify")
+        n_samples = 0
+        level = 0
+        while n_in > 0:
+            if level >= self.max_levels:
+                raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
+            while True:
+                counters[:] = 0
+                counters[_SLOT["samples"]] = n_samples
+                counters[_SLOT["arena"]] = arena_used
+                cl.enqueue_copy(queue, counters_buf, counters)
+                kernel(queue, launch_size(n_in), (WORK_GROUP,),
+                       self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
+                       cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
+                       self.arena, np.uint32(self.cap_arena), counters_buf,
+                       self.real.type(self.radius), self.real.type(self.floor))
+                cl.enqueue_copy(queue, counters, counters_buf)
+                n_cells_out = int(counters[_SLOT["cells"]])
+                n_samples_out = int(counters[_SLOT["samples"]])
+                arena_out = int(counters[_SLOT["arena"]])
+                ok = True
+                if n_cells_out > self.cap_cells:
+                    self.cap_cells = _grow(self.cap_cells, n_cells_out)
+                    cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+                    self.grown["cells"] += 1
+                    ok = False
+                if n_samples_out > self.cap_samples:
+                    new_cap = _grow(self.cap_samples, n_samples_out)
+                    self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
+                                                    new_cap * self.sdt.itemsize, "sample")
+                    self.cap_samples = new_cap
+                    self.grown["samples"] += 1
+                    ok = False
+                if arena_out > self.cap_arena:
+                    new_cap = _grow(self.cap_arena, arena_out)
+                    self.arena = self._grown_copy(self.arena, arena_used * tape.itemsize,
+                                                  new_cap * tape.itemsize, "tape arena")
+                    self.cap_arena = new_cap
+                    self.grown["arena"] += 1
+                    ok = False
+                if ok:
+                    break
+            for name in _SUMMED:
+                self.totals[name] += int(counters[_SLOT[name]])
+            self.levels.append({
+                "cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples,
+                "tape_mean": int(counters[_SLOT["tape_rows"]]) / n_in, "tape_max": int(counters[_SLOT["tape_max"]]),
+            })
+            n_samples = n_samples_out
+            arena_used = arena_out
+            self.progress.level(level, n_in, n_samples)
+            cells_in, cells_out = cells_out, cells_in
+            # the old input buffer becomes the next output: make sure it is large enough
+            if self.cap_cells * self.cdt.itemsize > cells_out.size:
+                cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+            n_in = n_cells_out
+            level += 1
+        self.progress.done()
+        self.n_samples = n_samples
+        self.arena_used = arena_used
+        self.raw = np.zeros(n_samples, dtype=self.sdt)
+        if n_samples:
+            cl.enqueue_copy(queue, self.raw, self.samples)
+        self.totals["buffer_growths"] = dict(self.grown)
+        self.totals["arena_rows"] = arena_used
+
+
+def _finish(ctx, prg, scene, frames_rec, tasks, sub, tape, packed, radius, capacity) -> Samples:
+    """Clip programs, signs, normals and primitives on the device; clip programs deduplicated."""
     import pyopencl as cl
 
-    mf = cl.mem_flags
-    real = packed.real
-    normals = np.zeros((n, 3), dtype=real)
-    terms = np.zeros(n, dtype=np.int32)
-    masks = np.zeros((n, mask_words + 1), dtype=np.uint32)
+    n = sub.n_samples
+    real = np.dtype(packed.real)
     if n == 0:
-        return normals, terms, masks
-    scene = SceneBuffers(ctx, packed)
-
-    def up(a):
-        return cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
-
-    nb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, normals.nbytes)
-    tb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, terms.nbytes)
-    mb = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, masks.nbytes)
-    cl.Kernel(prg, "finish")(ctx.queue, launch_size(n), (WORK_GROUP,), scene.quadrics, scene.literals,
-                             scene.terms, up(frames_rec), up(tasks), up(glits), raw_buf, np.int32(n),
-                             nb, tb, mb)
-    cl.enqueue_copy(ctx.queue, normals, nb)
-    cl.enqueue_copy(ctx.queue, terms, tb)
-    cl.enqueue_copy(ctx.queue, masks, mb)
-    return normals, terms, masks
-
-
-#: separates the terms of a clip set in the clip buffer (a splat fragment is kept if all
-#: literals of some block hold)
-CLIP_SEPARATOR = (-1, 0)
-
-
-def _assemble(raw, normals, terms, masks, tasks, glits, dnf, packed, radius) -> Samples:
-    """Host arrays in world coordinates; clip sets deduplicated (sort, then unique).
-
-    A clip set is a list of blocks, one per group term that neither holds nor fails over the
-    whole splat ball, separated by ``CLIP_SEPARATOR``; empty when some group term holds over
-    the whole ball.  Most samples have an empty clip set; only the others are sorted."""
-    tid = raw["task"]
-    n = len(raw)
-    clip_first = np.zeros(n, dtype=np.int32)
-    clip_count = np.zeros(n, dtype=np.int32)
-    clip = []
-    some = np.flatnonzero((masks[:, 0] == 0) & masks[:, 1:].any(axis=1))
-    if len(some):
-        gfirst = tasks["group_first"][tid[some]].astype(np.int64)
-        key = np.column_stack([gfirst, masks[some, 1:].astype(np.int64)])
-        uniq, inverse = np.unique(key, axis=0, return_inverse=True)
-        inverse = np.asarray(inverse).reshape(-1)
-        firsts = np.zeros(len(uniq), dtype=np.int32)
-        counts = np.zeros(len(uniq), dtype=np.int32)
-        for u, row in enumerate(uniq):
-            g0 = int(row[0])
-            words = row[1:]
-            blocks: dict = {}
-            for j in range(32 * len(words)):
-                if (int(words[j // 32]) >> (j % 32)) & 1:
-                    term, lit = glits[g0 + j]
-                    blocks.setdefault(int(term), []).append(tuple(packed.literals[lit][["quadric", "sign"]].tolist()))
-            sel = []
-            for b, lits in enumerate(blocks.values()):
-                if b:
-                    sel.append(CLIP_SEPARATOR)
-                sel.extend(lits)
-            firsts[u] = len(clip)
-            counts[u] = len(sel)
-            clip.extend(sel)
-        clip_first[some] = firsts[inverse]
-        clip_count[some] = counts[inverse]
+        return Samples.empty(radius, tape, packed, {})
+    q = ctx.queue
+    normals = np.zeros((n, 3), dtype=real)
+    ints = {k: np.zeros(n, dtype=np.int32) for k in ("signs", "primitives", "clip_first", "clip_count")}
+    bufs = {k: sub._buffer(a.nbytes, "sample output") for k, a in ints.items()}
+    nb = sub._buffer(normals.nbytes, "normal")
+    cap = tuple(capacity or ())
+    rows = scene.packed.tape.itemsize
+    cap_clip = max(2 * len(packed.tape), int(cap[3])) if len(cap) > 3 else max(n, 1 << 14)
+    counters = np.zeros(2, dtype=np.uint32)
+    counters_buf = sub._buffer(counters.nbytes, "counter")
+    kernel = cl.Kernel(prg, "finish")
+    grown = 0
+    while True:
+        clip_buf = sub._buffer(cap_clip * rows, "clip")
+        counters[:] = 0
+        cl.enqueue_copy(q, counters_buf, counters)
+        kernel(q, launch_size(n), (WORK_GROUP,), scene.quadrics, upload(ctx, frames_rec), upload(ctx, tasks),
+               sub.samples, np.int32(n), sub.arena, clip_buf, np.uint32(cap_clip), counters_buf,
+               *scene.colour_args(), nb, bufs["signs"], bufs["primitives"], bufs["clip_first"], bufs["clip_count"])
+        cl.enqueue_copy(q, counters, counters_buf)
+        if int(counters[0]) <= cap_clip:
+            break
+        cap_clip = _grow(cap_clip, int(counters[0]))
+        grown += 1
+    cl.enqueue_copy(q, normals, nb)
+    for k, a in ints.items():
+        cl.enqueue_copy(q, a, bufs[k])
+    used = int(counters[0])
+    clip = np.zeros(used, dtype=packed.tape.dtype)
+    if used:
+        cl.enqueue_copy(q, clip, clip_buf)
+    clip_ops = np.asarray(clip.view(np.int32).reshape(-1, 4))
+    first, count, ops = dedupe_programs(clip_ops, ints["clip_first"], ints["clip_count"])
+    raw = sub.raw
     return Samples(
         positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
         normals=np.asarray(normals, dtype=np.float64),
         radii=np.array(raw["radius"], dtype=np.float64),
-        quadrics=tasks["quadric"][tid],
-        signs=tasks["sign"][tid],
-        terms=terms,
-        clip_first=clip_first,
-        clip_count=clip_count,
-        clip_literals=np.array(clip, dtype=np.int32).reshape(-1, 2),
+        quadrics=tasks["quadric"][raw["task"]].astype(np.int32),
+        signs=ints["signs"],
+        primitives=ints["primitives"],
+        clip_first=first,
+        clip_count=count,
+        clip_ops=ops,
         radius=radius,
-        dnf=dnf,
+        tape=tape,
         packed=packed,
+        stats={"finish_prune_evaluations": int(counters[1]), "clip_buffer_growths": grown},
     )
+
+
+def dedupe_programs(rows, first, count):
+    """Equal clip programs stored once: (first, count, rows) over a compact row buffer."""
+    first = first.copy()
+    count = count.copy()
+    out = [np.zeros((0, 4), dtype=np.int32)]
+    used = 0
+    for c in np.unique(count[count > 0]):
+        sel = np.flatnonzero(count == c)
+        idx = first[sel, None] + np.arange(c)[None, :]
+        progs = rows[idx].reshape(len(sel), 4 * c)
+        uniq, inverse = np.unique(progs, axis=0, return_inverse=True)
+        out.append(uniq.reshape(-1, 4))
+        first[sel] = used + c * np.asarray(inverse).reshape(-1)
+        used += len(uniq) * c
+    first[count == 0] = 0
+    return first.astype(np.int32), count.astype(np.int32), np.concatenate(out).astype(np.int32)

@@ -1,30 +1,27 @@
-"""Surface samples: numpy arrays on the host, device buffers for the renderer, PLY output."""
+"""Surface samples: numpy arrays on the host and their device buffers for the renderer."""
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import UsageError
-from ..cl.records import LITERAL_DTYPE, PackedScene, SceneBuffers, sample_dtype
-from ..compile.dnf import Dnf
+from ..cl.records import PackedScene, SceneBuffers, pack, sample_dtype, tape_rows, upload
 
 
 @dataclass
 class Samples:
     """Samples on the CSG surface (world coordinates, float64).
 
-    Every sample lies on quadric ``quadrics[i]`` of the DNF; ``signs[i]`` is the polarity of
-    its literal (the solid's outward normal is ``signs[i] * grad Q``, given in ``normals``);
-    ``terms[i]`` is the DNF term it lies deepest in (a literal shared by several terms is
-    sampled once for all of them); its clip set is
-    ``clip_literals[clip_first[i] : clip_first[i] + clip_count[i]]``: rows of quadric index and
-    sign, in blocks separated by a row (-1, 0); a fragment of its splat is kept if every
-    literal of some block holds (empty: always kept).  Sets are deduplicated across samples.  Guarantee: every point of the CSG surface has a
-    sample on the same quadric within ``radius`` (the sampler's radius; ``radii`` may be
-    smaller where a small cell allowed it).
+    Every sample lies on quadric ``quadrics[i]`` of ``tape.quadrics``; ``signs[i]`` is the side
+    the solid is on there (+1: the negative side, so the outward normal ``normals[i]`` is
+    ``+grad Q / |grad Q|``); ``primitives[i]`` is the primitive instance (``tape.instances``, in
+    tree order) whose own boundary holds it, the first one where several do; its colour is that
+    instance's.  Its clip program is ``clip_ops[clip_first[i] : clip_first[i] + clip_count[i]]``
+    (tape rows; empty: no clipping): a fragment of its splat on the quadric is kept iff the
+    program's membership differs between the quadric's two sides.  Equal programs are stored
+    once.  Guarantee: every point of the CSG surface has a sample on the same quadric within
+    ``radius`` (the sampler's radius; ``radii`` may be smaller where a small cell allowed it).
     """
 
     positions: np.ndarray
@@ -32,12 +29,12 @@ class Samples:
     radii: np.ndarray
     quadrics: np.ndarray
     signs: np.ndarray
-    terms: np.ndarray
+    primitives: np.ndarray
     clip_first: np.ndarray
     clip_count: np.ndarray
-    clip_literals: np.ndarray
+    clip_ops: np.ndarray
     radius: float
-    dnf: Dnf
+    tape: object
     packed: PackedScene
     stats: dict = field(default_factory=dict)
     _device: dict = field(default_factory=dict, repr=False)
@@ -45,87 +42,53 @@ class Samples:
     def __len__(self) -> int:
         return len(self.positions)
 
+    @classmethod
+    def empty(cls, radius, tape, packed, stats) -> "Samples":
+        z3 = np.zeros((0, 3))
+        zi = np.zeros(0, dtype=np.int32)
+        return cls(z3, z3.copy(), np.zeros(0), zi, zi.copy(), zi.copy(), zi.copy(), zi.copy(),
+                   np.zeros((0, 4), dtype=np.int32), radius, tape, packed, stats)
+
+    @property
+    def colors(self) -> np.ndarray:
+        """(N, 4) float32 RGBA of each sample's primitive."""
+        table = np.array([inst.color for inst in self.tape.instances], dtype=np.float32).reshape(-1, 4)
+        if not len(self):
+            return np.zeros((0, 4), dtype=np.float32)
+        return table[np.maximum(self.primitives, 0)]
+
+    @property
+    def bound(self) -> np.ndarray:
+        return self.tape.bound
+
     # -- device side --------------------------------------------------------------------------
-    def records(self) -> np.ndarray:
+    def records(self, real=None) -> np.ndarray:
         """The samples as ``sample_rec`` structs in device coordinates."""
-        rec = np.zeros(len(self), dtype=sample_dtype(self.packed.real))
+        rec = np.zeros(len(self), dtype=sample_dtype(self.packed.real if real is None else real))
         rec["pos"] = self.positions - self.packed.origin
         rec["normal"] = self.normals
         rec["radius"] = self.radii
         rec["quadric"] = self.quadrics
         rec["sign"] = self.signs
-        rec["term"] = self.terms
+        rec["primitive"] = self.primitives
         rec["clip_first"] = self.clip_first
         rec["clip_count"] = self.clip_count
         return rec
 
-    def device_buffers(self, context):
-        """(SceneBuffers, sample buffer, clip buffer) on ``context``, uploaded once."""
-        key = id(context.ctx)
+    def device_buffers(self, context, real=None):
+        """(SceneBuffers, sample buffer, clip buffer) on ``context`` in precision ``real``,
+        uploaded once."""
+        real = np.dtype(self.packed.real if real is None else real)
+        key = (id(context.ctx), real.str)
         if key not in self._device:
-            import pyopencl as cl
-
-            mf = cl.mem_flags
-            rec = self.records()
-            clip = np.zeros(len(self.clip_literals), dtype=LITERAL_DTYPE)
-            if len(clip):
-                clip["quadric"] = self.clip_literals[:, 0]
-                clip["sign"] = self.clip_literals[:, 1]
-
-            def up(a):
-                data = a if a.size else np.zeros(1, dtype=a.dtype)
-                return cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=data)
-
-            self._device[key] = (SceneBuffers(context, self.packed), up(rec), up(clip))
+            packed = self.packed if real == np.dtype(self.packed.real) else pack(self.tape, real, self.packed.origin)
+            self._device[key] = (SceneBuffers(context, packed), upload(context, self.records(real)),
+                                 upload(context, tape_rows(self.clip_ops)))
         return self._device[key]
 
     # -- output -------------------------------------------------------------------------------
-    def to_ply(self, path) -> None:
-        """Binary little-endian PLY: x y z nx ny nz (float32), quadric (int32), radius (float32)."""
-        n = len(self)
-        rec = np.zeros(
-            n,
-            dtype=[
-                ("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
-                ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
-                ("quadric", "<i4"), ("radius", "<f4"),
-            ],
-        )
-        for k, name in enumerate("xyz"):
-            rec[name] = self.positions[:, k]
-            rec["n" + name] = self.normals[:, k]
-        rec["quadric"] = self.quadrics
-        rec["radius"] = self.radii
-        header = (
-            "ply\nformat binary_little_endian 1.0\ncomment generated by clcsg\n"
-            f"element vertex {n}\n"
-            "property float x\nproperty float y\nproperty float z\n"
-            "property float nx\nproperty float ny\nproperty float nz\n"
-            "property int quadric\nproperty float radius\nend_header\n"
-        )
-        try:
-            with open(os.fspath(path), "wb") as f:
-                f.write(header.encode("ascii"))
-                f.write(rec.tobytes())
-        except OSError as e:
-            raise UsageError(f"{os.fspath(path)}: cannot write PLY: {e.strerror or e}") from None
+    def to_ply(self, path, float32: bool = False) -> None:
+        """Binary PLY (Open3D, MeshLab, plyfile read it); see :func:`clcsg.io.ply.write_samples`."""
+        from ..io.ply import write_samples
 
-
-def read_ply(path) -> dict:
-    """Read a PLY written by :meth:`Samples.to_ply` back into arrays (for tests and tools)."""
-    with open(os.fspath(path), "rb") as f:
-        data = f.read()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    n = int(next(line.split()[2] for line in header if line.startswith("element vertex")))
-    dt = np.dtype([
-        ("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
-        ("quadric", "<i4"), ("radius", "<f4"),
-    ])
-    rec = np.frombuffer(data[end:], dtype=dt, count=n)
-    return {
-        "positions": np.column_stack([rec["x"], rec["y"], rec["z"]]),
-        "normals": np.column_stack([rec["nx"], rec["ny"], rec["nz"]]),
-        "quadrics": rec["quadric"].copy(),
-        "radii": rec["radius"].copy(),
-    }
+        write_samples(self, path, float32=float32)

@@ -1,95 +1,11 @@
-"""Rendering entry points: the exact ray tracer and the splat renderer (paper section 6).
-
-    img = clcsg.raytrace(shape, camera)              # exact global CSG ray tracing
-    img = clcsg.render(clcsg.sample(shape, r), camera)   # splats with local ray tracing + clipping
-    img.save("out.png"); img.depth; img.ids; img.stats
-
-Both return a :class:`~clcsg.image.Image` and shade with the same code (kernels/shade.h), so
-for the same hit they produce the same pixel.
-"""
+"""``clcsg render``: sample and splat-render a scene (or ray trace it) to an image."""
 
 from __future__ import annotations
 
-from .camera import Camera
 from ..errors import UsageError
-from .image import Image
-
-
-def as_dnf(obj):
-    """A :class:`~clcsg.host.dnf.Dnf` from a Dnf, Samples, Scene, Shape or scene file path."""
-    from ..compile.dnf import Dnf
-    from ..model.scene import as_scene
-
-    if isinstance(obj, Dnf):
-        return obj
-    dnf = getattr(obj, "dnf", None)
-    if isinstance(dnf, Dnf):
-        return dnf
-    return as_scene(obj).normalize()
-
-
-def _camera(camera, bound) -> Camera:
-    if camera is None:
-        return Camera.fit(bound)
-    if not isinstance(camera, Camera):
-        raise UsageError(f"camera must be a clcsg.camera.Camera, got {type(camera).__name__}")
-    return camera
-
-
-def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 1.0, 1.0),
-             precision: str = "auto", **shading) -> Image:
-    """Exact global ray tracing of a CSG scene (reference renderer).
-
-    ``scene``: a Shape, Scene, scene file path, Dnf or Samples (its scene is traced).
-    ``camera``: a :class:`~clcsg.camera.Camera` (default: :meth:`Camera.fit` to the scene
-    bound at 640x480).  ``device``: None (default device), a spec string (``"cpu"``, ``"0:1"``)
-    or a Context.  ``background``: RGBA/RGB in [0, 1].  ``precision``: ``"auto"`` (double where
-    the device has fp64), ``"double"`` or ``"float"``.  Further keywords are
-    :class:`~clcsg.host.raytracer.Shading` options (ambient, diffuse, specular, shininess,
-    gamma, key).
-
-    Per pixel, per DNF term: all roots of the term's quadrics along the ray (eqs. 5, 6), the
-    first root at which every other literal of the term holds, the nearest over terms.
-    """
-    from .raytracer import Shading, context_of, trace
-
-    dnf = as_dnf(scene)
-    cam = _camera(camera, dnf.bound)
-    shade = Shading().with_options(background=background, **shading)
-    return trace(context_of(device), dnf, cam, shade, precision)
-
-
-def render(samples, camera: Camera | None = None, device=None, background=(1.0, 1.0, 1.0),
-           precision: str = "auto", surface_aligned: bool = True, backface_culling: bool = True,
-           stats: bool = True, **shading) -> Image:
-    """Pixel-perfect splat rendering of :class:`~clcsg.samples.Samples` (paper section 6).
-
-    Per sample, one work-item loops over the screen bound of its splat; per pixel it solves
-    the view ray against the sample's quadric near the sample (eqs. 5, 6), keeps the hit if it
-    lies within the sample's radius and inside every literal of its clip set, and depth-tests
-    it with a 64-bit ``atom_min``; a resolve pass recomputes the winning hit and shades it like
-    :func:`raytrace`.
-
-    ``surface_aligned``: bound each splat by a box aligned with its normal whose height comes
-    from the eigenvalue bound of the patch (paper section 6.1) instead of the whole ball.
-    ``backface_culling``: skip splats and fragments that face away from the eye (only valid
-    from outside; turned off automatically when the eye is inside the solid).  ``stats``:
-    count fragments, clip evaluations, ... with atomic counters (``Image.stats``; off is a
-    little faster).  Other arguments as in :func:`raytrace`.  Requires 64-bit atomics
-    (``cl_khr_int64_extended_atomics``), else :class:`~clcsg.errors.DeviceError`.
-    """
-    from .raytracer import Shading, context_of
-    from .splat import rasterize
-
-    if not hasattr(samples, "device_buffers"):
-        raise UsageError(f"render needs Samples (see clcsg.sample), got {type(samples).__name__}")
-    cam = _camera(camera, samples.dnf.bound)
-    shade = Shading().with_options(background=background, **shading)
-    return rasterize(context_of(device), samples, cam, shade, precision, surface_aligned,
-                     backface_culling, stats)
-
-
-# -- command line: `clcsg render` ------------------------------------------------------------------
+from ..rendering.camera import Camera
+from ..rendering.raytracer import raytrace
+from ..rendering.splat import render
 
 RENDER_DESCRIPTION = """
     Render a scene to PNG.  The default method samples the CSG surface (clcsg sample) and draws
@@ -132,7 +48,7 @@ def add_render_arguments(parser) -> None:
     p.add_argument("--no-surface-aligned", action="store_true",
                    help="splat bounds from the whole ball instead of the surface-aligned slab")
     p.add_argument("--no-backface-culling", action="store_true", help="do not cull back-facing splats")
-    from ..cli.app import positive_int
+    from .app import positive_int
 
     p.add_argument("--max-samples", metavar="N", type=positive_int, default=None,
                    help="splat method: stop with exit code 5 before sampling if the estimate passes N "
@@ -143,7 +59,7 @@ def add_render_arguments(parser) -> None:
 
 def add_render_parser(subparsers):
     """``add_<name>_parser`` for the dispatch table of clcsg/cli.py."""
-    from ..cli.app import add_subcommand
+    from .app import add_subcommand
 
     p = add_subcommand(subparsers, "render", help="render a scene to PNG (splats or exact ray tracing)",
                        description=RENDER_DESCRIPTION, epilog=RENDER_EPILOG)
@@ -167,7 +83,7 @@ def parse_size(text) -> tuple[int, int]:
 
 def parse_background(text) -> tuple[float, ...]:
     """``"R,G,B[,A]"``: components in [0, 1], or 0-255 if any is above 1."""
-    from ..cli.app import parse_floats
+    from .app import parse_floats
 
     parts = str(text).replace(",", " ").split()
     if len(parts) not in (3, 4):
@@ -182,7 +98,7 @@ def parse_background(text) -> tuple[float, ...]:
 
 def cli_camera(args, bound) -> Camera:
     """The camera of ``clcsg render``'s options: fitted to ``bound`` unless --eye/--target."""
-    from ..cli.app import parse_floats
+    from .app import parse_floats
 
     w, h = parse_size(args.size)
     (fov,) = parse_floats(args.fov, 1, "--fov")
@@ -208,7 +124,7 @@ def cli_render(args) -> int:
 
     import numpy as np
 
-    from ..cli.app import parse_floats
+    from .app import parse_floats
     from ..cl.device import get_context
     from ..model.scene import load
 
@@ -220,34 +136,35 @@ def cli_render(args) -> int:
         if radius <= 0:
             raise UsageError(f"--radius must be positive, got {args.radius}")
     scene = load(args.scene)
-    dnf = scene.normalize()
+    normal_form = getattr(args, "normal_form", "tree")
+    tape = scene.compile(normal_form)
     ctx = get_context(getattr(args, "device", None))
     stats = {}
-    if not dnf.n_terms:
+    if tape.empty:
         import warnings
 
-        from .image import Image
+        from ..rendering.image import Image
 
         warnings.warn(f"{args.scene}: the solid is empty; the image is all background", stacklevel=2)
         w, h = size
         bg = np.round(255 * np.asarray((tuple(background) + (1.0,))[:4])).astype(np.uint8)
         img = Image(np.broadcast_to(bg, (h, w, 4)).copy(), np.full((h, w), np.inf, np.float32),
-                    np.full((h, w), -1, np.int32), {"method": args.method, "covered_pixels": 0,
-                                                   "total_seconds": 0.0})
+                    np.full((h, w), -1, np.int32), np.full((h, w), -1, np.int32),
+                    {"method": args.method, "covered_pixels": 0, "total_seconds": 0.0})
         what = "empty solid"
     elif args.method == "raytrace":
-        camera = cli_camera(args, dnf.bound)
-        img = raytrace(dnf, camera, device=ctx, background=background)
+        camera = cli_camera(args, tape.bound)
+        img = raytrace(tape, camera, device=ctx, background=background)
         what = "ray traced"
     else:
         from ..sampling.sampler import sample
 
-        camera = cli_camera(args, dnf.bound)
+        camera = cli_camera(args, tape.bound)
         if radius is None:
-            diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
+            diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
             radius = diag / 100 if diag > 0 else 1.0
         t0 = time.perf_counter()
-        samples = sample(scene, radius, device=ctx, progress=False,
+        samples = sample(scene, radius, device=ctx, progress=False, normal_form=normal_form,
                          max_samples=getattr(args, "max_samples", None))
         t_sample = time.perf_counter() - t0
         stats["sampling"] = dict(samples.stats)

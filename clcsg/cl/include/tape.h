@@ -1,0 +1,211 @@
+/* Tape interpreters and tape pruning (the float64 reference is clcsg/compile/interpret.py;
+ * the instruction set is documented in clcsg/compile/tape.py).
+ *
+ * A tape is `n` rows (op, out, a, b) in global memory; its result is register ops[n-1].out.
+ * TAPE_REGS (a build option from the host's register allocation) sizes the private register
+ * files.  Op codes OP_* come from clcsg/cl/constants.py.
+ *
+ * Substitution: the leaves on quadric `self_q` take, on the two sides of that quadric, the
+ * constants they have just on its negative side (leaf (q, s) holds there iff s = +1) and just
+ * on its positive side.  Pass self_q = -1 for plain evaluation.
+ */
+#ifndef CLCSG_TAPE_H
+#define CLCSG_TAPE_H
+#include "quadric.h"
+
+#ifndef TAPE_REGS
+#define TAPE_REGS 8
+#endif
+
+typedef struct {
+    int op, out, a, b;
+} tape_op;
+
+inline real literal_distance(__global const quadric_rec *qs, int q, int sign, real3 p)
+{
+    /* d(-Q, p) = -d(Q, p) */
+    return sign * quadric_distance(quadric_load(qs, q), qs[q].lam_min, qs[q].lam_max, p);
+}
+
+/* (f-, f+) over reals: leaves are s d_q(p) (eqs. 10-12), TRUE = -inf, FALSE = +inf,
+ * AND = max, OR = min.  *leaves counts the leaf distances evaluated. */
+inline real2 tape_eval(__global const tape_op *t, int n, __global const quadric_rec *qs, real3 p, int self_q,
+                       uint *leaves)
+{
+    real2 r[TAPE_REGS];
+    for (int k = 0; k < n; ++k) {
+        tape_op o = t[k];
+        if (o.op == OP_LEAF) {
+            if (o.a == self_q) {
+                r[o.out] = o.b > 0 ? (real2)(-INFINITY, INFINITY) : (real2)(INFINITY, -INFINITY);
+            } else {
+                real d = literal_distance(qs, o.a, o.b, p);
+                r[o.out] = (real2)(d, d);
+                ++*leaves;
+            }
+        } else if (o.op == OP_AND) {
+            r[o.out] = fmax(r[o.a], r[o.b]);
+        } else if (o.op == OP_OR) {
+            r[o.out] = fmin(r[o.a], r[o.b]);
+        } else if (o.op == OP_COPY) {
+            r[o.out] = r[o.a];
+        } else {
+            r[o.out] = o.a ? (real2)(-INFINITY, -INFINITY) : (real2)(INFINITY, INFINITY);
+        }
+    }
+    return r[t[n - 1].out];
+}
+
+/* d_q(p) = min(max(f-, -f+), max(-f-, f+)): negative iff p (on quadric q) is on the CSG
+ * surface, |d_q| a radius on q within which that classification holds. */
+inline real surface_distance(real2 f) { return fmin(fmax(f.x, -f.y), fmax(-f.x, f.y)); }
+
+/* Membership, two bits: bit 0 on the negative side of self_q, bit 1 on the positive side
+ * (both equal without substitution).  Closed solids: Q = 0 counts as inside. */
+inline uint tape_member(__global const tape_op *t, int n, __global const quadric_rec *qs, real3 p, int self_q)
+{
+    uchar r[TAPE_REGS];
+    for (int k = 0; k < n; ++k) {
+        tape_op o = t[k];
+        if (o.op == OP_LEAF) {
+            if (o.a == self_q)
+                r[o.out] = o.b > 0 ? 1 : 2;
+            else
+                r[o.out] = o.b * quadric_value(quadric_load(qs, o.a), p) <= 0 ? 3 : 0;
+        } else if (o.op == OP_AND) {
+            r[o.out] = r[o.a] & r[o.b];
+        } else if (o.op == OP_OR) {
+            r[o.out] = r[o.a] | r[o.b];
+        } else if (o.op == OP_COPY) {
+            r[o.out] = r[o.a];
+        } else {
+            r[o.out] = o.a ? 3 : 0;
+        }
+    }
+    return r[t[n - 1].out];
+}
+
+/* ---- pruning ------------------------------------------------------------------------------ */
+
+/* A region to prune over: the oriented box c + sum_m u_m a_m (|u_m| <= 1) grown by a ball of
+ * radius rho.  Plane leaves are tested exactly on it (a linear function's range over the box
+ * is its value at c +- sum_m |g.a_m|), other leaves by the conservative distance at c against
+ * rho + the box's half-diagonal. */
+typedef struct {
+    real3 c, a0, a1, a2;
+    real rho;
+} prune_region;
+
+#define ST_F 0
+#define ST_T 1
+#define ST_LIVE 2
+/* register state: bits 0-1 the tape state, 2-3 side -, 4-5 side + (each ST_*) */
+#define ST_PACK(t, m, p) ((uchar)((t) | ((m) << 2) | ((p) << 4)))
+#define ST_TAPE(s) ((s) & 3)
+#define ST_MINUS(s) (((s) >> 2) & 3)
+#define ST_PLUS(s) (((s) >> 4) & 3)
+
+inline int st_and(int x, int y) { return (x == ST_F || y == ST_F) ? ST_F : (x == ST_T && y == ST_T) ? ST_T : ST_LIVE; }
+inline int st_or(int x, int y) { return (x == ST_T || y == ST_T) ? ST_T : (x == ST_F && y == ST_F) ? ST_F : ST_LIVE; }
+
+/* The state of a leaf over the region: ST_T (holds everywhere), ST_F or ST_LIVE. */
+inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, const prune_region *g)
+{
+    __global const real *c = qs[q].coef;
+    real scale = fabs(g->rho) + length(g->c) + length(g->a0) + length(g->a1) + length(g->a2);
+    real slack = 64 * REAL_EPS * scale;
+    if (c[0] == 0 && c[1] == 0 && c[2] == 0 && c[4] == 0 && c[5] == 0 && c[7] == 0) {
+        /* a plane: sign Q(x) = g.x + w, |grad| = |g| */
+        real3 gr = 2 * sign * (real3)(c[3], c[6], c[8]);
+        real v = dot(gr, g->c) + sign * c[9];
+        real spread = fabs(dot(gr, g->a0)) + fabs(dot(gr, g->a1)) + fabs(dot(gr, g->a2)) + (g->rho + slack) * length(gr);
+        return v > spread ? ST_F : v < -spread ? ST_T : ST_LIVE;
+    }
+    real d = literal_distance(qs, q, sign, g->c);
+    real reach = g->rho + sqrt(dot(g->a0, g->a0) + dot(g->a1, g->a1) + dot(g->a2, g->a2)) + slack;
+    return d >= reach ? ST_F : d <= -reach ? ST_T : ST_LIVE;
+}
+
+/* Prune tape t (n rows) over region g with self_q substituted.
+ * Returns the decision: +1 both sides known and equal over the region (no surface of self_q in
+ * it), -1 known and different (all of self_q in it is surface), 0 otherwise.
+ * If `out` is not null (capacity n + 1 rows) the pruned tape is written there: a forward pass
+ * (constants folded, aliases become COPY rows) writes rows from the front, a backward pass
+ * (liveness over registers) keeps the rows whose result is read and packs them at the end;
+ * *first (offset in `out`) and *count give the result.  A constant tape is one CONST row.
+ * *evals counts the leaves tested against the region. */
+inline int tape_prune(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
+                      int self_q, __global tape_op *out, int *first, int *count, uint *evals)
+{
+    uchar st[TAPE_REGS];
+    int m = 0;
+    bool write = out != 0;
+    for (int k = 0; k < n; ++k) {
+        tape_op o = t[k];
+        if (o.op == OP_LEAF) {
+            if (o.a == self_q) {
+                st[o.out] = o.b > 0 ? ST_PACK(ST_LIVE, ST_T, ST_F) : ST_PACK(ST_LIVE, ST_F, ST_T);
+                if (write) out[m++] = o;
+                continue;
+            }
+            ++*evals;
+            int s = leaf_over_region(qs, o.a, o.b, g);
+            st[o.out] = ST_PACK(s, s, s);
+            if (s == ST_LIVE && write) out[m++] = o;
+        } else if (o.op == OP_AND || o.op == OP_OR) {
+            uchar sa = st[o.a], sb = st[o.b];
+            bool is_and = o.op == OP_AND;
+            int absorb = is_and ? ST_F : ST_T, neutral = is_and ? ST_T : ST_F;
+            int mm = is_and ? st_and(ST_MINUS(sa), ST_MINUS(sb)) : st_or(ST_MINUS(sa), ST_MINUS(sb));
+            int pp = is_and ? st_and(ST_PLUS(sa), ST_PLUS(sb)) : st_or(ST_PLUS(sa), ST_PLUS(sb));
+            if (ST_TAPE(sa) == absorb || ST_TAPE(sb) == absorb) {
+                st[o.out] = ST_PACK(absorb, mm, pp);
+            } else if (ST_TAPE(sa) == neutral || ST_TAPE(sb) == neutral) {
+                int src = ST_TAPE(sa) == neutral ? o.b : o.a;
+                int ts = ST_TAPE(st[src]);
+                if (ts == ST_LIVE && src != o.out && write) out[m++] = (tape_op){OP_COPY, o.out, src, 0};
+                st[o.out] = ST_PACK(ts, mm, pp);
+            } else {
+                if (write) out[m++] = o;
+                st[o.out] = ST_PACK(ST_LIVE, mm, pp);
+            }
+        } else if (o.op == OP_COPY) {
+            st[o.out] = st[o.a];
+            if (ST_TAPE(st[o.a]) == ST_LIVE && o.a != o.out && write) out[m++] = o;
+        } else {
+            st[o.out] = o.a ? ST_PACK(ST_T, ST_T, ST_T) : ST_PACK(ST_F, ST_F, ST_F);
+        }
+    }
+    int root = t[n - 1].out;
+    uchar s = st[root];
+    int decided = (ST_MINUS(s) == ST_LIVE || ST_PLUS(s) == ST_LIVE) ? 0 : ST_MINUS(s) == ST_PLUS(s) ? 1 : -1;
+    if (!write) return decided;
+    if (ST_TAPE(s) != ST_LIVE) {
+        out[n] = (tape_op){OP_CONST, root, ST_TAPE(s) == ST_T, 0};
+        *first = n;
+        *count = 1;
+        return decided;
+    }
+    if (m == 0 || out[m - 1].out != root) out[m++] = (tape_op){OP_COPY, root, root, 0};
+    uchar needed[TAPE_REGS];
+    for (int r = 0; r < TAPE_REGS; ++r) needed[r] = 0;
+    needed[root] = 1;
+    int w = n + 1; /* rows are packed downwards from the end of the n + 1 reserved rows */
+    for (int k = m - 1; k >= 0; --k) {
+        tape_op o = out[k];
+        if (!needed[o.out]) continue;
+        if (!(o.op == OP_COPY && o.a == o.out)) needed[o.out] = 0;
+        if (o.op == OP_AND || o.op == OP_OR) {
+            needed[o.a] = 1;
+            needed[o.b] = 1;
+        } else if (o.op == OP_COPY) {
+            needed[o.a] = 1;
+        }
+        out[--w] = o;
+    }
+    *first = w;
+    *count = n + 1 - w;
+    return decided;
+}
+
+#endif

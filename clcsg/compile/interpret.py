@@ -1,0 +1,216 @@
+"""Float64 numpy interpreters of a tape, and tape pruning over a ball: the reference for the
+device interpreters in ``cl/include/tape.h`` (same algorithms, instruction for instruction).
+
+Substitution (the quadric-relative view of paper eq. 22, generalized to any tree): for a point
+on quadric q, every leaf on q, whatever its place in the tree and its polarity, is replaced by
+the constant it has just on q's negative side (K_q < 0) and just on its positive side.  A leaf
+(q, s) holds on the negative side iff s = +1.  The point is on the CSG surface, carried by q,
+iff the root's membership differs between the two sides, and with f-, f+ the real-valued tapes
+(TRUE = -inf, FALSE = +inf for the substituted leaves)
+
+    d_q(p) = min( max(f-(p), -f+(p)),  max(-f-(p), f+(p)) )
+
+is negative iff p is on the surface, and |d_q| is a radius on q within which that
+classification holds (first branch: the solid is on the negative side, outward normal
++grad K_q; second: the opposite).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.quadric import Quadric
+from .tape import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+
+#: pruning's rounding margin, relative to the region's size and distance from the origin
+#: (64 units of float64 rounding, as in cl/include/tape.h)
+PRUNE_SLACK = 64 * np.finfo(np.float64).eps
+
+
+def _values(matrices, points):
+    xh = np.concatenate([points, np.ones(points.shape[:-1] + (1,))], axis=-1)
+    return np.einsum("...i,ij,...j->...", xh, matrices, xh)
+
+
+def distances(tape_quadrics, q: int, points) -> np.ndarray:
+    """Conservative signed distance d_q (eqs. 10-12) of canonical quadric ``q`` at ``points``."""
+    return Quadric(tape_quadrics[q]).distance(points)
+
+
+def evaluate(ops, quadrics, points, self_quadric: int = -1):
+    """(f-, f+): the tape over reals at ``points`` (N, 3) with quadric ``self_quadric``
+    substituted (both equal f when it is -1); a dict counts leaf distance evaluations."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = len(p)
+    regs: dict = {}
+    cache: dict = {}
+    for op, out, a, b in np.asarray(ops):
+        if op == OP_LEAF:
+            if a == self_quadric:
+                inf = np.full(n, np.inf)
+                regs[out] = (-b * inf, b * inf)
+            else:
+                if a not in cache:
+                    cache[a] = distances(quadrics, a, p)
+                v = b * cache[a]
+                regs[out] = (v, v)
+        elif op == OP_AND:
+            regs[out] = (np.maximum(regs[a][0], regs[b][0]), np.maximum(regs[a][1], regs[b][1]))
+        elif op == OP_OR:
+            regs[out] = (np.minimum(regs[a][0], regs[b][0]), np.minimum(regs[a][1], regs[b][1]))
+        elif op == OP_COPY:
+            regs[out] = regs[a]
+        elif op == OP_CONST:
+            v = np.full(n, -np.inf if a else np.inf)
+            regs[out] = (v, v)
+    return regs[ops[-1][1]]
+
+
+def surface_distance(ops, quadrics, points, q: int) -> np.ndarray:
+    """d_q(p) for points on quadric ``q`` (negative: on the CSG surface)."""
+    fm, fp = evaluate(ops, quadrics, points, q)
+    return np.minimum(np.maximum(fm, -fp), np.maximum(-fm, fp))
+
+
+def member(ops, quadrics, points, self_quadric: int = -1):
+    """(m-, m+): membership (closed solid: K = 0 counts as inside) with ``self_quadric``
+    substituted."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = len(p)
+    regs: dict = {}
+    cache: dict = {}
+    for op, out, a, b in np.asarray(ops):
+        if op == OP_LEAF:
+            if a == self_quadric:
+                regs[out] = (np.full(n, b > 0), np.full(n, b < 0))
+            else:
+                if a not in cache:
+                    cache[a] = _values(quadrics[a], p)
+                v = b * cache[a] <= 0.0
+                regs[out] = (v, v)
+        elif op == OP_AND:
+            regs[out] = (regs[a][0] & regs[b][0], regs[a][1] & regs[b][1])
+        elif op == OP_OR:
+            regs[out] = (regs[a][0] | regs[b][0], regs[a][1] | regs[b][1])
+        elif op == OP_COPY:
+            regs[out] = regs[a]
+        elif op == OP_CONST:
+            v = np.full(n, bool(a))
+            regs[out] = (v, v)
+    return regs[ops[-1][1]]
+
+
+def contains(ops, quadrics, points) -> np.ndarray:
+    return member(ops, quadrics, points)[0]
+
+
+# -- pruning -------------------------------------------------------------------------------------
+
+_F, _T, _LIVE = 0, 1, 2
+
+
+def leaf_over_region(matrix, sign: int, center, axes, rho: float) -> int:
+    """State of the literal (matrix, sign) over the region: the oriented box
+    center + sum_m u_m axes[m] (|u_m| <= 1) grown by a ball of radius rho.  Planes are tested
+    exactly (a linear function's range over the box), other quadrics by the conservative
+    distance at the center against rho plus the box's half-diagonal."""
+    c = np.asarray(center, dtype=np.float64).reshape(3)
+    ax = np.asarray(axes, dtype=np.float64).reshape(3, 3)
+    scale = abs(rho) + np.linalg.norm(c) + np.linalg.norm(ax, axis=1).sum()
+    slack = PRUNE_SLACK * scale
+    m = np.asarray(matrix)
+    if not np.any(m[:3, :3]):
+        g = 2.0 * sign * m[:3, 3]
+        v = g @ c + sign * m[3, 3]
+        spread = np.abs(ax @ g).sum() + (rho + slack) * np.linalg.norm(g)
+        return _F if v > spread else _T if v < -spread else _LIVE
+    d = sign * float(Quadric(m).distance(c.reshape(1, 3))[0])
+    reach = rho + float(np.sqrt((ax * ax).sum())) + slack
+    return _F if d >= reach else _T if d <= -reach else _LIVE
+
+
+def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=None):
+    """The tape simplified over a region: (ops, decided, evaluations).
+
+    The region is the ball (center, radius), or with ``axes`` (3, 3) the oriented box
+    center + sum_m u_m axes[m] grown by ``radius`` (see :func:`leaf_over_region`).
+    Forward pass over the registers: a leaf that keeps one sign over the region becomes TRUE
+    or FALSE (leaves on
+    ``self_quadric`` stay: they are substituted later); AND with FALSE is FALSE, with TRUE the
+    other operand (a COPY unless it already sits in the output register); OR likewise.  The
+    same pass tracks, per side of ``self_quadric``, a three-valued state (TRUE, FALSE,
+    unknown) of every register.  Backward pass: instructions whose result no later
+    instruction reads are dropped.  ``decided``: +1 if both sides are known and equal over the
+    whole ball (no surface on the self quadric there), -1 if known and different (all of the
+    quadric inside the ball is surface), 0 otherwise.  A constant tape is one CONST row.
+    """
+    axes = np.zeros((3, 3)) if axes is None else axes
+    ops = np.asarray(ops)
+    state: dict = {}  # register -> (tape state, side-, side+) with side states in {F, T, LIVE}
+    emitted = []
+    evaluations = 0
+    for op, out, a, b in ops:
+        if op == OP_LEAF:
+            if a == self_quadric:
+                state[out] = (_LIVE, _T if b > 0 else _F, _F if b > 0 else _T)
+                emitted.append((op, out, a, b))
+                continue
+            evaluations += 1
+            st = leaf_over_region(quadrics[a], b, center, axes, radius)
+            state[out] = (st, st, st)
+            if st == _LIVE:
+                emitted.append((op, out, a, b))
+        elif op in (OP_AND, OP_OR):
+            sa, sb = state[a], state[b]
+            absorb, neutral = (_F, _T) if op == OP_AND else (_T, _F)
+            sides = tuple(_combine3(op, sa[k], sb[k]) for k in (1, 2))
+            if sa[0] == absorb or sb[0] == absorb:
+                state[out] = (absorb,) + sides
+            elif sa[0] == neutral or sb[0] == neutral:
+                src = b if sa[0] == neutral else a
+                if state[src][0] == _LIVE and src != out:
+                    emitted.append((OP_COPY, out, src, 0))
+                state[out] = (state[src][0],) + sides
+            else:
+                emitted.append((op, out, a, b))
+                state[out] = (_LIVE,) + sides
+        elif op == OP_COPY:
+            state[out] = state[a]
+            if state[a][0] == _LIVE and a != out:
+                emitted.append((op, out, a, b))
+        elif op == OP_CONST:
+            state[out] = (_T, _T, _T) if a else (_F, _F, _F)
+    root = int(ops[-1][1])
+    st = state[root]
+    known = st[1] != _LIVE and st[2] != _LIVE
+    decided = 0 if not known else (1 if st[1] == st[2] else -1)
+    if st[0] != _LIVE:
+        return np.array([[OP_CONST, root, int(st[0] == _T), 0]], dtype=np.int32), decided, evaluations
+    if not emitted or emitted[-1][1] != root:
+        emitted.append((OP_COPY, root, root, 0))
+    # backward pass: liveness over registers
+    needed = {root}
+    kept = []
+    for ins in reversed(emitted):
+        op, out, a, b = ins
+        if out not in needed:
+            continue
+        if not (op == OP_COPY and a == out):
+            needed.discard(out)
+        if op in (OP_AND, OP_OR):
+            needed.update((a, b))
+        elif op == OP_COPY:
+            needed.add(a)
+        kept.append(ins)
+    kept.reverse()
+    return np.array(kept, dtype=np.int32).reshape(-1, 4), decided, evaluations
+
+
+def _combine3(op, x, y):
+    if op == OP_AND:
+        if x == _F or y == _F:
+            return _F
+        return _T if x == _T and y == _T else _LIVE
+    if x == _T or y == _T:
+        return _T
+    return _F if x == _F and y == _F else _LIVE

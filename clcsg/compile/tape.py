@@ -1,0 +1,514 @@
+"""Compiling a CSG graph into a tape: a straight-line program over unique canonical quadrics.
+
+The graph (a tree or a DAG of :mod:`clcsg.model.csg` nodes) becomes, in one iterative pass:
+
+* transforms pushed into the leaves (Q' = M^-T Q M^-1, paper eq. 17);
+* complements pushed to the leaves (negation normal form: ~(a | b) = ~a & ~b, ~(a - b) =
+  ~a | b), so that every leaf is a *literal* (q, s): canonical quadric q, polarity s, solid
+  ``s K_q(x) <= 0``;
+* every quadric stored once in canonical form (unit norm, first non-zero coefficient positive,
+  the sign moved into s), so coincident faces of different solids are one quadric;
+* an expression DAG of AND / OR nodes, hash-consed (equal sub-expressions are one node, a
+  shared sub-graph is computed once), with constants folded (x & false = false, x | true =
+  true) and x & ~x = false for literals;
+* a tape: SSA instructions in an order that keeps few values alive (the operand needing more
+  registers first, Sethi-Ullman), then registers assigned by a linear scan.
+
+Instructions are int32 rows ``(op, out, a, b)``:
+
+=========  ===================================================================================
+LEAF       reg[out] = the literal (quadric a, sign b)
+AND        reg[out] = reg[a] AND reg[b]      (max of distances, & of memberships)
+OR         reg[out] = reg[a] OR reg[b]       (min of distances, | of memberships)
+COPY       reg[out] = reg[a]                 (written only by pruning)
+CONST      reg[out] = a ? TRUE : FALSE       (a whole tape that pruning made constant)
+=========  ===================================================================================
+
+The result is ``reg[ops[-1].out]``.  Over reals a literal is ``s d_q(x)``, the conservative
+signed distance (eqs. 10-12), TRUE is -inf and FALSE +inf: then min / max compose to a
+conservative signed distance of the whole solid (the maximizing operand of an AND that is > 0
+stays > 0 within its value; all operands of an AND that is < 0 stay < 0 within |value|).
+
+The disjunctive normal form of the paper (section 5, eq. 18) is one shape of tape: an OR of
+ANDs (:func:`dnf_tape`), run by the same kernels.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import SceneError, UnboundedError
+from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
+from ..model.quadric import COEFFICIENT_INDEX, Quadric
+
+OP_LEAF, OP_AND, OP_OR, OP_COPY, OP_CONST = 0, 1, 2, 3, 4
+OP_NAMES = ("LEAF", "AND", "OR", "COPY", "CONST")
+
+#: canonical coefficients closer than this are the same quadric
+SAME_QUADRIC = 1e-9
+#: coefficients smaller than this (relative to the unit-norm matrix) are rounding noise
+_ZERO = 1e-13
+
+_TRUE, _FALSE = 0, 1  # expression ids of the constants
+_LEAF, _AND, _OR, _CONST = "leaf", "and", "or", "const"
+
+
+class QuadricTable:
+    """Unique canonical quadrics, found with a tolerance (a dict on rounded coefficients,
+    checked against the neighbours of the rounding grid)."""
+
+    def __init__(self):
+        self.coefs: list[np.ndarray] = []
+        self._grid: dict = {}
+
+    def __len__(self) -> int:
+        return len(self.coefs)
+
+    def add(self, matrix: np.ndarray) -> tuple[int, int]:
+        """(index, sign) of the canonical form K of ``matrix``: matrix = sign * |matrix| * K."""
+        m = np.asarray(matrix, dtype=np.float64)
+        norm = np.linalg.norm(m)
+        if not (np.isfinite(norm) and norm > 0.0):
+            raise ValueError("not a finite non-zero quadric")
+        coef = np.array([m[i, j] for i, j in COEFFICIENT_INDEX]) / norm
+        coef[np.abs(coef) < _ZERO] = 0.0
+        nz = np.flatnonzero(coef)
+        s = 1 if coef[nz[0]] > 0 else -1
+        coef *= s
+        key = tuple(np.round(coef / (4 * SAME_QUADRIC)).astype(np.int64))
+        for k in self._neighbours(key):
+            for idx in self._grid.get(k, ()):
+                if np.abs(self.coefs[idx] - coef).max() < SAME_QUADRIC:
+                    return idx, s
+        self.coefs.append(coef)
+        self._grid.setdefault(key, []).append(len(self.coefs) - 1)
+        return len(self.coefs) - 1, s
+
+    @staticmethod
+    def _neighbours(key):
+        yield key
+        # a coefficient near a rounding boundary may have rounded either way
+        for i in range(len(key)):
+            for d in (-1, 1):
+                yield key[:i] + (key[i] + d,) + key[i + 1:]
+
+    def matrices(self) -> np.ndarray:
+        return np.array([Quadric.from_coefficients(c).matrix for c in self.coefs]).reshape(-1, 4, 4)
+
+
+@dataclass
+class Instance:
+    """A primitive instance: a Primitive node under one accumulated world transform, in tree
+    order (the first occurrence in a depth-first walk).  ``literals`` are (quadric, sign) of
+    its own (un-complemented) solid."""
+
+    index: int
+    node: Primitive
+    matrix: np.ndarray
+    literals: list
+    color: tuple
+    box: tuple | None  # (lo, hi), None if provably empty
+
+
+@dataclass
+class Tape:
+    """A compiled scene: the instructions, the quadric table, the primitive instances, the bound."""
+
+    ops: np.ndarray  # (N, 4) int32
+    n_regs: int
+    quadrics: np.ndarray  # (U, 4, 4) canonical world matrices
+    instances: list
+    bound: np.ndarray  # (2, 3)
+    shape: str = "tree"  # or "dnf"
+    stats: dict = field(default_factory=dict)
+    empty: bool = False
+
+    @property
+    def n_quadrics(self) -> int:
+        return len(self.quadrics)
+
+    @property
+    def leaves(self) -> np.ndarray:
+        return self.ops[self.ops[:, 0] == OP_LEAF]
+
+    def owners(self) -> list[list[int]]:
+        """Per quadric, the instances (tree order) that have it as a literal."""
+        out = [[] for _ in range(self.n_quadrics)]
+        for inst in self.instances:
+            for q, _ in inst.literals:
+                if not out[q] or out[q][-1] != inst.index:
+                    out[q].append(inst.index)
+        return out
+
+    def describe(self, limit: int = 40) -> str:
+        lines = []
+        for k, (op, out, a, b) in enumerate(self.ops[:limit]):
+            if op == OP_LEAF:
+                arg = f"{'+' if b > 0 else '-'}q{a}"
+            elif op == OP_CONST:
+                arg = "TRUE" if a else "FALSE"
+            elif op == OP_COPY:
+                arg = f"r{a}"
+            else:
+                arg = f"r{a} r{b}"
+            lines.append(f"{k:5d}  r{out} = {OP_NAMES[op]} {arg}")
+        if len(self.ops) > limit:
+            lines.append(f"  ... {len(self.ops) - limit} more")
+        return "\n".join(lines)
+
+
+class _Builder:
+    """The expression DAG: hash-consed nodes ``(kind, args)``."""
+
+    def __init__(self):
+        self.kind = [_CONST, _CONST]
+        self.args: list = [(1,), (0,)]
+        self._ids = {(_CONST, (1,)): _TRUE, (_CONST, (0,)): _FALSE}
+
+    def node(self, kind, args) -> int:
+        key = (kind, args)
+        i = self._ids.get(key)
+        if i is None:
+            i = self._ids[key] = len(self.kind)
+            self.kind.append(kind)
+            self.args.append(args)
+        return i
+
+    def leaf(self, q: int, s: int) -> int:
+        return self.node(_LEAF, (q, s))
+
+    def combine(self, kind, ids) -> int:
+        absorbing, neutral = (_FALSE, _TRUE) if kind == _AND else (_TRUE, _FALSE)
+        seen = []
+        lits = set()
+        for i in ids:
+            if i == absorbing:
+                return absorbing
+            if i == neutral or i in seen:
+                continue
+            if self.kind[i] == _LEAF:
+                q, s = self.args[i]
+                if (q, -s) in lits:  # K & ~K is the surface (no volume); K | ~K everything
+                    return absorbing
+                lits.add((q, s))
+            seen.append(i)
+        if not seen:
+            return neutral
+        if len(seen) == 1:
+            return seen[0]
+        return self.node(kind, tuple(sorted(seen)))
+
+
+def _inverse_cache():
+    cache: dict = {}
+
+    def inv(m: np.ndarray) -> np.ndarray:
+        k = m.tobytes()
+        r = cache.get(k)
+        if r is None:
+            r = cache[k] = np.linalg.inv(m)
+        return r
+
+    return inv
+
+
+def _children(node, m, neg):
+    """(kind, [(child, matrix, negated)]) of an inner node; kind None for pass-through."""
+    if isinstance(node, Transformed):
+        return None, [(node.operand, m @ node.matrix, neg)]
+    if isinstance(node, Complement):
+        return None, [(node.operand, m, not neg)]
+    if isinstance(node, Union):
+        return (_AND if neg else _OR), [(c, m, neg) for c in node.operands]
+    if isinstance(node, Intersection):
+        return (_OR if neg else _AND), [(c, m, neg) for c in node.operands]
+    if isinstance(node, Difference):
+        ops = [(node.operands[0], m, neg)] + [(c, m, not neg) for c in node.operands[1:]]
+        return (_OR if neg else _AND), ops
+    raise SceneError(f"not a CSG node: {type(node).__name__}")
+
+
+def _world_literals(node: Primitive, m, inv, table: QuadricTable, source: str):
+    im = inv(m)
+    out = []
+    for q in node.quadrics():
+        w = im.T @ q.matrix @ im
+        try:
+            out.append(table.add(w))
+        except (ValueError, IndexError, FloatingPointError):
+            raise SceneError(f"{source}: {node!r}: its quadric overflows float64 after the transforms "
+                             "(sizes or offsets far too large)") from None
+    return out
+
+
+def instances_of(shape: Shape, table: QuadricTable, source: str = "scene") -> list[Instance]:
+    """The primitive instances of ``shape`` in tree order (iterative depth-first walk; a shared
+    sub-graph under the same transform is walked once)."""
+    from .bounds import term_box
+
+    inv = _inverse_cache()
+    out: list[Instance] = []
+    seen = set()
+    stack = [(shape, np.eye(4))]
+    while stack:
+        node, m = stack.pop()
+        key = (id(node), m.tobytes())
+        if key in seen:
+            continue
+        seen.add(key)
+        if isinstance(node, Primitive):
+            lits = _world_literals(node, m, inv, table, source)
+            quads = [(Quadric.from_coefficients(table.coefs[q]), s) for q, s in lits]
+            out.append(Instance(len(out), node, m, lits, node.color, term_box(quads)))
+            continue
+        _, kids = _children(node, m, False)
+        for child, cm, _ in reversed(kids):
+            stack.append((child, cm))
+    return out
+
+
+def _expression(shape: Shape, table: QuadricTable, b: _Builder, source: str) -> int:
+    """The root expression id of ``shape`` (iterative post-order walk, memoized on
+    (node, transform, negated))."""
+    inv = _inverse_cache()
+    memo: dict = {}
+    stack = [(shape, np.eye(4), False, False)]
+    while stack:
+        node, m, neg, expanded = stack.pop()
+        key = (id(node), m.tobytes(), neg)
+        if key in memo:
+            continue
+        if isinstance(node, Primitive):
+            lits = _world_literals(node, m, inv, table, source)
+            if neg:
+                memo[key] = b.combine(_OR, [b.leaf(q, -s) for q, s in lits])
+            else:
+                memo[key] = b.combine(_AND, [b.leaf(q, s) for q, s in lits])
+            continue
+        kind, kids = _children(node, m, neg)
+        keys = [(id(c), cm.tobytes(), cn) for c, cm, cn in kids]
+        if not expanded:
+            stack.append((node, m, neg, True))
+            for (c, cm, cn), k in zip(reversed(kids), reversed(keys)):
+                if k not in memo:
+                    stack.append((c, cm, cn, False))
+            continue
+        ids = [memo[k] for k in keys]
+        if kind is None:
+            memo[key] = ids[0]
+        elif not ids:  # an empty union is nothing; its complement everything
+            memo[key] = _FALSE if kind == _OR else _TRUE
+        else:
+            memo[key] = b.combine(kind, ids)
+    return memo[(id(shape), np.eye(4).tobytes(), False)]
+
+
+def _needs(b: _Builder, root: int) -> dict:
+    """Sethi-Ullman register estimates of every node reachable from ``root`` (iterative)."""
+    need: dict = {}
+    stack = [(root, False)]
+    while stack:
+        i, done = stack.pop()
+        if i in need:
+            continue
+        if b.kind[i] in (_LEAF, _CONST):
+            need[i] = 1
+            continue
+        if not done:
+            stack.append((i, True))
+            stack.extend((c, False) for c in b.args[i] if c not in need)
+            continue
+        ns = sorted((need[c] for c in b.args[i]), reverse=True)
+        need[i] = max(ns[0], 1 + max(ns[1:], default=0))
+    return need
+
+
+def _emit(b: _Builder, root: int) -> tuple[np.ndarray, int]:
+    """SSA instructions in evaluation order, then linear-scan register allocation."""
+    need = _needs(b, root)
+    value: dict = {}  # expression id -> SSA value
+    ssa: list = []  # (op, a, b) with SSA operands for AND/OR
+
+    def emit(op, x, y):
+        ssa.append((op, x, y))
+        return len(ssa) - 1
+
+    # frames: [node, sorted children, next index, accumulated value]
+    stack = [[root, None, 0, None]]
+    while stack:
+        fr = stack[-1]
+        i = fr[0]
+        if i in value:
+            stack.pop()
+            continue
+        kind = b.kind[i]
+        if kind == _LEAF:
+            q, s = b.args[i]
+            value[i] = emit(OP_LEAF, q, s)
+            stack.pop()
+            continue
+        if kind == _CONST:
+            value[i] = emit(OP_CONST, b.args[i][0], 0)
+            stack.pop()
+            continue
+        if fr[1] is None:
+            fr[1] = sorted(b.args[i], key=lambda c: -need[c])
+        kids = fr[1]
+        if fr[2] < len(kids):
+            c = kids[fr[2]]
+            if c not in value:
+                stack.append([c, None, 0, None])
+                continue
+            v = value[c]
+            fr[3] = v if fr[3] is None else emit(OP_AND if kind == _AND else OP_OR, fr[3], v)
+            fr[2] += 1
+            continue
+        value[i] = fr[3]
+        stack.pop()
+    result = value[root]
+    # linear scan: a value dies at its last use; its register is free for the next write
+    last = {}
+    for k, (op, x, y) in enumerate(ssa):
+        if op in (OP_AND, OP_OR):
+            last[x] = k
+            last[y] = k
+    last[result] = len(ssa)
+    free: list = []
+    n_regs = 0
+    reg = {}
+    ops = np.zeros((len(ssa), 4), dtype=np.int32)
+    for k, (op, x, y) in enumerate(ssa):
+        if op in (OP_AND, OP_OR):
+            for v in {x, y}:
+                if last.get(v) == k:
+                    heapq.heappush(free, reg[v])
+            ops[k] = (op, 0, reg[x], reg[y])
+        else:
+            ops[k] = (op, 0, x, y)
+        if free:
+            r = heapq.heappop(free)
+        else:
+            r = n_regs
+            n_regs += 1
+        reg[k] = r
+        ops[k, 1] = r
+    assert result == len(ssa) - 1  # the root's value is the last one computed
+    return ops, max(n_regs, 1)
+
+
+def _depth_and_terms(b: _Builder, root: int) -> tuple[int, float]:
+    """Depth of the expression DAG and the number of DNF terms distributing it would give
+    (float; inf past 1e300), both without building anything."""
+    depth: dict = {}
+    terms: dict = {}
+    stack = [(root, False)]
+    while stack:
+        i, done = stack.pop()
+        if i in depth:
+            continue
+        kind = b.kind[i]
+        if kind in (_LEAF, _CONST):
+            depth[i] = 1
+            terms[i] = 0.0 if i == _FALSE else 1.0
+            continue
+        if not done:
+            stack.append((i, True))
+            stack.extend((c, False) for c in b.args[i] if c not in depth)
+            continue
+        kids = b.args[i]
+        depth[i] = 1 + max(depth[c] for c in kids)
+        if kind == _OR:
+            t = math.fsum(terms[c] for c in kids)
+        else:
+            t = 1.0
+            for c in kids:
+                t *= terms[c]
+        terms[i] = t if t < 1e300 else math.inf
+    return depth[root], terms[root]
+
+
+def compile_shape(shape: Shape, user_bound=None, source: str = "scene", table: QuadricTable | None = None) -> Tape:
+    """Compile ``shape`` into a :class:`Tape` (the tree shape).  ``user_bound``: (lo, hi)."""
+    if not isinstance(shape, Shape):
+        raise SceneError(f"{source}: expected a CSG shape, got {type(shape).__name__}")
+    table = QuadricTable() if table is None else table
+    instances = instances_of(shape, table, source)
+    b = _Builder()
+    root = _expression(shape, table, b, source)
+    ops, n_regs = _emit(b, root)
+    depth, dnf_terms = _depth_and_terms(b, root)
+    bound, empty = scene_bound(shape, instances, root, user_bound, source)
+    tape = Tape(ops, n_regs, table.matrices(), instances, bound, "tree", empty=empty or root == _FALSE)
+    tape.stats = _tape_stats(tape, depth=depth, dnf_terms=dnf_terms)
+    return tape
+
+
+def _tape_stats(tape: Tape, **extra) -> dict:
+    leaves = tape.ops[tape.ops[:, 0] == OP_LEAF]
+    return {
+        "shape": tape.shape,
+        "instructions": int(len(tape.ops)),
+        "leaves": int(len(leaves)),
+        "quadrics": int(len(np.unique(leaves[:, 2]))) if len(leaves) else 0,
+        "registers": int(tape.n_regs),
+        "primitives": len(tape.instances),
+        **extra,
+    }
+
+
+def scene_bound(shape, instances, root, user_bound, source):
+    """(bound (2, 3), empty) of the solid."""
+    if root == _FALSE:
+        return np.zeros((2, 3)), True
+    from . import bounds
+
+    if hasattr(bounds, "shape_bound"):
+        return bounds.shape_bound(shape, user_bound=user_bound, source=source)
+    boxes = [i.box for i in instances if i.box is not None]
+    lo = np.min([b[0] for b in boxes], axis=0) if boxes else np.zeros(3)
+    hi = np.max([b[1] for b in boxes], axis=0) if boxes else np.zeros(3)
+    if user_bound is not None:
+        ub = np.asarray(user_bound, dtype=np.float64)
+        lo, hi = np.maximum(lo, ub[0]), np.minimum(hi, ub[1])
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise UnboundedError(f"{source}: the solid is unbounded; intersect it with a box or give a bound")
+    return np.array([lo, hi]), not boxes
+
+
+def dnf_tape(dnf, instances, bound, table_matrices) -> Tape:
+    """The DNF (an OR of ANDs of literals over ``table_matrices``) as a tape."""
+    b = _Builder()
+    terms = [b.combine(_AND, [b.leaf(q, s) for q, s in term]) for term in dnf.terms]
+    root = b.combine(_OR, terms) if terms else _FALSE
+    ops, n_regs = _emit(b, root)
+    depth, dnf_terms = _depth_and_terms(b, root)
+    tape = Tape(ops, n_regs, table_matrices, instances, bound, "dnf", empty=root == _FALSE)
+    tape.stats = _tape_stats(tape, depth=depth, dnf_terms=dnf_terms, terms=dnf.n_terms)
+    return tape
+
+
+NORMAL_FORMS = ("tree", "dnf")
+
+
+def compile_scene(scene, normal_form: str = "tree", term_limit: int | None = None) -> Tape:
+    """The tape of a :class:`~clcsg.model.scene.Scene` in the given normal form."""
+    from ..errors import UsageError
+
+    if normal_form not in NORMAL_FORMS:
+        raise UsageError(f"normal form must be one of {', '.join(NORMAL_FORMS)}, got {normal_form!r}")
+    table = QuadricTable()
+    tree = compile_shape(scene.shape, scene.bound, scene.source, table)
+    if normal_form == "tree":
+        return tree
+    from .dnf import DEFAULT_TERM_LIMIT, normalize
+
+    dnf = normalize(scene.shape, DEFAULT_TERM_LIMIT if term_limit is None else term_limit, scene.bound,
+                    scene.source, table=table)
+    tape = dnf_tape(dnf, tree.instances, tree.bound, table.matrices())
+    tape.stats.update({f"dnf_{k}": v for k, v in dnf.stats.items()})
+    tape.empty = tape.empty or tree.empty
+    return tape

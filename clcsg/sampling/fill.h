@@ -1,0 +1,129 @@
+/* Covering a patch that lies on the CSG surface with samples (paper section 4.2's fill with
+ * an anisotropic slope bound in place of the isotropic sqrt 3 distortion bound).
+ *
+ * Build options: FILL_DELTA_RATIO (a block is split while its distortion bounds differ by
+ * more than this factor).
+ */
+#ifndef CLCSG_FILL_H
+#define CLCSG_FILL_H
+#include "heightfield.h"
+
+#ifndef FILL_DELTA_RATIO
+#define FILL_DELTA_RATIO 1.1
+#endif
+
+/* where a sample comes from: its task and the tape of its cell (valid over every splat ball
+ * of radius <= r around the cell's patch) */
+typedef struct {
+    int task, tape_first, tape_count;
+} sample_src;
+
+inline void emit_sample(__global raw_sample_rec *out, uint slot, uint cap, real3 p, real radius, sample_src src)
+{
+    if (slot >= cap) return;
+    out[slot].pos[0] = p.x;
+    out[slot].pos[1] = p.y;
+    out[slot].pos[2] = p.z;
+    out[slot].radius = radius;
+    out[slot].task = src.task;
+    out[slot].tape_first = src.tape_first;
+    out[slot].tape_count = src.tape_count;
+    out[slot].pad = 0;
+}
+
+/* Cover a block [x0,x1] x [y0,y1] known to lie on the CSG surface with samples at the
+ * centers of sub-rectangles of half-sizes (a, b).  Anisotropic bound (beyond the paper's
+ * isotropic distortion): for two points of a sub-rectangle, p2 - p1 = (dx, dy, t2 - t1) and
+ * by the mean value theorem |t2 - t1| <= mx |dx| + my |dy| with mx, my the slope bounds over
+ * the sub-rectangle, so every point is within sqrt(a^2 + b^2 + (mx a + my b)^2) <= r of the
+ * center.  On a steep patch only the steep direction shrinks.  Rows are marched in y, each
+ * with the slopes over the whole row (shrinking a rectangle never raises them); (a, b)
+ * maximize the area a b on the constraint.  Sub-rectangles that plane k owns nowhere are
+ * left to the other planes; a row owned everywhere reserves its output with one atomic. */
+void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real radius, sample_src src,
+                __global volatile uint *counters, __global raw_sample_rec *samples, uint cap_samples)
+{
+    real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
+    real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
+    real y = y0;
+    real hy = y1 - y0;
+    while (y < y1) {
+        hy = fmin(y1 - y, 2 * hy);
+        real3 m = rect_slopes(pf, x0, x1, y, y + hy);
+        /* best aspect for these slopes: a few angles suffice (the area is flat at its max) */
+        real best_b = 0, best_area = -1;
+        for (int k = 1; k < 16; ++k) {
+            real th = (real)(M_PI / 32) * k, cs = cos(th), sn = sin(th);
+            real e = m.x * cs + m.y * sn;
+            real rho = radius / sqrt(1 + e * e);
+            if (rho * rho * cs * sn > best_area) {
+                best_area = rho * rho * cs * sn;
+                best_b = rho * sn;
+            }
+        }
+        if (hy > 2 * best_b) {
+            hy = 2 * best_b;
+            m = rect_slopes(pf, x0, x1, y, y + hy);
+        }
+        real yb = y + hy >= y1 ? y1 : y + hy;
+        real sx = 2 * half_width(m.x, m.y, 0.5 * hy, radius);
+        sx = fmax(sx, (real)1e-12 * radius);
+        int nx = max(1, (int)ceil((x1 - x0) / sx));
+        sx = (x1 - x0) / nx;
+        real cy = 0.5 * (y + yb);
+        /* the radius this row's samples need (paper 6.1: smaller splats, less overdraw) */
+        real ha = 0.5 * sx, hb = 0.5 * (yb - y), e = m.x * ha + m.y * hb;
+        real need = fmin(radius, sqrt(ha * ha + hb * hb + e * e) * (1 + (real)1e-6));
+        if (ni.y <= m.z && nj.y <= m.z) { /* owned everywhere */
+            uint base = atomic_add(&counters[SC_SAMPLES], (uint)nx);
+            for (int a = 0; a < nx; ++a) {
+                real cx = x0 + (a + (real)0.5) * sx;
+                emit_sample(samples, base + a, cap_samples,
+                            plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, src);
+            }
+        } else {
+            for (int a = 0; a < nx; ++a) {
+                real xa = x0 + a * sx;
+                if (!sub_rect_owned(pf, xa, xa + sx, y, yb)) continue;
+                real cx = xa + (real)0.5 * sx;
+                uint slot = atomic_inc(&counters[SC_SAMPLES]);
+                emit_sample(samples, slot, cap_samples,
+                            plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, src);
+            }
+        }
+        y = yb;
+    }
+}
+
+/* Cover a cell that lies on the CSG surface: split it (no distance queries needed) into
+ * blocks over which the distortion varies little, and fill each block. */
+void fill_cell(const plane_frame *pf, cell_rec c, real radius, sample_src src, __global volatile uint *counters,
+               __global raw_sample_rec *samples, uint cap_samples)
+{
+    real4 stack[40];
+    int top = 0;
+    stack[top++] = (real4)(c.x0, c.x1, c.y0, c.y1);
+    while (top > 0) {
+        real4 b = stack[--top];
+        bool owned;
+        real2 dl = rect_distortion(pf, b.x, b.y, b.z, b.w, &owned);
+        if (!owned) continue;
+        real wx = b.y - b.x, wy = b.w - b.z;
+        real s = sqrt((real)2) * radius / dl.x;
+        if (top + 2 <= 40 && wx * wy > 16 * s * s && dl.x > FILL_DELTA_RATIO * dl.y) {
+            if (wx >= wy) {
+                real mid = 0.5 * (b.x + b.y);
+                stack[top++] = (real4)(b.x, mid, b.z, b.w);
+                stack[top++] = (real4)(mid, b.y, b.z, b.w);
+            } else {
+                real mid = 0.5 * (b.z + b.w);
+                stack[top++] = (real4)(b.x, b.y, b.z, mid);
+                stack[top++] = (real4)(b.x, b.y, mid, b.w);
+            }
+            continue;
+        }
+        fill_block(pf, b.x, b.y, b.z, b.w, radius, src, counters, samples, cap_samples);
+    }
+}
+
+#endif

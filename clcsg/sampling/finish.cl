@@ -1,0 +1,67 @@
+/* Per sample, after the subdivision: its clip program, the side the solid is on, its outward
+ * normal and its primitive (driven by clcsg/sampling/sampler.py).
+ *
+ * The clip program is the sample's cell tape pruned over the splat ball (s, r) with the
+ * sample's quadric substituted.  If both sides come out constant (and, s being on the surface,
+ * different) the splat needs no clipping; otherwise the pruned tape is written to the clip
+ * buffer (rows reserved with an atomic add, written only below the capacity; the host grows
+ * the buffer and re-runs on overflow).  The sign is +1 where the solid is on the quadric's
+ * negative side at s (outward normal +grad Q), -1 otherwise.
+ */
+#include "tape.h"
+#include "primitives.h"
+
+__kernel void finish(__global const quadric_rec *qs, __global const frame_rec *frames,
+                     __global const task_rec *tasks, __global const raw_sample_rec *raw, int n,
+                     __global const tape_op *arena, __global tape_op *clip, uint cap_clip,
+                     __global volatile uint *counters,
+                     __global const owner_rec *owners, __global const int *owner_list,
+                     __global const prim_rec *prims, __global const int2 *prim_lits,
+                     __global real *normals, __global int *signs, __global int *primitives,
+                     __global int *clip_first, __global int *clip_count)
+{
+    int gid = get_global_id(0);
+    if (gid >= n) return;
+    raw_sample_rec s = raw[gid];
+    task_rec t = tasks[s.task];
+    real3 p = (real3)(s.pos[0], s.pos[1], s.pos[2]);
+    __global const tape_op *tape = arena + s.tape_first;
+    int nt = s.tape_count;
+    prune_region ball = {p, (real3)(0), (real3)(0), (real3)(0), s.radius};
+    uint evals = 0;
+    int first = 0, count = 0;
+    uint bits;
+    int decided = tape_prune(tape, nt, qs, &ball, t.quadric, 0, &first, &count, &evals);
+    if (decided < 0) {
+        bits = tape_member(tape, nt, qs, p, t.quadric);
+        clip_first[gid] = 0;
+        clip_count[gid] = 0;
+    } else {
+        uint base = atomic_add(&counters[0], (uint)(nt + 1));
+        if (base + (uint)(nt + 1) <= cap_clip) {
+            tape_prune(tape, nt, qs, &ball, t.quadric, clip + base, &first, &count, &evals);
+            clip_first[gid] = (int)base + first;
+            clip_count[gid] = count;
+        } else {
+            clip_first[gid] = 0;
+            clip_count[gid] = 0;
+        }
+        bits = tape_member(tape, nt, qs, p, t.quadric);
+    }
+    atomic_add(&counters[1], evals);
+    int sign = (bits & 1) ? 1 : -1;
+    real3 g = sign * quadric_gradient(quadric_load(qs, t.quadric), p);
+    real gl = length(g);
+    if (gl > 0) {
+        g = g / gl;
+    } else { /* a singular point (cone apex): the sampling direction stands in */
+        __global const frame_rec *f = frames + t.quadric;
+        real sh = t.sheet != 0 ? (real)t.sheet : (real)1;
+        g = sh * (real3)(f->U[t.plane], f->U[3 + t.plane], f->U[6 + t.plane]);
+    }
+    normals[3 * gid] = g.x;
+    normals[3 * gid + 1] = g.y;
+    normals[3 * gid + 2] = g.z;
+    signs[gid] = sign;
+    primitives[gid] = primitive_at(owners, owner_list, prims, prim_lits, qs, t.quadric, p);
+}
