@@ -596,10 +596,15 @@ def test_file_errors(tmp_path):
     assert load_csg(bom).shape.kind == "box"
 
 
-def test_deep_nesting_is_refused_cleanly():
-    ok = "group() {" * (MAX_DEPTH - 1) + "sphere(1);" + "}" * (MAX_DEPTH - 1)
+def test_deep_nesting_loads_and_deep_values_are_refused_cleanly():
+    # nodes: explicit stacks, any depth up to MAX_NODE_DEPTH (tests/test_scad.py: 1,000 / 10,000)
+    ok = "group() {" * 5000 + "sphere(1);" + "}" * 5000
     assert quiet_parse(ok).shape.kind == "sphere"
-    for text in ("group() {" * 5000, "group() " * 5000 + ";", "cube(" + "[" * 5000, "sphere(" + "-" * 5000 + "1);"):
+    assert quiet_parse("group() " * 5000 + "sphere(1);").shape.kind == "sphere"
+    assert "expected '}', got end of file" in err("group() {" * 5000)
+    # values: recursive, at most MAX_DEPTH levels
+    assert quiet_parse("cube(" + "[" * (MAX_DEPTH - 1) + "]" * (MAX_DEPTH - 1) + ");").shape.kind == "box"
+    for text in ("cube(" + "[" * 5000, "sphere(" + "-" * 5000 + "1);"):
         assert "nested deeper than" in err(text)
 
 

@@ -19,7 +19,8 @@ ignored: the surfaces are exact, not tessellated), ``multmatrix`` a transform an
 (``polyhedron``, ``linear_extrude``, ``hull``, ...) are rejected with a one-line
 :class:`~clcsg.errors.SceneError` naming file, line and column.
 
-Grammar (a hand-written tokenizer and recursive-descent parser, no dependencies)::
+Grammar (a hand-written tokenizer and recursive-descent parser, no dependencies; the rules
+for statements and nodes run on an explicit stack, see ``_trampoline``)::
 
     file       := statement* EOF
     statement  := ';'  |  '{' statement* '}'  |  modifier* NAME '(' arguments ')' child
@@ -56,8 +57,16 @@ Semantics follow OpenSCAD's own evaluator (2021.01 and later), including its qui
   ``undef`` means "not given".
 
 The parser raises nothing but :class:`SceneError` for any input text: syntax errors read
-``<file>:<line>:<col>: syntax error: expected ...`` and nesting deeper than
-:data:`MAX_DEPTH` levels is refused (the normalizer is recursive).
+``<file>:<line>:<col>: syntax error: expected ...``.
+
+Deep nesting: the parser and the evaluator keep pending nodes on explicit stacks instead of
+recursing, so any nesting depth loads (1,000 nested ``difference()`` are an ordinary model;
+:data:`MAX_NODE_DEPTH`, 100,000 levels, only bounds memory for absurd input).  Values are
+parsed recursively; vectors nested deeper than :data:`MAX_DEPTH` (100) levels are refused
+(CSG export nests them 2 deep).  Code that walks the resulting :class:`Shape` graph must not
+recurse per level either.
+
+``.scad`` programs are exported by the ``openscad`` binary first: :mod:`clcsg.io.scad`.
 """
 
 from __future__ import annotations
@@ -68,6 +77,7 @@ import os
 import re
 import warnings
 from dataclasses import dataclass
+from types import GeneratorType
 
 import numpy as np
 
@@ -75,10 +85,18 @@ from ..model.csg import Difference, Intersection, Shape, Transformed, Union
 from ..errors import SceneError
 from ..model.scene import Scene
 
-__all__ = ["load_csg", "parse_csg", "OpenScadWarning", "WEB_COLORS", "SUPPORTED_NODES", "MAX_DEPTH"]
+__all__ = [
+    "load_csg", "parse_csg", "OpenScadWarning", "WEB_COLORS", "SUPPORTED_NODES", "MAX_DEPTH", "MAX_NODE_DEPTH",
+]
 
-#: Deepest nesting of blocks and vectors accepted (CSG normalization recurses per level).
+#: Deepest nesting of values (vectors, signs) accepted.  CSG export never nests vectors deeper
+#: than a matrix (2 levels); values are parsed recursively, so this stays far below Python's
+#: recursion limit.
 MAX_DEPTH = 100
+
+#: Deepest nesting of nodes (blocks, single children) accepted.  Nodes are parsed and evaluated
+#: with explicit stacks, not recursion; the limit only bounds memory for absurd input.
+MAX_NODE_DEPTH = 100_000
 
 
 class OpenScadWarning(UserWarning):
@@ -421,6 +439,38 @@ def _tokenize(src: _Source) -> list[_Token]:
     return out
 
 
+def _run(gen):
+    """Drive a generator that yields sub-generators (calls) and returns a result.
+
+    A call ``x = yield sub`` runs ``sub`` to completion and sends its return value back as
+    ``x``; the pending generators live on a list, so arbitrarily deep call chains need no
+    Python (or C) stack.  A generator may also yield a non-generator request, which is
+    handed to ``handle(request)``; that returns a value to send back or a generator to run.
+    """
+    return _trampoline(gen, None)
+
+
+def _trampoline(gen, handle):
+    stack = [gen]
+    value = None
+    while True:
+        try:
+            req = stack[-1].send(value)
+        except StopIteration as stop:
+            stack.pop()
+            if not stack:
+                return stop.value
+            value = stop.value
+            continue
+        if type(req) is not GeneratorType:
+            req = handle(req)
+            if type(req) is not GeneratorType:
+                value = req
+                continue
+        stack.append(req)
+        value = None
+
+
 # -- syntax tree ------------------------------------------------------------------------------
 @dataclass
 class _Arg:
@@ -489,21 +539,28 @@ class _Parser:
     def enter(self, tok: _Token, what: str = "depth"):
         d = getattr(self, what) + 1
         setattr(self, what, d)
-        if d > MAX_DEPTH:
+        limit = MAX_NODE_DEPTH if what == "depth" else MAX_DEPTH
+        if d > limit:
             kind = "nodes" if what == "depth" else "values"
-            raise self.src.error(tok.pos, f"{kind} nested deeper than {MAX_DEPTH} levels are not supported")
+            raise self.src.error(tok.pos, f"{kind} nested deeper than {limit} levels are not supported")
 
     def leave(self, what: str = "depth"):
         setattr(self, what, getattr(self, what) - 1)
 
     # grammar
+    #
+    # statements(), statement() and instantiation() are the recursive-descent rules written as
+    # generators: where a rule needs a sub-rule it yields the sub-rule's generator and _run()
+    # sends back its result.  _run() keeps the pending rules on an explicit stack, so the
+    # nesting depth of the input is bounded by MAX_NODE_DEPTH, not by Python's recursion limit
+    # (``yield from`` would recurse in C once per level).
     def parse_file(self) -> list[_Node]:
-        nodes = self.statements(end=None)
+        nodes = _run(self.statements(end=None))
         if self.tok.kind != "eof":  # pragma: no cover - statements() stops only at eof here
             self.fail("a statement")
         return nodes
 
-    def statements(self, end: str | None) -> list[_Node]:
+    def statements(self, end: str | None):
         out: list[_Node] = []
         while True:
             t = self.tok
@@ -513,9 +570,14 @@ class _Parser:
                 return out
             if end is not None and self.is_punct(end):
                 return out
-            out.extend(self.statement())
+            if self.is_punct(";"):  # statement() inlined for the commonest cases
+                self.advance()
+            elif t.kind == "id":
+                out.append((yield self.instantiation()))
+            else:
+                out.extend((yield self.statement()))
 
-    def statement(self) -> list[_Node]:
+    def statement(self):
         t = self.tok
         if self.is_punct(";"):
             self.advance()
@@ -523,13 +585,13 @@ class _Parser:
         if self.is_punct("{"):
             self.enter(t)
             self.advance()
-            body = self.statements("}")
+            body = yield self.statements("}")
             self.expect("}")
             self.leave()
             return body
-        return [self.instantiation()]
+        return [(yield self.instantiation())]
 
-    def instantiation(self) -> _Node:
+    def instantiation(self):
         mods = ""
         while self.tok.kind == "punct" and self.tok.text in "*%!#":
             mods += self.advance().text
@@ -554,13 +616,13 @@ class _Parser:
         elif self.is_punct("{"):
             self.enter(c)
             self.advance()
-            node.children = self.statements("}")
+            node.children = yield self.statements("}")
             self.expect("}")
             self.leave()
             node.has_children_block = True
         elif c.kind == "id" or (c.kind == "punct" and c.text in "*%!#"):
             self.enter(c)
-            node.children = [self.instantiation()]
+            node.children = [(yield self.instantiation())]
             self.leave()
             node.has_children_block = True
         else:
@@ -744,15 +806,28 @@ class _Evaluator:
             if n.name not in _PRIMITIVES:  # OpenSCAD does not instantiate a primitive's children
                 stack.extend(reversed(n.children))
 
-    def children(self, node: _Node, ctx: _Ctx) -> list[Shape | None]:
+    # The tree is evaluated without recursion: the n_* methods of nodes with children are
+    # generators that yield ``(child, ctx)`` requests, or the generator of children(), and get
+    # the child's shape sent back; node() drives them with an explicit stack (_trampoline).
+    def children(self, node: _Node, ctx: _Ctx):
         """The children that take part (not disabled, not background), evaluated."""
-        return [self.node(c, ctx) for c in node.children if not (c.disabled or c.background)]
+        out = []
+        for c in node.children:
+            if not (c.disabled or c.background):
+                out.append((yield (c, ctx)))
+        return out
 
     def union_of(self, nodes: list[_Node], ctx: _Ctx) -> Shape | None:
         shapes = [self.node(c, ctx) for c in nodes if not (c.disabled or c.background)]
         return _union(shapes)
 
     def node(self, node: _Node, ctx: _Ctx) -> Shape | None:
+        r = self._start((node, ctx))
+        return _trampoline(r, self._start) if type(r) is GeneratorType else r
+
+    def _start(self, request):
+        """Evaluate a primitive, or return the generator that evaluates a node with children."""
+        node, ctx = request
         method = getattr(self, "n_" + node.name, None) if node.name in _PARAMS else None
         if method is None:
             if node.name in _SOURCE_MODULES:
@@ -763,14 +838,14 @@ class _Evaluator:
     # Booleans and groups
     def n_group(self, node, ctx):
         self.bind(node)
-        return _union(self.children(node, ctx))
+        return _union((yield self.children(node, ctx)))
 
     n_union = n_group
     n_render = n_group
 
     def n_difference(self, node, ctx):
         self.bind(node)
-        kids = self.children(node, ctx)
+        kids = yield self.children(node, ctx)
         if not kids or kids[0] is None:
             return None
         rest = [k for k in kids[1:] if k is not None]
@@ -778,7 +853,7 @@ class _Evaluator:
 
     def n_intersection(self, node, ctx):
         self.bind(node)
-        kids = self.children(node, ctx)
+        kids = yield self.children(node, ctx)
         if not kids or any(k is None for k in kids):
             return None
         return Intersection(kids) if len(kids) > 1 else kids[0]
@@ -786,7 +861,7 @@ class _Evaluator:
     # transform
     def n_multmatrix(self, node, ctx):
         p = self.bind(node)
-        child = _union(self.children(node, ctx))
+        child = _union((yield self.children(node, ctx)))
         m = np.eye(4)
         raw = p.get("m")
         if isinstance(raw, list):
@@ -860,7 +935,7 @@ class _Evaluator:
         # OpenSCAD: the outermost color wins (a color node only colors what has none yet)
         if color is not None and ctx.color is None:
             ctx = _Ctx(color)
-        return _union(self.children(node, ctx))
+        return _union((yield self.children(node, ctx)))
 
     # primitives
     def _no_children(self, node):

@@ -19,6 +19,18 @@ is a :class:`~clcsg.csg.Primitive`, ``union`` / ``intersection`` / ``difference`
 it finds nodes with more than one parent (by identity) and writes them once under ``defs``.
 Floats are written with ``repr`` precision, so a saved graph loads back bit for bit.
 
+Deep chains: loading and saving use explicit stacks, not recursion, so the depth of the graph
+is not limited by Python's recursion limit.  JSON text is: Python's ``json`` module recurses
+once per array and object and cannot read the ~2000 levels of 1,000 nested operations
+(``$: nesting too deep``).  Write deep chains flat, one level per def::
+
+    "defs": {"d0": {"box": {"size": 1}},
+             "d1": {"difference": [{"ref": "d0"}, {"sphere": {"radius": 0.1}}]}, ...},
+    "root": {"ref": "d1000"}
+
+:func:`scene_to_dict` does this by itself: below :data:`SAVE_DEPTH` nested operations the
+rest of a chain is written as a def (used once, so it loads back to the same graph).
+
 Every problem is a :class:`~clcsg.errors.SceneError` (``TransformError`` for bad transforms)
 with a one-line message ``<file>: <json path>: <reason>``, e.g.
 ``part.json: $.root.difference[1].cylinder.radius: must be positive, got -1``.
@@ -34,6 +46,7 @@ import math
 import numbers
 import os
 import re
+from types import GeneratorType
 from typing import Any
 
 import numpy as np
@@ -66,6 +79,12 @@ NODE_EXTRA_KEYS = ("transform", "color", "comment")
 
 #: line width of :func:`dumps`
 WIDTH = 96
+
+#: deepest nesting of operations that :func:`scene_to_dict` writes into one JSON object; a
+#: deeper chain continues in a def (``{"ref": ...}``), so that saved files stay within the
+#: nesting that Python's ``json`` module can read (about 1000 levels of arrays and objects,
+#: two per operation)
+SAVE_DEPTH = 100
 
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _HEX_COLOR = re.compile(r"#([0-9a-fA-F]{6}|[0-9a-fA-F]{8})\Z")
@@ -212,6 +231,34 @@ def _known_kinds() -> str:
 _BUILDING = object()
 
 
+class _KeyCheck:
+    """check_values' stack entry for an object key (checked before the key's value)."""
+
+    __slots__ = ("key",)
+
+    def __init__(self, key):
+        self.key = key
+
+
+def _run(gen):
+    """Run a generator that yields sub-generators (``x = yield sub`` runs ``sub`` and sends
+    back its return value) with an explicit stack instead of recursion; return its result."""
+    stack = [gen]
+    value = None
+    while True:
+        try:
+            sub = stack[-1].send(value)
+        except StopIteration as stop:
+            stack.pop()
+            if not stack:
+                return stop.value
+            value = stop.value
+            continue
+        assert type(sub) is GeneratorType
+        stack.append(sub)
+        value = None
+
+
 class _Loader:
     def __init__(self, source: str):
         self.source = source
@@ -224,19 +271,29 @@ class _Loader:
 
     # values that JSON cannot hold or that Python's json accepts anyway
     def check_values(self, v, path: str):
+        """Depth-first, in document order, with an explicit stack (no recursion)."""
+        todo = [(v, path)]
+        while todo:
+            v, path = todo.pop()
+            if isinstance(v, _KeyCheck):  # an object key, checked just before its value
+                if not isinstance(v.key, str):
+                    self.fail(path, f"object keys must be strings, got {_jtype(v.key)}")
+                continue
+            self.check_value(v, path, todo)
+
+    def check_value(self, v, path: str, todo: list):
         if isinstance(v, _BadConstant):
             self.fail(path, f"{v.token} is not allowed (JSON numbers must be finite)")
         if isinstance(v, dict):
             dup = getattr(v, "duplicate", None)
             if dup is not None:
                 self.fail(_key(path, dup), f"duplicate key {dup!r}")
-            for k, x in v.items():
-                if not isinstance(k, str):
-                    self.fail(path, f"object keys must be strings, got {_jtype(k)}")
-                self.check_values(x, _key(path, k))
+            for k, x in reversed(list(v.items())):
+                todo.append((x, _key(path, k)))
+                todo.append((_KeyCheck(k), path))
         elif isinstance(v, (list, tuple)):
-            for i, x in enumerate(v):
-                self.check_values(x, _idx(path, i))
+            for i in range(len(v) - 1, -1, -1):
+                todo.append((v[i], _idx(path, i)))
         elif _is_number(v):
             try:
                 ok = math.isfinite(float(v))
@@ -344,7 +401,18 @@ class _Loader:
         return list(v)
 
     # -- nodes
+    #
+    # _node() and _ref() are recursive descent written as generators: ``x = yield gen`` runs
+    # the sub-node ``gen`` and sends back its shape.  _run() keeps the pending nodes on an
+    # explicit stack, so a deep chain (nested operations or a long chain of refs through
+    # "defs") needs no Python recursion.
     def node(self, v, path) -> Shape:
+        return _run(self._node(v, path))
+
+    def ref(self, name, path) -> Shape:
+        return _run(self._ref(name, path))
+
+    def _node(self, v, path):
         if not isinstance(v, dict):
             self.fail(path, f"expected a node object, got {_jtype(v)}")
         kinds = [k for k in v if k in solids.KINDS or k in OPERATIONS or k in UNARY or k == "ref"]
@@ -376,18 +444,21 @@ class _Loader:
                 self.fail(kpath, f"expected a list of nodes, got {_jtype(arg)}")
             if not arg and kind != "union":
                 self.fail(kpath, f"{kind} needs at least one operand")
-            shape = OPERATIONS[kind]([self.node(c, _idx(kpath, i)) for i, c in enumerate(arg)])
+            operands = []
+            for i, c in enumerate(arg):
+                operands.append((yield self._node(c, _idx(kpath, i))))
+            shape = OPERATIONS[kind](operands)
         elif kind == "complement":
-            shape = Complement(self.node(arg, kpath))
+            shape = Complement((yield self._node(arg, kpath)))
         else:
             if not isinstance(arg, str):
                 self.fail(kpath, f"expected the name of a definition, got {_jtype(arg)}")
-            shape = self.ref(arg, kpath)
+            shape = yield self._ref(arg, kpath)
         if "transform" in v:
             shape = self.transform(shape, v["transform"], _key(path, "transform"))
         return shape
 
-    def ref(self, name, path) -> Shape:
+    def _ref(self, name, path):
         if name not in self.defs:
             known = f"defined: {', '.join(map(repr, self.defs))}" if self.defs else 'the scene has no "defs"'
             self.fail(path, f"undefined ref {name!r}{_suggest(name, self.defs)}; {known}")
@@ -399,7 +470,7 @@ class _Loader:
             return got
         self.built[name] = _BUILDING
         self.stack.append(name)
-        shape = self.node(self.defs[name], _key("$.defs", name))
+        shape = yield self._node(self.defs[name], _key("$.defs", name))
         self.stack.pop()
         self.built[name] = shape
         return shape
@@ -547,13 +618,18 @@ class _Saver:
         return out
 
     def node(self, node: Shape, top=False) -> dict:
+        return _run(self._node(node, top, 0))
+
+    # a generator like _Loader._node (no recursion); ``depth`` counts the operations above
+    # ``node`` in the object being written: at SAVE_DEPTH the subtree becomes a def
+    def _node(self, node: Shape, top: bool, depth: int):
         if id(node) in self.shared and not top:
             name = self.names.get(id(node))
             if name is None:
                 name = self.new_name(node)
                 self.names[id(node)] = name
                 self.defs[name] = None  # reserve the slot: defs keep first-use order
-                self.defs[name] = self.node(node, top=True)
+                self.defs[name] = yield self._node(node, True, 0)
             return {"ref": name}
         steps = []
         cur = node
@@ -561,7 +637,7 @@ class _Saver:
             steps.append(_step(cur.matrix))
             cur = cur.operand
         if steps:
-            out = self.node(cur)
+            out = yield self._node(cur, False, depth)
             out["transform"] = steps[::-1]  # innermost edge is applied first
             return out
         if isinstance(node, Primitive):
@@ -570,11 +646,21 @@ class _Saver:
                 c = [_jnum(x) for x in node.color]
                 out["color"] = c[:3] if c[3] == 1.0 else c
             return out
+        if depth >= SAVE_DEPTH and not top:
+            # too deep for one JSON object (json.loads recurses per level): the rest of the
+            # chain is written as a def, used once, which loads back to the same graph
+            name = self.new_name(node)
+            self.defs[name] = None
+            self.defs[name] = yield self._node(node, True, 0)
+            return {"ref": name}
         for name, cls in OPERATIONS.items():
             if type(node) is cls:
-                return {name: [self.node(c) for c in node.operands]}
+                operands = []
+                for c in node.operands:
+                    operands.append((yield self._node(c, False, depth + 1)))
+                return {name: operands}
         if type(node) is Complement:
-            return {"complement": self.node(node.operand)}
+            return {"complement": (yield self._node(node.operand, False, depth + 1))}
         self.fail(f"unknown CSG node type {type(node).__name__}")
 
     def new_name(self, node) -> str:
