@@ -1,4 +1,5 @@
-"""The device sees exactly what the host packed, and quadric.h agrees with clcsg/quadric.py."""
+"""The device headers agree with the float64 references: quadric.h with clcsg/model/quadric.py,
+tape.h (interpreters and pruning) with clcsg/compile/interpret.py."""
 
 from __future__ import annotations
 
@@ -17,38 +18,6 @@ def _out(ctx, n, dtype):
     return np.zeros(n, dtype=dtype), cl.Buffer(ctx.ctx, cl.mem_flags.WRITE_ONLY, max(1, n) * np.dtype(dtype).itemsize)
 
 
-def test_kernel_reads_back_packed_buffers(cl_context):
-    shape = (clcsg.box(2, color=(1, 0, 0)) - clcsg.cylinder(3, 0.5)) | clcsg.sphere(1, center=(0, 0, 2), color=(0, 0.5, 1, 0.5))
-    dnf = clcsg.Scene(shape).normalize()
-    real = real_dtype(cl_context)
-    p = pack(dnf, real)
-    b = SceneBuffers(cl_context, p)
-    prg = build(cl_context, "cl/layout_check.cl", real=real)
-    q = cl_context.queue
-    U, L, T = len(p.quadrics), len(p.literals), len(p.terms)
-    coef, bc = _out(cl_context, U * 10, real)
-    lam, bl = _out(cl_context, U * 2, real)
-    col, bcol = _out(cl_context, U * 4, np.float32)
-    cl.Kernel(prg, "read_quadrics")(q, (U,), None, b.quadrics, bc, bl, bcol)
-    lits, blit = _out(cl_context, L * 2, np.int32)
-    cl.Kernel(prg, "read_literals")(q, (L,), None, b.literals, blit)
-    ranges, br = _out(cl_context, T * 2, np.int32)
-    bounds, bb = _out(cl_context, T * 6, real)
-    cl.Kernel(prg, "read_terms")(q, (T,), None, b.terms, br, bb)
-    for host, buf in ((coef, bc), (lam, bl), (col, bcol), (lits, blit), (ranges, br), (bounds, bb)):
-        cl.enqueue_copy(q, host, buf)
-    np.testing.assert_array_equal(coef.reshape(U, 10), p.quadrics["coef"])
-    np.testing.assert_array_equal(lam.reshape(U, 2), np.column_stack([p.quadrics["lam_min"], p.quadrics["lam_max"]]))
-    np.testing.assert_array_equal(col.reshape(U, 4), p.quadrics["color"])
-    np.testing.assert_array_equal(lits.reshape(L, 2), np.column_stack([p.literals["quadric"], p.literals["sign"]]))
-    np.testing.assert_array_equal(ranges.reshape(T, 2), np.column_stack([p.terms["first"], p.terms["count"]]))
-    np.testing.assert_array_equal(bounds.reshape(T, 6), np.column_stack([p.terms["lo"], p.terms["hi"]]))
-    # and the packing itself is faithful: literal table = DNF terms, colors per quadric
-    flat = [lit for t in dnf.terms for lit in t]
-    assert [tuple(x) for x in lits.reshape(L, 2)] == flat
-    assert {tuple(np.round(c, 6)) for c in col.reshape(U, 4)} >= {(1, 0, 0, 1), (0, 0.5, 1, 0.5)}
-
-
 QUADRICS = {
     "sphere": Quadric.sphere((0.3, -0.2, 0.1), 1.2),
     "cylinder": Quadric.cylinder((1, 1, 0), 0.7),
@@ -64,9 +33,9 @@ QUADRICS = {
 def test_quadric_header_matches_reference(name, cl_context):
     real = real_dtype(cl_context)
     qd = QUADRICS[name]
-    dnf = clcsg.Scene(clcsg.quadric(qd.matrix) & clcsg.box(4)).normalize()
-    p = pack(dnf, real, origin=np.zeros(3))
-    qi = next(i for i in range(dnf.n_quadrics) if np.allclose(np.abs(dnf.quadrics[i]), np.abs(qd.canonical()[0].matrix)))
+    tape = clcsg.Scene(clcsg.quadric(qd.matrix) & clcsg.box(4)).compile()
+    p = pack(tape, real, origin=np.zeros(3))
+    qi = next(i for i in range(tape.n_quadrics) if np.allclose(np.abs(tape.quadrics[i]), np.abs(qd.canonical()[0].matrix)))
     K = Quadric(p.local_matrices[qi])
     rng = np.random.default_rng(7)
     n = 4096
@@ -98,3 +67,76 @@ def test_quadric_header_matches_reference(name, cl_context):
     both = np.isfinite(ref) & np.isfinite(got)
     np.testing.assert_allclose(got[both], ref[both], rtol=1e-6, atol=1e-6)
     assert np.mean(np.isfinite(got) == np.isfinite(ref)) > 0.999
+
+
+TAPE_SCENES = {
+    "drilled_block": clcsg.box(2) - clcsg.cylinder(3, 0.5) - clcsg.cylinder(3, 0.5, axis=(1, 0, 0)),
+    "spheres_and_boxes": (clcsg.sphere(1) | clcsg.box(1, center=(0.8, 0, 0))) & ~clcsg.box((0.5, 3, 3)).rotate((0, 0, 1), 30),
+    "nested": clcsg.difference(clcsg.box(3), clcsg.difference(clcsg.box(2.5), clcsg.difference(clcsg.box(2), clcsg.sphere(1.2)))),
+}
+
+
+@pytest.mark.parametrize("name", sorted(TAPE_SCENES))
+def test_tape_header_matches_reference(name, cl_context):
+    """tape_eval / tape_member at random points and tape_prune over random regions (balls and
+    oriented boxes, with and without substitution) give what the numpy reference gives,
+    pruned rows included, and every pruned tape agrees with the original inside its region."""
+    from clcsg.cl.records import tape_rows, upload
+    from clcsg.compile import interpret
+
+    real = real_dtype(cl_context)
+    tape = clcsg.Scene(TAPE_SCENES[name]).compile()
+    p = pack(tape, real, origin=np.zeros(3))
+    b = SceneBuffers(cl_context, p)
+    prg = build(cl_context, "cl/tape_check.cl", {"TAPE_REGS": tape.n_regs}, real=real)
+    q = cl_context.queue
+    rng = np.random.default_rng(3)
+    n = len(tape.ops)
+    for self_q in (-1, int(tape.leaves[0, 2]), int(tape.leaves[-1, 2])):
+        pts = rng.uniform(-2, 2, (2000, 3))
+        f, bf = _out(cl_context, 2 * len(pts), real)
+        bits, bb = _out(cl_context, len(pts), np.uint32)
+        cl.Kernel(prg, "eval")(q, (len(pts),), None, b.quadrics, b.tape, np.int32(n), np.int32(self_q),
+                               upload(cl_context, pts.astype(real)), np.int32(len(pts)), bf, bb)
+        cl.enqueue_copy(q, f, bf)
+        cl.enqueue_copy(q, bits, bb)
+        fm, fp = interpret.evaluate(tape.ops, p.local_matrices, pts, self_q)
+        rtol = 1e-9 if real == np.float64 else 1e-4
+        np.testing.assert_allclose(f.reshape(-1, 2), np.column_stack([fm, fp]), rtol=rtol, atol=rtol)
+        mm, mp = interpret.member(tape.ops, p.local_matrices, pts, self_q)
+        np.testing.assert_array_equal(bits, mm.astype(np.uint32) | (mp.astype(np.uint32) << 1))
+        # regions: balls and oriented boxes of many sizes
+        m = 300
+        c = rng.uniform(-2, 2, (m, 3))
+        axes = rng.normal(size=(m, 3, 3)) * rng.uniform(0, 0.6, (m, 1, 1)) * (rng.random((m, 1, 1)) < 0.5)
+        rho = rng.uniform(0, 0.8, m)
+        regions = np.column_stack([c, axes.reshape(m, 9), rho]).astype(real)
+        out = np.zeros(m * (n + 1), dtype=p.tape.dtype)
+        bo = cl.Buffer(cl_context.ctx, cl.mem_flags.READ_WRITE, out.nbytes)
+        res, br = _out(cl_context, 4 * m, np.int32)
+        cl.Kernel(prg, "prune")(q, (m,), None, b.quadrics, b.tape, np.int32(n), np.int32(self_q),
+                                upload(cl_context, regions), np.int32(m), bo, br)
+        cl.enqueue_copy(q, out, bo)
+        cl.enqueue_copy(q, res, br)
+        res = res.reshape(m, 4)
+        rows = out.view(np.int32).reshape(m, n + 1, 4)
+        assert res[:, 3].all(), "the decide-only pass disagrees with the writing pass"
+        same = 0
+        for i in range(m):
+            got = rows[i, res[i, 1]:res[i, 1] + res[i, 2]]
+            ref, decided, _ = interpret.prune(tape.ops, p.local_matrices, c[i], rho[i], self_q, axes=axes[i])
+            if real == np.float64:
+                np.testing.assert_array_equal(got, ref)
+                assert decided == res[i, 0]
+                same += 1
+            # the pruned tape is the tape inside the region: check at points of the region
+            u = rng.uniform(-1, 1, (64, 3))
+            w = rng.normal(size=(64, 3))
+            w *= (rho[i] * rng.random(64) / np.linalg.norm(w, axis=1))[:, None]
+            x = c[i] + u @ axes[i] + w
+            a0, a1 = interpret.member(tape.ops, p.local_matrices, x, self_q)
+            b0, b1 = interpret.member(got, p.local_matrices, x, self_q)
+            assert np.array_equal(a0, b0) and np.array_equal(a1, b1)
+            if res[i, 0] and self_q >= 0:
+                assert np.all((a0 != a1) == (res[i, 0] < 0))
+        assert same == m or real != np.float64

@@ -10,9 +10,10 @@ import clcsg
 from clcsg.rendering.camera import Camera, orbit
 from clcsg.errors import UsageError
 from clcsg.model.quadric import Quadric
-from clcsg.rendering.api import raytrace
+from clcsg import raytrace
 
 import oracle
+import tree_oracle as T
 
 W, H = 96, 72
 
@@ -56,15 +57,16 @@ def _views(dnf):
     return views
 
 
-def compare(img, dnf, cam, rel=None):
-    """Kernel vs oracle: masks and ids identical away from fragile pixels; depth within 1e-6
-    relative with double (2e-5 when the float32 path is forced, CLCSG_PRECISION=float)."""
+def compare(img, shape, tape, cam, rel=None):
+    """Kernel vs the tree oracle: masks, quadric and primitive ids identical away from fragile
+    pixels; depth within 1e-6 relative with double (2e-5 when the float32 path is forced,
+    CLCSG_PRECISION=float)."""
     double = img.stats["precision"] == "double"
     if rel is None:
         rel = 1e-6 if double else 2e-5
     o, d = cam.rays()
-    ref = oracle.cast(dnf, o, d)
-    skip = oracle.fragile(dnf, o, d, rel=1e-9 if double else 1e-5)
+    ref = T.cast(shape, o, d)
+    skip = T.fragile(shape, o, d, rel=1e-9 if double else 1e-5)
     ok = ~skip
     assert skip.mean() < 0.02, f"too many fragile pixels: {skip.sum()}"
     # float32: rays grazing a silhouette (discriminant ~ 0) may also flip
@@ -74,30 +76,56 @@ def compare(img, dnf, cam, rel=None):
     both = ref.mask & img.mask & ok
     rd = np.abs(img.depth[both].astype(np.float64) - ref.depth[both]) / ref.depth[both]
     assert rd.max(initial=0) <= rel, f"depth rel diff {rd.max()}"
-    bad_ids = both & (img.ids != ref.quadric)
+    ids = T.quadric_table(shape).match(tape.quadrics)[img.ids]
+    bad_ids = both & (ids != ref.quadric)
     assert bad_ids.sum() <= allowed, f"{bad_ids.sum()} id mismatches"
+    bad_prims = both & (img.primitives != ref.primitive)
+    assert bad_prims.sum() <= allowed, f"{bad_prims.sum()} primitive mismatches at {np.argwhere(bad_prims)[:5].tolist()}"
     assert np.all(np.isinf(img.depth[~img.mask])) and np.all(img.ids[~img.mask] == -1)
     return ref
 
 
+@pytest.mark.parametrize("normal_form", ["tree", "dnf"])
 @pytest.mark.parametrize("name", sorted(SCENES))
-def test_raytrace_matches_oracle(cl_context, name):
-    dnf = clcsg.Scene(SCENES[name]).normalize()
-    for cam in _views(dnf):
-        img = raytrace(dnf, cam, device=cl_context)
-        ref = compare(img, dnf, cam)
+def test_raytrace_matches_oracle(cl_context, name, normal_form):
+    shape = SCENES[name]
+    tape = clcsg.Scene(shape).compile(normal_form)
+    for cam in _views(tape):
+        img = raytrace(tape, cam, device=cl_context)
+        ref = compare(img, shape, tape, cam)
         assert ref.mask.any()
 
 
+def test_tree_and_dnf_images_are_identical(cl_context):
+    shape = SCENES["box_minus_3_cylinders"] | SCENES["union_of_spheres"].translate((0, 0, 1.5))
+    tree, dnf = (clcsg.Scene(shape).compile(nf) for nf in ("tree", "dnf"))
+    assert dnf.shape == "dnf" and dnf.stats["terms"] > 1
+    for cam in _views(tree)[:3]:
+        a, b = raytrace(tree, cam, device=cl_context), raytrace(dnf, cam, device=cl_context)
+        assert np.array_equal(a.rgba, b.rgba) and np.array_equal(a.ids, b.ids) and np.array_equal(a.depth, b.depth)
+
+
 def test_touching_boxes_shared_face_is_never_visible(cl_context):
-    dnf = clcsg.Scene(SCENES["touching_boxes"]).normalize()
+    tape = clcsg.Scene(SCENES["touching_boxes"]).compile()
     pts = np.array([[0.5, 0.1, 0.2], [0.5, -0.3, 0.4], [0.5, 0.2, -0.1]])
-    vals = dnf.values(pts)
-    shared = [qi for qi in range(dnf.n_quadrics) if np.all(np.abs(vals[:, qi]) < 1e-12)]
+    shared = [qi for qi in range(tape.n_quadrics) if np.all(np.abs(clcsg.Quadric(tape.quadrics[qi]).value(pts)) < 1e-12)]
     assert len(shared) == 1
-    for cam in orbit(dnf.bound, 5, elevation=20, width=48, height=36):
-        img = raytrace(dnf, cam, device=cl_context)
+    for cam in orbit(tape.bound, 5, elevation=20, width=48, height=36):
+        img = raytrace(tape, cam, device=cl_context)
         assert img.mask.any() and not np.any(img.ids == shared[0])
+
+
+def test_views_from_inside_match_the_oracle(cl_context):
+    """The eye inside multi-part solids: the tree ray tracer sees the inner faces exactly."""
+    hollow = clcsg.box(4) - clcsg.box(3) - clcsg.sphere(0.6, center=(1.8, 0, 0))
+    parts = (clcsg.box(2, color=(1, 0, 0)) | clcsg.box(2, center=(1.5, 0.5, 0), color=(0, 1, 0))) - clcsg.sphere(0.5)
+    for shape, eye, target in [(hollow, (0.3, -0.4, 0.2), (2, 0.3, 0.1)), (parts, (0.8, 0.2, 0.1), (2.4, 1, 0)),
+                               (parts, (0.0, 0.0, 0.0), (1, -1, 0.3))]:
+        tape = clcsg.Scene(shape).compile()
+        cam = Camera.look_at(eye, target, fov=80, width=W, height=H)
+        img = raytrace(tape, cam, device=cl_context)
+        ref = compare(img, shape, tape, cam)
+        assert ref.mask.mean() > 0.5
 
 
 def test_camera_contract_sphere_center_pixel(cl_context):
@@ -108,7 +136,7 @@ def test_camera_contract_sphere_center_pixel(cl_context):
     img = raytrace(clcsg.sphere(r, center=c), cam, device=cl_context)
     i, j = cam.pixel_of(c)
     assert (i, j) == (24, 32)
-    assert img.ids[i, j] == 0
+    assert img.ids[i, j] == 0 and img.primitives[i, j] == 0
     assert math.isclose(img.depth[i, j], np.linalg.norm(eye - c) - r, rel_tol=1e-6)
     # the covered region is centered on that pixel
     ii, jj = np.nonzero(img.mask)
@@ -141,7 +169,7 @@ def test_shading_and_background(cl_context, tmp_path):
     assert np.mean(fg[:, 2]) > np.mean(fg[:, 0]) and fg[:, :3].max() > 100
     # a surface facing the headlight is brighter than a grazing one
     o, d = cam.rays()
-    ref = oracle.cast(sh, o, d)
+    ref = T.cast(sh, o, d)
     facing = -(ref.normal * d).sum(-1)
     lum = img.rgba[..., :3].astype(float).sum(-1)
     m = img.mask
@@ -180,39 +208,11 @@ def test_default_camera_fits_scene(cl_context):
     assert ii.min() > 0 and jj.min() > 0 and ii.max() < 479 and jj.max() < 639
 
 
-def test_view_record_layout(cl_context):
-    """The numpy view dtype mirrors view_rec (kernels/shade.h) field by field."""
-    import pyopencl as cl
-
-    from clcsg.cl import programs
-    from clcsg.rendering.raytracer import view_dtype
-
-    names = view_dtype(np.float64).names
-    src = '#include "shade.h"\n__kernel void k(__global long *out) {\n'
-    src += "out[0] = sizeof(view_rec);\n"
-    for n, name in enumerate(names):
-        src += f"out[{n + 1}] = (long)&(((view_rec *)0)->{name});\n"
-    src += "}\n"
-    prg = cl.Program(cl_context.ctx, src).build(options=["-DCLCSG_DOUBLE", "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("rendering")])
-    out = np.zeros(len(names) + 1, dtype=np.int64)
-    buf = cl.Buffer(cl_context.ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    prg.k(cl_context.queue, (1,), None, buf)
-    cl.enqueue_copy(cl_context.queue, out, buf)
-    dt = view_dtype(np.float64)
-    assert out[0] == dt.itemsize
-    assert list(out[1:]) == [dt.fields[n][1] for n in names]
-
-
 def test_float_precision_close_to_double(cl_context):
-    dnf = clcsg.Scene(SCENES["box_minus_3_cylinders"]).normalize()
-    cam = Camera.fit(dnf, 64, 48)
-    try:
-        img = raytrace(dnf, cam, device=cl_context, precision="float")
-    except Exception as e:  # pragma: no cover - depends on kernels/layout.h
-        if "redefinition" in str(e):
-            pytest.xfail("kernels/layout.h does not compile without CLCSG_DOUBLE (sample_rec defined twice)")
-        raise
-    ref = raytrace(dnf, cam, device=cl_context)
+    tape = clcsg.Scene(SCENES["box_minus_3_cylinders"]).compile()
+    cam = Camera.fit(tape, 64, 48)
+    img = raytrace(tape, cam, device=cl_context, precision="float")
+    ref = raytrace(tape, cam, device=cl_context)
     assert (img.mask != ref.mask).mean() < 0.01
     both = img.mask & ref.mask
     assert np.median(np.abs(img.depth[both] - ref.depth[both]) / ref.depth[both]) < 1e-5

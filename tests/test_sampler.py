@@ -1,26 +1,31 @@
-"""The sampler's guarantees, checked against float64 numpy oracles on PoCL.
+"""The sampler's guarantees on the CSG tape, checked against the independent float64 tree
+oracle (tests/tree_oracle.py) on PoCL, for the tree and, where it fits, the DNF shape:
 
-* every sample lies on its quadric and on the CSG surface (tests/coverage.py);
-* every exact surface point (ray casts from many directions, tests/oracle.py) has a sample on
+* every sample lies on its quadric and on the CSG surface, with the primitive whose boundary
+  holds it;
+* every exact surface point (random lines, hidden and inner surfaces included) has a sample on
   the same quadric within the radius;
+* clip programs decide the CSG surface exactly within every splat ball;
 * the covering is not wasteful; forced buffer overflows change nothing.
 """
 
 from __future__ import annotations
 
 import math
+import types
 import warnings
 
 import numpy as np
 import pytest
 
 import clcsg
-from clcsg.sampling.sampler import sample
-from clcsg.sampling.samples import read_ply
+from clcsg.compile.interpret import member
+from clcsg.io.ply import read_samples
 from clcsg.model.solids import _make
+from clcsg.sampling.sampler import sample
 
-from coverage import assert_same_samples, surface_residuals, uncovered
-from oracle import surface_points
+import tree_oracle as T
+from coverage import assert_same_samples, uncovered
 
 B = clcsg.box(2)
 
@@ -79,32 +84,45 @@ SCENES = {
 MM_SCENES = ["drilled_block", "rounded_cube", "flush_tops", "hyperboloid_paraboloid", "sharp_tips"]
 
 
-def _check(shape, radius, cl_context, n_dirs=20, res=56):
+def oracle_ids(shape, samples):
+    """The samples with their quadric ids mapped onto the oracle's quadric table."""
+    ids = T.quadric_table(shape).match(samples.tape.quadrics)
+    return types.SimpleNamespace(positions=samples.positions, quadrics=ids[samples.quadrics])
+
+
+def _check(shape, radius, cl_context, normal_form="tree", n_lines=20000):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        s = sample(shape, radius, device=cl_context)
+        s = sample(shape, radius, device=cl_context, normal_form=normal_form)
     assert len(s) > 0
-    size = float(np.linalg.norm(s.dnf.bound[1] - s.dnf.bound[0]))
-    on_q, csg = surface_residuals(s)
+    size = float(np.linalg.norm(s.bound[1] - s.bound[0]))
+    Q = s.tape.quadrics[s.quadrics]
+    on_q, on_csg = T.sample_residuals(shape, s.positions, Q, tol=1e-9 * size)
     assert on_q.max() <= 1e-5 * size, f"sample off its quadric by {on_q.max():.3g}"
-    assert csg.max() <= 1e-5 * size, f"sample off the CSG surface by {csg.max():.3g}"
+    assert on_csg.all(), f"{(~on_csg).sum()} samples off the CSG surface, e.g. {s.positions[~on_csg][:3].tolist()}"
     assert np.all(np.isfinite(s.normals)) and np.allclose(np.linalg.norm(s.normals, axis=1), 1.0)
     assert np.all((s.radii > 0) & (s.radii <= radius * (1 + 1e-12)))
-    ref = surface_points(s.dnf, n_dirs=n_dirs, res=res)
+    # the primitive whose boundary holds the sample (where no rounding-level change decides it)
+    exact = T.primitive_at(shape, s.positions, Q)
+    loose = T.primitive_at(shape, s.positions, Q, tol=1e-9 * size)
+    firm = exact == loose
+    assert np.array_equal(s.primitives[firm], exact[firm])
+    pad = 1e-3 * size
+    ref = T.surface_points(shape, s.bound + [[-pad], [pad]], n_lines=n_lines)
     assert len(ref) > 100
-    missing = uncovered(ref.points, ref.quadrics, s, radius, slack=1e-5)
+    missing = uncovered(ref.points, ref.quadrics, oracle_ids(shape, s), radius, slack=1e-5)
     assert len(missing) == 0, (
         f"{len(missing)} of {len(ref)} surface points have no sample within r on their quadric, "
-        f"e.g. {ref.points[missing[:3]].tolist()} on quadrics {ref.quadrics[missing[:3]].tolist()}"
+        f"e.g. {ref.points[missing[:3]].tolist()}"
     )
-    # the normal is the solid's outward normal: it agrees with the reference normal
     return s
 
 
+@pytest.mark.parametrize("normal_form", ["tree", "dnf"])
 @pytest.mark.parametrize("name", sorted(SCENES))
-def test_guarantees_unit_scale(name, cl_context):
+def test_guarantees_unit_scale(name, normal_form, cl_context):
     shape, radius = SCENES[name]
-    _check(shape, radius, cl_context)
+    _check(shape, radius, cl_context, normal_form)
 
 
 @pytest.mark.parametrize("name", MM_SCENES)
@@ -164,75 +182,93 @@ def test_coincident_geometry_terminates_with_bounded_work(cl_context):
         assert sum(s.stats["cells_per_level"]) < 200 * len(s)
 
 
-def test_forced_overflow_gives_identical_results(cl_context):
-    shape, r = SCENES["drilled_block"]
+@pytest.mark.parametrize("name", ["drilled_block", "shared_surface"])
+def test_forced_overflow_gives_identical_results(name, cl_context):
+    shape, r = SCENES[name]
     big = sample(shape, r, device=cl_context)
-    tiny = sample(shape, r, device=cl_context, capacity=(2, 2))
-    assert tiny.stats["buffer_growths"]["cells"] > 0 and tiny.stats["buffer_growths"]["samples"] > 0
+    tiny = sample(shape, r, device=cl_context, capacity=(2, 2, 2, 2))
+    grown = tiny.stats["buffer_growths"]
+    assert grown["cells"] > 0 and grown["samples"] > 0 and grown["arena"] > 0
+    assert tiny.stats["clip_buffer_growths"] > 0
     assert_same_samples(big, tiny)
 
 
-def _blocks(s, i):
-    """Sample i's clip set as a list of literal sets (blocks separated by quadric -1)."""
-    out, cur = [], set()
-    for q, sg in s.clip_literals[s.clip_first[i]:s.clip_first[i] + s.clip_count[i]]:
-        if q < 0:
-            out.append(cur)
-            cur = set()
-        else:
-            cur.add((int(q), int(sg)))
-    if s.clip_count[i]:
-        out.append(cur)
-    return out
+def _points_near(s, i, rng, n=24):
+    """Points on sample i's quadric inside its splat ball (projected along the normal)."""
+    Kq = clcsg.Quadric(s.tape.quadrics[s.quadrics[i]])
+    p, r = s.positions[i], s.radii[i]
+    g = s.normals[i]
+    u = rng.normal(size=(n, 3))
+    u -= (u @ g)[:, None] * g
+    u *= (r * rng.random(n) ** 0.5 / np.linalg.norm(u, axis=1))[:, None]
+    x = p + u
+    t1, t2 = Kq.intersect_line(x, np.broadcast_to(g, x.shape))
+    t = np.where(np.abs(t1) <= np.abs(np.nan_to_num(t2, nan=np.inf)), t1, t2)
+    y = x + np.nan_to_num(t)[:, None] * g
+    ok = np.isfinite(t) & (np.linalg.norm(y - p, axis=1) <= r)
+    return y[ok]
 
 
-@pytest.mark.parametrize("name", ["drilled_block", "shared_surface", "flush_tops"])
-def test_clip_sets_hold_exactly_the_close_literals(name, cl_context):
-    """Reference in float64: a sample on literal (q, s) is drawn for all terms holding it; a
-    term whose other literals all have d <= -r holds over the whole splat (no clipping); one
-    with a literal d >= r fails over it (no block); every other term is a block of its
-    literals with |d| < r."""
+@pytest.mark.parametrize("name", ["drilled_block", "shared_surface", "flush_tops", "sharp_tips"])
+def test_clip_programs_decide_the_surface_within_the_splat(name, cl_context):
+    """A sample's clip program says "surface" at a point of its quadric inside its splat ball
+    iff the tree oracle does (up to rounding-level ties); no program means all surface."""
     shape, r = SCENES[name]
     s = sample(shape, r, device=cl_context)
-    dnf = s.dnf
-    for i in np.random.default_rng(1).choice(len(s), min(400, len(s)), replace=False):
-        q, sg, rad = int(s.quadrics[i]), int(s.signs[i]), s.radii[i]
-        expect, always = [], False
-        for term in dnf.terms:
-            if (q, sg) not in term:
-                continue
-            d = {(qi, si): si * dnf.quadric(qi).distance(s.positions[i][None])[0] for qi, si in term if qi != q}
-            if all(v <= -rad for v in d.values()):
-                always = True
-            elif not any(v >= rad for v in d.values()):
-                expect.append({lit for lit, v in d.items() if abs(v) < rad})
-        got = _blocks(s, i)
-        if always:
-            assert got == []
+    rng = np.random.default_rng(1)
+    size = float(np.linalg.norm(s.bound[1] - s.bound[0]))
+    checked = 0
+    clipped = np.flatnonzero(s.clip_count > 0)
+    plain = np.flatnonzero(s.clip_count == 0)
+    pick = np.concatenate([rng.choice(clipped, min(150, len(clipped)), replace=False),
+                           rng.choice(plain, min(50, len(plain)), replace=False)])
+    for i in pick:
+        y = _points_near(s, i, rng)
+        if not len(y):
+            continue
+        K = s.tape.quadrics[s.quadrics[i]]
+        truth = T.on_surface(shape, y, np.broadcast_to(K, (len(y), 4, 4)))
+        loose = T.on_surface(shape, y, np.broadcast_to(K, (len(y), 4, 4)), tol=1e-9 * size)
+        firm = truth == loose
+        if s.clip_count[i]:
+            prog = s.clip_ops[s.clip_first[i]:s.clip_first[i] + s.clip_count[i]]
+            neg, pos = member(prog, s.tape.quadrics, y, int(s.quadrics[i]))
+            got = neg != pos
         else:
-            assert sorted(map(sorted, got)) == sorted(map(sorted, expect))
-    # deduplicated: every stored clip set is distinct
+            got = np.ones(len(y), dtype=bool)
+        assert np.array_equal(got[firm], truth[firm]), (name, i)
+        checked += int(firm.sum())
+    assert checked > 1000
+    assert len(clipped) > 0
+    # deduplicated: every stored program is distinct
     spans = {(int(f), int(c)) for f, c in zip(s.clip_first, s.clip_count) if c}
-    assert len(s.clip_literals) == sum(c for _, c in spans)
+    progs = {tuple(map(tuple, s.clip_ops[f:f + c])) for f, c in spans}
+    assert len(progs) == len(spans)
 
 
 def test_stats_have_the_papers_columns(cl_context):
     shape, r = SCENES["rounded_cube"]
     st = sample(shape, r, device=cl_context).stats
-    for k in ("samples", "distance_queries", "clip_indices", "levels", "cells_per_level", "unresolved", "total_s", "subdivide_s"):
+    for k in ("samples", "distance_queries", "leaf_distances", "prune_evaluations", "clip_rows", "levels",
+              "cells_per_level", "tape_mean_per_level", "tape_max_per_level", "unresolved", "total_s", "subdivide_s"):
         assert k in st
     assert st["distance_queries"] > 0 and st["levels"] == len(st["cells_per_level"])
+    assert 0 < st["leaf_distances_per_query"] <= 3
+    assert st["tape_mean_per_level"][-1] < st["tape_mean_per_level"][0]
 
 
 def test_ply_round_trip(tmp_path, cl_context):
-    s = sample(clcsg.sphere(1.0), 0.2, device=cl_context)
+    shape = clcsg.sphere(1.0, color=(1, 0, 0)) | clcsg.box(1, center=(1, 0, 0), color=(0, 0, 1))
+    s = sample(shape, 0.2, device=cl_context)
     path = tmp_path / "s.ply"
     s.to_ply(path)
     head = path.read_bytes()[:200]
     assert head.startswith(b"ply\nformat binary_little_endian 1.0\n")
-    back = read_ply(path)
-    np.testing.assert_allclose(back["positions"], s.positions, rtol=1e-6, atol=1e-6)
+    back = read_samples(path)
+    np.testing.assert_array_equal(back["positions"], s.positions)
     np.testing.assert_array_equal(back["quadrics"], s.quadrics)
+    np.testing.assert_array_equal(back["primitives"], s.primitives)
+    assert {tuple(c) for c in back["colors"]} == {(255, 0, 0), (0, 0, 255)}
 
 
 def test_bad_radius_is_a_usage_error(cl_context):
@@ -242,7 +278,7 @@ def test_bad_radius_is_a_usage_error(cl_context):
 
 
 def test_empty_solid_warns_and_returns_no_samples(cl_context):
-    with pytest.warns(UserWarning, match="no surface"):
+    with pytest.warns(UserWarning, match="empty"):
         s = sample(clcsg.sphere(1) - clcsg.sphere(2), 0.1, device=cl_context)
     assert len(s) == 0
 

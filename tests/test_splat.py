@@ -1,4 +1,4 @@
-"""The splat renderer (kernels/splat.cl + resolve.cl) against the exact ray tracer.
+"""The splat renderer (rendering/splat.cl + resolve.cl) against the exact ray tracer.
 
 Criteria (paper section 6: pixel-perfect, hole-free): the coverage mask equals the ray
 tracer's on >= 99.9 % of the pixels, there is no hole (background where the ray tracer hits)
@@ -19,15 +19,13 @@ from clcsg.rendering.camera import Camera, orbit
 from clcsg.errors import DeviceError, UsageError
 from clcsg.cl.records import pack
 from clcsg.model.quadric import Quadric
-from clcsg.rendering.api import raytrace, render
+from clcsg import raytrace, render
 from clcsg.sampling.samples import Samples
 
-import oracle
+import tree_oracle as T
+from clcsg.compile.interpret import member
 
-try:
-    from clcsg import sample
-except ImportError:  # until clcsg/__init__.py exports it
-    from clcsg.sampling.sampler import sample
+from clcsg import sample
 
 W, H = 96, 72
 FLAGS = [(False, False), (True, False), (False, True), (True, True)]
@@ -103,8 +101,8 @@ def samples_of(name, radius):
 def test_splats_match_raytracer(cl_context, name):
     S = samples_of(name, 0.12)
     assert len(S) > 0
-    for cam in views(S.dnf):
-        ref = raytrace(S.dnf, cam, device=cl_context)
+    for cam in views(S.tape):
+        ref = raytrace(S.tape, cam, device=cl_context)
         for sa, bf in FLAGS:
             img = render(S, cam, device=cl_context, surface_aligned=sa, backface_culling=bf)
             check(img, ref)
@@ -117,8 +115,8 @@ def test_tiny_and_large_radii(cl_context, radius):
     S = sample(THREE_CYL, radius)
     if radius > 0.5:
         assert S.clip_count.max() >= 3 and S.clip_count.mean() > 1.5
-    for cam in views(S.dnf)[:2]:
-        ref = raytrace(S.dnf, cam, device=cl_context)
+    for cam in views(S.tape)[:2]:
+        ref = raytrace(S.tape, cam, device=cl_context)
         for sa, bf in FLAGS:
             check(render(S, cam, device=cl_context, surface_aligned=sa, backface_culling=bf), ref)
 
@@ -132,7 +130,7 @@ def test_close_up(cl_context):
         Camera.look_at((1.1, -1.1, 0.7), (0.6, -0.6, 0.2), fov=70, width=W, height=H),
     ]
     for cam in cams:
-        ref = raytrace(S.dnf, cam, device=cl_context)
+        ref = raytrace(S.tape, cam, device=cl_context)
         assert ref.mask.mean() > 0.5
         for sa, bf in FLAGS:
             img = render(S, cam, device=cl_context, surface_aligned=sa, backface_culling=bf)
@@ -148,14 +146,14 @@ def test_grazing_views(cl_context):
         # eye almost in the plane of the top face (z = 1) and of the front face (y = -1)
         for eye, tgt in [((4.0, -0.5, 1.0 + eps), (0.0, 0.3, 1.0)), ((-0.3, -1.0 - eps, 4.0), (0.2, -1.0, 0.0))]:
             cam = Camera.look_at(eye, tgt, fov=40, width=W, height=H)
-            ref = raytrace(S.dnf, cam, device=cl_context)
+            ref = raytrace(S.tape, cam, device=cl_context)
             for sa, bf in FLAGS:
                 check(render(S, cam, device=cl_context, surface_aligned=sa, backface_culling=bf), ref)
 
 
 def test_optimizations_reduce_overdraw(cl_context):
     S = samples_of("box_minus_3_cylinders", 0.12)
-    cam = Camera.fit(S.dnf, W, H)
+    cam = Camera.fit(S.tape, W, H)
     st = {f: render(S, cam, device=cl_context, surface_aligned=f[0], backface_culling=f[1]).stats for f in FLAGS}
     base = st[(False, False)]
     for key in ("fragments", "clip_evaluations", "covered_pixels", "overdraw", "splats_culled", "bound_pixels"):
@@ -179,7 +177,7 @@ def test_eye_inside_turns_culling_off(cl_context):
     cam = Camera.look_at(c + [0.2, 0.1, 0.0], c + [1, 0.3, 0.2], fov=60, width=64, height=48)
     img = render(S, cam, device=cl_context)
     assert img.stats["backface_culling"] is False and "inside" in img.stats["backface_culling_note"]
-    ref = raytrace(S.dnf, cam, device=cl_context)
+    ref = raytrace(S.tape, cam, device=cl_context)
     # the ray tracer reports the exit point from inside as well (first root t > 0)
     check(img, ref)
     assert img.mask.all()
@@ -188,47 +186,33 @@ def test_eye_inside_turns_culling_off(cl_context):
 # -- samples built without the sampler: dense exact surface points from the oracle --------------
 
 
-def synthetic_samples(dnf, radius, n_dirs=24, cell=0.25):
-    """Samples from :func:`oracle.surface_points` thinned to one per (cell * radius) voxel and
-    literal, with clip sets = other literals of the term with |d(Q, s)| < radius (eqs. 10-12).
-    Grid spacing 0.6 radius: every surface point is within ~0.5 r of a surface point and
-    within ~0.45 r of that point's voxel representative."""
-    R = 0.5 * np.linalg.norm(dnf.bound[1] - dnf.bound[0])
-    res = int(np.ceil(2 * R / (0.6 * radius)))
-    sp = oracle.surface_points(dnf, n_dirs, res)
-    key = np.column_stack([np.floor(sp.points / (cell * radius)).astype(np.int64), sp.quadrics, sp.signs, sp.terms])
+def synthetic_samples(shape, radius, cell=0.25):
+    """Samples from the tree oracle's surface points thinned to one per (cell * radius) voxel and
+    quadric, each with the whole tape as its clip program (exact everywhere).  Lines dense
+    enough that every surface point is within ~0.5 r of a kept point."""
+    tape = clcsg.Scene(shape).compile()
+    b = tape.bound
+    R = 0.5 * np.linalg.norm(b[1] - b[0])
+    n_lines = int(min(4e5, 60 * (R / radius) ** 2))
+    sp = T.surface_points(shape, b + [[-1e-3 * R], [1e-3 * R]], n_lines=n_lines, directions="both")
+    to_tape = {int(o): t for t, o in enumerate(T.quadric_table(shape).match(tape.quadrics)) if o >= 0}
+    qi = np.array([to_tape[int(o)] for o in sp.quadrics], dtype=np.int32)
+    key = np.column_stack([np.floor(sp.points / (cell * radius)).astype(np.int64), qi])
     _, first = np.unique(key, axis=0, return_index=True)
     first.sort()
-    P, N, Qi, S, T = sp.points[first], sp.normals[first], sp.quadrics[first], sp.signs[first], sp.terms[first]
-    sets = [[] for _ in range(len(P))]
-    for ti, lits in enumerate(dnf.terms):
-        sel = np.flatnonzero(T == ti)
-        for qj, sj in lits:
-            d = np.abs(Quadric(dnf.quadrics[qj]).distance(P[sel]))
-            for k in sel[(d < radius) & (Qi[sel] != qj)]:
-                sets[k].append((qj, sj))
-    table, flat = {}, []
-    cf = np.zeros(len(P), np.int32)
-    cc = np.zeros(len(P), np.int32)
-    for k, s in enumerate(sets):
-        t = tuple(sorted(s))
-        if t not in table:
-            table[t] = len(flat)
-            flat.extend(t)
-        cf[k], cc[k] = table[t], len(t)
-    clip = np.array(flat, dtype=np.int32).reshape(-1, 2)
-    n = len(P)
-    return Samples(P, N, np.full(n, float(radius)), Qi.astype(np.int32), S.astype(np.int32), T.astype(np.int32),
-                   cf, cc, clip, float(radius), dnf, pack(dnf))
+    n = len(first)
+    return Samples(sp.points[first], sp.normals[first], np.full(n, float(radius)), qi[first],
+                   sp.signs[first].astype(np.int32), sp.primitives[first].astype(np.int32),
+                   np.zeros(n, np.int32), np.full(n, len(tape.ops), np.int32), tape.ops.copy(), float(radius), tape,
+                   pack(tape))
 
 
 def test_synthetic_samples_render_exactly(cl_context):
     """The renderer alone, fed with samples that do not come from the sampler."""
-    dnf = clcsg.Scene(SCENES["touching_boxes"] | clcsg.sphere(0.4, center=(0.5, 0, 0.5))).normalize()
-    S = synthetic_samples(dnf, 0.15)
-    assert S.clip_count.max() >= 1
-    for cam in views(dnf, 64, 48)[:2]:
-        ref = raytrace(dnf, cam, device=cl_context)
+    shape = SCENES["touching_boxes"] | clcsg.sphere(0.4, center=(0.5, 0, 0.5))
+    S = synthetic_samples(shape, 0.15)
+    for cam in views(S.tape, 64, 48)[:2]:
+        ref = raytrace(S.tape, cam, device=cl_context)
         for sa, bf in [(False, False), (True, True)]:
             check(render(S, cam, device=cl_context, surface_aligned=sa, backface_culling=bf), ref)
 
@@ -236,8 +220,8 @@ def test_synthetic_samples_render_exactly(cl_context):
 def test_no_clipping_shows_overhang(cl_context):
     """Without clip sets the splats overhang the holes: the clip test is what makes it exact."""
     S = samples_of("box_minus_3_cylinders", 0.3)
-    cam = Camera.fit(S.dnf, W, H)
-    ref = raytrace(S.dnf, cam, device=cl_context)
+    cam = Camera.fit(S.tape, W, H)
+    ref = raytrace(S.tape, cam, device=cl_context)
     bare = dataclasses.replace(S, clip_count=np.zeros_like(S.clip_count), _device={})
     img = render(bare, cam, device=cl_context)
     assert (img.mask & ~ref.mask).sum() > 20 or (img.ids != ref.ids).sum() > 20
@@ -245,10 +229,10 @@ def test_no_clipping_shows_overhang(cl_context):
 
 def test_empty_samples_and_errors(cl_context):
     S = samples_of("sphere", 0.12)
-    cam = Camera.fit(S.dnf, 32, 24)
+    cam = Camera.fit(S.tape, 32, 24)
     empty = dataclasses.replace(
         S, positions=S.positions[:0], normals=S.normals[:0], radii=S.radii[:0], quadrics=S.quadrics[:0],
-        signs=S.signs[:0], terms=S.terms[:0], clip_first=S.clip_first[:0], clip_count=S.clip_count[:0], _device={},
+        signs=S.signs[:0], primitives=S.primitives[:0], clip_first=S.clip_first[:0], clip_count=S.clip_count[:0], _device={},
     )
     img = render(empty, cam, device=cl_context, background=(0, 0, 0))
     assert not img.mask.any() and np.all(img.rgba[..., :3] == 0)
@@ -266,14 +250,14 @@ def test_default_camera_and_float_precision(cl_context):
     S = samples_of("sphere", 0.12)
     img = render(S, device=cl_context, stats=False)
     assert img.rgba.shape == (480, 640, 4) and img.mask.any()
-    cam = Camera.fit(S.dnf, 64, 48)
+    cam = Camera.fit(S.tape, 64, 48)
     try:
         f = render(S, cam, device=cl_context, precision="float")
     except Exception as e:  # pragma: no cover - depends on kernels/layout.h
         if "redefinition" in str(e):
             pytest.xfail("kernels/layout.h does not compile without CLCSG_DOUBLE (sample_rec defined twice)")
         raise
-    check(f, raytrace(S.dnf, cam, device=cl_context), frac=0.995, rel=1e-4)
+    check(f, raytrace(S.tape, cam, device=cl_context), frac=0.995, rel=1e-4)
 
 
 # -- one splat at a time: the screen bounds and culling tests are conservative -------------------
@@ -288,26 +272,29 @@ def splat_reference(S, k, cam, culling, margin=0.0):
     e = cam.eye
     s = S.positions[k]
     r = S.radii[k]
-    Q = Quadric(S.dnf.quadrics[S.quadrics[k]])
+    Q = Quadric(S.tape.quadrics[S.quadrics[k]])
     a = s - e
     tc = v @ a
     org = e + tc[:, None] * v
     roots = Q.intersect_line(org, v)
     out = np.full(len(v), np.inf)
     done = np.zeros(len(v), dtype=bool)
-    clips = S.clip_literals[S.clip_first[k] : S.clip_first[k] + S.clip_count[k]]
+    prog = S.clip_ops[S.clip_first[k] : S.clip_first[k] + S.clip_count[k]]
     for tau in roots:
         p = org + tau[:, None] * v
         ok = np.isfinite(tau) & ~done
         with np.errstate(invalid="ignore"):
             ok &= np.sum((p - s) ** 2, axis=1) <= r * r * (1 + margin)
             ok &= tc + tau > 0
+            side = np.full(len(p), S.signs[k])
+            if len(prog):
+                neg, pos = member(prog, S.tape.quadrics, np.nan_to_num(p), int(S.quadrics[k]))
+                if margin <= 0:
+                    ok &= neg != pos
+                side = np.where(neg, 1, -1)
             if culling:
-                g = S.signs[k] * Q.gradient(p)
+                g = side[:, None] * Q.gradient(p)
                 ok &= np.sum(g * v, axis=1) <= margin * np.linalg.norm(g, axis=1)
-            for qi, sg in clips:
-                Qc = Quadric(S.dnf.quadrics[qi])
-                ok &= sg * Qc.value(p) <= margin * np.linalg.norm(Qc.gradient(p), axis=1) * (1 + np.abs(s).max())
         out[ok] = (tc + tau)[ok]
         done |= ok
     return out.reshape(cam.height, cam.width)
@@ -317,7 +304,7 @@ def only(S, k):
     sl = slice(k, k + 1)
     return dataclasses.replace(
         S, positions=S.positions[sl], normals=S.normals[sl], radii=S.radii[sl], quadrics=S.quadrics[sl],
-        signs=S.signs[sl], terms=S.terms[sl], clip_first=S.clip_first[sl], clip_count=S.clip_count[sl], _device={},
+        signs=S.signs[sl], primitives=S.primitives[sl], clip_first=S.clip_first[sl], clip_count=S.clip_count[sl], _device={},
     )
 
 
@@ -337,7 +324,7 @@ def test_single_splat_fragments_are_exact(cl_context, name):
     splat, saddles, a cone apex) or the view (close-up, grazing)."""
     shape, radius = SINGLE[name]
     S = sample(shape, radius)
-    dnf = S.dnf
+    dnf = S.tape
     b = dnf.bound
     c = 0.5 * (b[0] + b[1])
     R = 0.5 * np.linalg.norm(b[1] - b[0])
@@ -386,7 +373,7 @@ def test_single_splat_fragments_are_exact(cl_context, name):
 def _run_cli(argv):
     import argparse
 
-    from clcsg.rendering.api import add_render_parser, cli_render
+    from clcsg.cli.render import add_render_parser, cli_render
 
     parser = argparse.ArgumentParser(prog="clcsg")
     add_render_parser(parser.add_subparsers(dest="command"))

@@ -63,8 +63,8 @@ __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op
         tiles[tile] = (int2)(0, 0);
         return;
     }
-    real3 h = 0.5 * (hi - lo);
-    prune_region g = {0.5 * (lo + hi), (real3)(h.x, 0, 0), (real3)(0, h.y, 0), (real3)(0, 0, h.z), 0};
+    real3 h = (real)0.5 * (hi - lo);
+    prune_region g = {(real)0.5 * (lo + hi), (real3)(h.x, 0, 0), (real3)(0, h.y, 0), (real3)(0, 0, h.z), 0};
     uint evals = 0;
     uint base = atomic_add(&counters[0], (uint)(n + 1));
     if (base + (uint)(n + 1) > cap_arena) return;

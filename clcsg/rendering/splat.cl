@@ -17,8 +17,8 @@
  *    that skips atomics which cannot win.
  *
  * BACKFACE_CULLING (outside views only; the host turns it off when the eye is inside the
- * solid) skips splats whose patch faces away from the eye everywhere (splat_backfacing; only
- * unclipped splats, whose orientation is constant) and fragments whose outward normal faces
+ * solid) skips splats whose patch faces away from the eye everywhere (splat_backfacing; for
+ * splats with one orientation over the ball, tape_self_polarity) and fragments whose outward normal faces
  * away from the view ray: a back-facing point is where a ray leaves the solid, so a
  * front-facing surface point is nearer on the same ray.
  *
@@ -225,7 +225,9 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
 
     rect bound = screen_ball(view, a, r);
 #if BACKFACE_CULLING
-    if (nc == 0 && bound.x0 <= bound.x1 && bound.y0 <= bound.y1 &&
+    /* the whole-splat test needs one orientation over the ball */
+    bool fixed = nc == 0 || tape_self_polarity(clip + c0, nc, sp->quadric) != 0;
+    if (fixed && bound.x0 <= bound.x1 && bound.y0 <= bound.y1 &&
         splat_backfacing(q, lam_min, lam_max, sign, s, a, r)) {
         cnt[PC_SPLATS_CULLED] = 1;
         bound = (rect){0, 0, -1, -1};

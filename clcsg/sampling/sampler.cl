@@ -38,9 +38,9 @@ inline prune_region patch_region(const plane_frame *pf, cell_rec c, real t_lo, r
 {
     prune_region g;
     g.c = plane_point(pf, 0.5 * (c.x0 + c.x1), 0.5 * (c.y0 + c.y1), 0.5 * (t_lo + t_hi));
-    g.a0 = 0.5 * (c.x1 - c.x0) * plane_axis(pf, pf->i);
-    g.a1 = 0.5 * (c.y1 - c.y0) * plane_axis(pf, pf->j);
-    g.a2 = 0.5 * (t_hi - t_lo) * plane_axis(pf, pf->k);
+    g.a0 = (real)(0.5 * (c.x1 - c.x0)) * plane_axis(pf, pf->i);
+    g.a1 = (real)(0.5 * (c.y1 - c.y0)) * plane_axis(pf, pf->j);
+    g.a2 = (real)(0.5 * (t_hi - t_lo)) * plane_axis(pf, pf->k);
     g.rho = grow;
     return g;
 }

@@ -85,6 +85,21 @@ inline uint tape_member(__global const tape_op *t, int n, __global const quadric
     return r[t[n - 1].out];
 }
 
+/* The side the solid is on wherever the tape says "surface" on self_q: the tape is a monotone
+ * Boolean function of its leaves, so if every leaf on self_q has polarity +1 the membership on
+ * the negative side is never below the one on the positive side (the solid is on the negative
+ * side: +1), if all have -1 the opposite (-1); mixed polarities give 0 (it may vary). */
+inline int tape_self_polarity(__global const tape_op *t, int n, int self_q)
+{
+    int seen = 0;
+    for (int k = 0; k < n; ++k) {
+        if (t[k].op != OP_LEAF || t[k].a != self_q) continue;
+        if (seen && seen != t[k].b) return 0;
+        seen = t[k].b;
+    }
+    return seen;
+}
+
 /* ---- pruning ------------------------------------------------------------------------------ */
 
 /* A region to prune over: the oriented box c + sum_m u_m a_m (|u_m| <= 1) grown by a ball of
