@@ -156,7 +156,8 @@ def test_cast_from_inside_hollow_box():
     assert np.abs(hits.depth - 0.5).max() < 1e-15
     assert np.allclose(hits.normal, [[1, 0, 0], [-1, 0, 0]]) and hits.primitive.tolist() == [0, 1]
     # closed operands, literal Booleans: the subtracted box's closed face is removed
-    assert T.contains(shape, [[0, 0, 0], [1.5, 0, 0], [1, 0, 0], [2, 0, 0]]).tolist() == [False, True, False, True]
+    probe = [[0, 0, 0], [1.5, 0, 0], [1, 0, 0], [2, 0, 0]]
+    assert T.contains(shape, probe).tolist() == [False, True, False, True]
     sp = T.surface_points(shape, [[-2, -2, -2], [2, 2, 2]], n_lines=6000)
     m = np.abs(sp.points).max(axis=1)
     inner, outer = np.abs(m - 1) < 1e-12, np.abs(m - 2) < 1e-12
@@ -260,7 +261,7 @@ def test_rays_agree_with_marching():
     rng = np.random.default_rng(8)
     parts = [clcsg.box(rng.uniform(0.5, 2, 3), center=rng.uniform(-1.5, 1.5, 3)) for _ in range(6)]
     parts += [clcsg.sphere(rng.uniform(0.3, 1), center=rng.uniform(-1.5, 1.5, 3)) for _ in range(6)]
-    parts += [clcsg.cylinder(2, 0.4, axis=rng.normal(size=3)).translate(rng.uniform(-1.5, 1.5, 3)) for _ in range(4)]
+    parts += [clcsg.cylinder(2, 0.4, axis=rng.normal(size=3)).translate(rng.uniform(-1.5, 1.5, 3)) for _ in "abcd"]
     shape = parts[0]
     for i, p in enumerate(parts[1:]):
         shape = [shape | p, shape - p, shape | p, shape & ~p][i % 4]

@@ -5,12 +5,14 @@ all its quadrics}``; Union = any operand, Intersection = all, Difference = the f
 others, Complement = not, ``Transformed(c, M)`` holds x iff ``M^-1 x`` is in c.  A leaf's world
 matrix is ``M_root ... M_parent`` and its world quadrics are ``M^-T Q M^-1``.  Graphs may be
 deep DAGs: every traversal uses an explicit stack and shared sub-graphs are evaluated once per
-(node, world matrix).
+(node, world matrix).  Membership is the Boolean formula of the closed leaves' sign tests (as in
+``clcsg.contains``), so a point on the surface of a subtracted solid is outside.
 
 Literals.  Every world quadric Q is written ``Q = s |Q| K`` with K canonical (unit Frobenius
 norm, first coefficient with ``|c| > 1e-13`` positive, order xx xy xz xw yy yz yw zz zw ww) and
 K looked up in a :class:`QuadricTable` (tolerance 1e-9): the literal ``Q <= 0`` is ``s K <= 0``,
-evaluated with the table's K, so coincident faces of different solids are one quadric.
+one sign test per table quadric and point, so coincident faces of different solids (facing
+either way) are one quadric.  Values come from one matrix product: ``K(p) = mono(p) . coef``.
 
 Surface.  For a point p on K, the solid just on K's negative / positive side is found exactly
 by substitution (:func:`membership_sides`): every literal on K is the constant it has on that
@@ -24,7 +26,7 @@ Public API::
     instances(shape) -> list[Instance]              quadric_table(shape) -> QuadricTable
     contains(shape, points) -> bool                 membership_sides(shape, points, K) -> (neg, pos)
     on_surface(shape, points, K, tol=0.0) -> bool   primitive_at(shape, points, K, tol=0.0) -> int
-    surface_points(shape, bound, ...) -> SurfacePoints
+    surface_points(shape, bound, ...) -> SurfacePoints   lines(bound, ...) -> (origins, dirs)
     cast(shape, origins, directions, bound=None) -> Hits
     fragile(shape, origins, directions, rel=1e-9, scale=None, bound=None) -> bool
     sample_residuals(shape, positions, K, tol=None) -> (on_quadric, on_csg)
@@ -65,7 +67,8 @@ def _matrix(key):
 def _mono(P):
     """Monomials with ``K(p) = mono(p) @ key``: x^2 2xy 2xz 2x y^2 2yz 2y z^2 2z 1."""
     x, y, z = P[:, 0], P[:, 1], P[:, 2]
-    return np.column_stack([x * x, 2 * x * y, 2 * x * z, 2 * x, y * y, 2 * y * z, 2 * y, z * z, 2 * z, np.ones(len(P))])
+    one = np.ones(len(P))
+    return np.column_stack([x * x, 2 * x * y, 2 * x * z, 2 * x, y * y, 2 * y * z, 2 * y, z * z, 2 * z, one])
 
 
 class QuadricTable:
@@ -125,7 +128,8 @@ class QuadricTable:
 
     def match(self, matrices):
         """Table ids of other quadric matrices (U, 4, 4), -1 where none matches."""
-        return np.array([self.id_of(m)[0] for m in np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)], dtype=np.int64)
+        mats = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
+        return np.array([self.id_of(m)[0] for m in mats], dtype=np.int64)
 
 
 @dataclass
@@ -169,7 +173,8 @@ class _Tree:
             if key in memo:
                 continue
             if isinstance(node, Primitive):
-                qs = [q.matrix.copy() if np.array_equal(M, np.eye(4)) else q.transform(M).matrix for q in node.quadrics()]
+                eye = np.array_equal(M, np.eye(4))
+                qs = [q.matrix.copy() if eye else q.transform(M).matrix for q in node.quadrics()]
                 inst = Instance(len(self.instances), node, M, qs, [canonical(q) for q in qs], node.color)
                 self.instances.append(inst)
                 memo[key] = self._emit("prim", inst.index)
@@ -189,7 +194,7 @@ class _Tree:
             if a != self.root:
                 self.program[i][3].append(a)
         self.table = QuadricTable()
-        self.lits = [np.array([self.table.add(q) for q in inst.quadrics]).reshape(-1, 2) for inst in self.instances]
+        self.lits = [np.array([self.table.add(q) for q in i.quadrics]).reshape(-1, 2) for i in self.instances]
         U = self.U = len(self.table)
         Ks = self.K = self.table.representatives
         self.keys = Ks[:, _IU[0], _IU[1]]
@@ -248,16 +253,17 @@ class _Tree:
         r = np.flatnonzero(k >= 0)
         L[r, k[r]], L[r, self.U + k[r]] = True, False
         neg = self.evaluate(L)
+        if not len(r):
+            return neg, neg
         L[r, k[r]], L[r, self.U + k[r]] = False, True
         return neg, self.evaluate(L)
 
     def flags(self, P, k, tol=0.0):
-        """(exact, loose, strict) per point: sides differ exactly / for the exact or either
-        forced evaluation / for all three.  Chunked."""
-        n = len(P)
-        out = np.zeros((3, n), dtype=bool)
+        """(neg, exact, loose, strict) per point on K_k: membership on K's negative side;
+        sides differ exactly / for the exact or either forced evaluation / for all three."""
+        out = np.zeros((4, len(P)), dtype=bool)
         step = max(256, _CELLS // max(self.U, 1))
-        for a in range(0, n, step):
+        for a in range(0, len(P), step):
             p, kk = P[a : a + step], k[a : a + step]
             if tol > 0.0:
                 V, g = self.values(p, grad=True)
@@ -277,7 +283,7 @@ class _Tree:
                     n2, p2 = self.sides(V[rows], kk[rows], amb[rows], force)
                     loose[rows] |= n2 != p2
                     strict[rows] &= n2 != p2
-            out[:, a : a + step] = exact, loose, strict
+            out[:, a : a + step] = neg, exact, loose, strict
         return out
 
     def first_carrier(self, P, k, tol=0.0):
@@ -373,12 +379,11 @@ def quadric_table(shape) -> QuadricTable:
 
 
 def contains(shape, points) -> np.ndarray:
-    """Membership of points (..., 3) in the closed solid (exact sign tests)."""
+    """Membership of points (..., 3): the Boolean formula of the closed leaves' sign tests
+    (like ``clcsg.contains``; so a point on a subtracted solid's surface is outside)."""
     t = _tree(shape)
     P, sh = _points(points)
-    step = max(256, _CELLS // max(t.U, 1))
-    out = [t.evaluate(np.concatenate([V <= 0, V >= 0], axis=1)) for V in (t.values(P[a : a + step]) for a in range(0, len(P), step))]
-    return (np.concatenate(out) if out else np.zeros(0, dtype=bool)).reshape(sh)
+    return t.flags(P, np.full(len(P), -1))[0].reshape(sh)
 
 
 def membership_sides(shape, points, quadric_matrix):
@@ -387,14 +392,8 @@ def membership_sides(shape, points, quadric_matrix):
     quadric."""
     t = _tree(shape)
     P, sh = _points(points)
-    k = _ids(t, quadric_matrix, len(P))
-    step = max(256, _CELLS // max(t.U, 1))
-    neg, pos = [np.zeros(0, dtype=bool)], [np.zeros(0, dtype=bool)]
-    for a in range(0, len(P), step):
-        n, p = t.sides(t.values(P[a : a + step]), k[a : a + step])
-        neg.append(n)
-        pos.append(p)
-    return np.concatenate(neg).reshape(sh), np.concatenate(pos).reshape(sh)
+    neg, exact = t.flags(P, _ids(t, quadric_matrix, len(P)))[:2]
+    return neg.reshape(sh), (neg ^ exact).reshape(sh)
 
 
 def on_surface(shape, points, quadric_matrices, tol=0.0) -> np.ndarray:
@@ -407,7 +406,7 @@ def on_surface(shape, points, quadric_matrices, tol=0.0) -> np.ndarray:
     """
     t = _tree(shape)
     P, sh = _points(points)
-    return t.flags(P, _ids(t, quadric_matrices, len(P)), float(tol))[1].reshape(sh)
+    return t.flags(P, _ids(t, quadric_matrices, len(P)), float(tol))[2].reshape(sh)
 
 
 def primitive_at(shape, points, quadric_matrix, tol=0.0) -> np.ndarray:
@@ -469,12 +468,7 @@ def surface_points(shape, bound, n_lines=20000, seed=0, directions="random") -> 
     t = _tree(shape)
     o, d = lines(bound, n_lines, seed, directions)
     _, _, k, P, prim = t.line_roots(o, d, positive=False, bound=bound)
-    step = max(256, _CELLS // max(t.U, 1))
-    neg = np.zeros(len(P), dtype=bool)
-    keep = np.zeros(len(P), dtype=bool)
-    for a in range(0, len(P), step):
-        n, p = t.sides(t.values(P[a : a + step]), k[a : a + step])
-        neg[a : a + step], keep[a : a + step] = n, n != p
+    neg, keep = t.flags(P, k)[:2]
     P, k, prim = P[keep], k[keep], prim[keep]
     sign = np.where(neg[keep], 1, -1)
     return SurfacePoints(P, k, sign, t.normals(P, k, sign), prim)
@@ -515,7 +509,7 @@ def _first_per(ray, order_key, sel):
 
 def _cast(t, o, d, bound, tol):
     ray, tt, k, P, prim = t.line_roots(o, d, positive=True, bound=bound, tol=tol)
-    exact, loose, strict = t.flags(P, k, tol)
+    neg, exact, loose, strict = t.flags(P, k, tol)
     n = len(o)
     best = _first_per(ray, tt, exact)
     depth = np.full(n, np.inf)
@@ -526,11 +520,11 @@ def _cast(t, o, d, bound, tol):
     near = _first_per(ray, gap, (hk[ray] >= 0) & np.isfinite(gap))
     second = np.full(n, np.inf)
     second[ray[near]] = tt[near]
-    return ray, tt, k, P, prim, exact, loose, strict, best, depth, hk, second
+    return ray, tt, k, P, prim, neg, exact, loose, strict, best, depth, hk, second
 
 
 def _rays(origins, directions):
-    o, d = np.broadcast_arrays(np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64))
+    o, d = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (origins, directions)))
     sh = o.shape[:-1]
     o, d = o.reshape(-1, 3), d.reshape(-1, 3)
     return o, d / np.linalg.norm(d, axis=1, keepdims=True), sh
@@ -541,16 +535,16 @@ def cast(shape, origins, directions, bound=None) -> Hits:
     eyes may be anywhere, inside the solid too.  With ``bound`` roots outside it are ignored."""
     t = _tree(shape)
     o, d, sh = _rays(origins, directions)
-    ray, tt, k, P, prim, exact, *_, best, depth, hk, second = _cast(t, o, d, bound, 0.0)
+    ray, tt, k, P, prim, neg, *_, best, depth, hk, second = _cast(t, o, d, bound, 0.0)
     n = len(o)
     sign, pr = np.zeros(n, dtype=np.int64), np.full(n, -1, dtype=np.int64)
     point, normal = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
     r = ray[best]
-    neg, _ = t.sides(t.values(P[best]), k[best]) if len(best) else (np.zeros(0, bool), None)
-    sign[r] = np.where(neg, 1, -1)
+    sign[r] = np.where(neg[best], 1, -1)
     pr[r], point[r] = prim[best], P[best]
     normal[r] = t.normals(P[best], k[best], sign[r])
-    return Hits(depth.reshape(sh), hk.reshape(sh), sign.reshape(sh), pr.reshape(sh), point.reshape(sh + (3,)), normal.reshape(sh + (3,)), second.reshape(sh))
+    arrays = [a.reshape(sh + a.shape[1:]) for a in (depth, hk, sign, pr, point, normal, second)]
+    return Hits(*arrays)
 
 
 def fragile(shape, origins, directions, rel=1e-9, scale=None, bound=None) -> np.ndarray:
@@ -568,7 +562,7 @@ def fragile(shape, origins, directions, rel=1e-9, scale=None, bound=None) -> np.
     if scale is None:
         ref = np.asarray(bound if bound is not None else o, dtype=np.float64)
         scale = max(1.0, float(np.abs(ref).max(initial=0.0)))
-    ray, tt, k, P, prim, exact, loose, strict, best, depth, hk, second = _cast(t, o, d, bound, rel * scale)
+    ray, tt, k, P, prim, _, exact, loose, strict, best, depth, hk, second = _cast(t, o, d, bound, rel * scale)
     out = np.zeros(len(o), dtype=bool)
     out[ray[best[~strict[best]]]] = True
     front = loose & ~exact & (tt <= depth[ray] * (1.0 + rel))
@@ -580,7 +574,9 @@ def fragile(shape, origins, directions, rel=1e-9, scale=None, bound=None) -> np.
 
 def sample_residuals(shape, positions, quadric_matrices, tol=None):
     """(first-order distance |Q(p)| / |grad Q(p)| of each sample to its own quadric,
-    ``on_surface(..., tol)``); tol defaults to 1e-9 times max(1, largest |coordinate|)."""
+    ``on_surface(..., tol)``); tol defaults to 1e-9 times max(1, largest |coordinate|).
+    ``on_csg`` only asks whether the sides differ; how far the sample is from its quadric is
+    ``on_quadric``: a sample is good if both hold."""
     P, _ = _points(positions)
     Q = np.broadcast_to(np.asarray(quadric_matrices, dtype=np.float64), (len(P), 4, 4))
     xh = np.column_stack([P, np.ones(len(P))])
