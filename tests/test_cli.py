@@ -99,7 +99,7 @@ def test_error_handling(capsys, monkeypatch):
     def boom(args):
         raise SceneError("scene.json: node 3: radius must be > 0")
 
-    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.add_devices_parser, boom))
+    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.COMMANDS["devices"][0], boom))
     code, out, err = run(capsys, "devices")
     assert code == 3
     assert err == "clcsg: error: scene.json: node 3: radius must be > 0\n"
@@ -107,7 +107,7 @@ def test_error_handling(capsys, monkeypatch):
     def bug(args):
         raise ZeroDivisionError("division by zero")
 
-    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.add_devices_parser, bug))
+    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.COMMANDS["devices"][0], bug))
     code, out, err = run(capsys, "devices")
     assert code == 1
     assert err == (
@@ -121,7 +121,7 @@ def test_error_handling(capsys, monkeypatch):
     def interrupted(args):
         raise KeyboardInterrupt
 
-    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.add_devices_parser, interrupted))
+    monkeypatch.setitem(cli.COMMANDS, "devices", (cli.COMMANDS["devices"][0], interrupted))
     code, out, err = run(capsys, "devices")
     assert code == 130
 
@@ -191,35 +191,43 @@ def test_python_m_bad_device(argv, tmp_path):
 
 
 def test_scene_info_programmatic():
-    info = cli.scene_info(demo_scene(), device="0:0")
-    s = info["stats"]
-    assert s["primitives"] == 3 and s["unique_quadrics"] == 10
-    assert s["terms"] == len(info["term_bounds"]) == 2
-    assert info["term_sizes"] == {"min": 1, "mean": 4.0, "max": 7}
+    from clcsg.cli.info import format_info
+    from clcsg.compile.summary import scene_info
+
+    info = scene_info(demo_scene(), normal_form="dnf", listing=True)
+    t = info["tape"]
+    assert t["primitives"] == 3 and info["unique_quadrics"] == 10
+    assert t["leaves"] == 10 and t["instructions"] == 19 and t["registers"] >= 2 and t["depth"] == 4
+    # (box & ~cyl & ~cap & ~cap) | sphere: 3 + 1 terms if distributed, 2 after pruning
+    assert info["dnf_terms"] == 4 and info["dnf"]["stats"]["terms"] == 2
     assert info["bound"] == [[-1.0, -1.0, -1.0], [4.0, 1.0, 1.0]]
-    assert info["device"]["spec"] == "0:0"
     json.dumps(info)
-    text = cli.format_info(info)
-    for key in ("primitives:", "unique quadrics:", "DNF terms:", "term sizes:", "term bounds:", "scene bound:"):
+    text = format_info(info)
+    for key in ("primitives:", "unique quadrics:", "tape:", "DNF terms:", "DNF built:", "tape listing:", "scene bound:"):
         assert key in text
-    assert "2 with disjoint literal boxes" in text
+    assert "4 (counted, not built)" in text and "19 instructions, 10 leaves" in text
 
 
-def test_scene_info_bound_override_and_many_terms():
-    spheres = clcsg.union(*[clcsg.sphere(0.4, center=(i, 0, 0)) for i in range(25)])
-    info = cli.scene_info(spheres, bound=[[-1, -1, -1], [30, 1, 1]])
-    assert info["stats"]["terms"] == 25
-    assert info["user_bound_from"] == "--bound"
-    text = cli.format_info(info)
-    assert "... and 5 more" in text
-    assert "(from --bound)" in text
+def test_scene_info_counts_huge_dnfs_without_building_them():
+    from clcsg.compile.summary import scene_info
+
+    plate = clcsg.box((40, 30, 2))
+    holes = [clcsg.cylinder(4, 0.5, center=(x, y, 0)) | clcsg.cone(1, 1.2, 0.5, center=(x, y, 0.6))
+             for x in range(-15, 16, 5) for y in (-10, 0, 10)]
+    info = scene_info(plate - clcsg.union(*holes))
+    assert info["dnf_terms"] > 10**9
+    # the cap planes of all holes are the same four quadrics, each leaf computed once
+    assert info["unique_quadrics"] == 6 + 2 * len(holes) + 4 == info["tape"]["leaves"]
+    assert info["user_bound_from"] is None
 
 
-def test_scene_info_unbounded_needs_bound():
+def test_scene_info_bound_override_and_unbounded():
+    from clcsg.compile.summary import scene_info
+
     with pytest.raises(SceneError, match="unbounded"):
-        cli.scene_info(~clcsg.sphere(1))
-    info = cli.scene_info(~clcsg.sphere(1), bound=[[-2, -2, -2], [2, 2, 2]])
-    assert info["bound"] == [[-2.0] * 3, [2.0] * 3]
+        scene_info(~clcsg.sphere(1))
+    info = scene_info(~clcsg.sphere(1), bound=[[-2, -2, -2], [2, 2, 2]])
+    assert info["bound"] == [[-2.0] * 3, [2.0] * 3] and info["user_bound_from"] == "--bound"
 
 
 @pytest.fixture
@@ -241,20 +249,21 @@ def scene_loader(monkeypatch):
 def test_info_text(capsys, scene_loader):
     code, out, err = run(capsys, "info", "part.demo")
     assert code == 0, err
-    assert "DNF terms:" in out and "2 after pruning" in out
+    assert "DNF terms:" in out and "4 (counted, not built)" in out and "DNF built" not in out
     assert "scene bound:" in out and "(4, 1, 1)" in out
 
 
 def test_info_json_and_options(capsys, scene_loader):
-    code, out, err = run(capsys, "info", "part.demo", "--json", "--term-limit", "1000", "--bound", "-5,-5,-5,5,5,5")
+    code, out, err = run(capsys, "info", "part.demo", "--json", "--normal-form", "dnf", "--term-limit", "1000",
+                         "--bound", "-5,-5,-5,5,5,5")
     assert code == 0, err
     info = json.loads(out)
-    assert info["stats"]["terms"] == 2
+    assert info["dnf"]["stats"]["terms"] == 2 and info["tape"]["leaves"] == 10
     assert info["user_bound"] == [[-5.0] * 3, [5.0] * 3]
 
 
 def test_info_term_limit(capsys, scene_loader):
-    code, out, err = run(capsys, "info", "part.demo", "--term-limit", "1")
+    code, out, err = run(capsys, "info", "part.demo", "--normal-form", "dnf", "--term-limit", "1")
     assert code == 5
     assert err.startswith("clcsg: error: ") and "limit" in err and err.count("\n") == 1
 
@@ -282,16 +291,16 @@ def test_info_missing_file(capsys):
 
 def test_info_json_file(capsys, tmp_scene):
     path = tmp_scene(demo_scene())
-    code, out, err = run(capsys, "info", str(path))
+    code, out, err = run(capsys, "info", str(path), "--normal-form", "dnf")
     assert code == 0, err
-    assert "2 after pruning" in out
+    assert "2 terms after pruning" in out
 
 
 def test_python_m_info_json_file(tmp_scene):
     path = tmp_scene(demo_scene())
     r = run_module("info", str(path), "--json")
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["stats"]["terms"] == 2
+    assert json.loads(r.stdout)["tape"]["primitives"] == 3
     r = run_module("info", str(path), "--bound", "1,2")
     assert r.returncode == 2 and "Traceback" not in r.stderr
 
@@ -300,7 +309,7 @@ def test_sample_writes_ply_and_stats(tmp_path):
     import json as _json
 
     from clcsg.cli import main as _main
-    from clcsg.sampling.samples import read_ply
+    from clcsg.io.ply import read_samples
 
     out, stats = tmp_path / "s.ply", tmp_path / "s.json"
     scene = tmp_path / "scene.json"
@@ -308,10 +317,14 @@ def test_sample_writes_ply_and_stats(tmp_path):
 
     _c.save(_c.box(2) - _c.sphere(1.2), scene)
     assert _main(["sample", str(scene), "-r", "0.1", "-o", str(out), "--stats", str(stats), "--no-progress"]) == 0
-    back = read_ply(out)
+    back = read_samples(out)
     st = _json.loads(stats.read_text())
     assert len(back["positions"]) == st["samples"] > 0
-    assert {"distance_queries", "clip_indices", "levels", "cells_per_level"} <= set(st)
+    assert {"distance_queries", "leaf_distances", "clip_rows", "levels", "cells_per_level"} <= set(st)
+    assert st["normal_form"] == "tree"
+    assert _main(["sample", str(scene), "-r", "0.1", "-o", str(out), "--normal-form", "dnf", "--float32",
+                  "--no-progress"]) == 0
+    assert len(read_samples(out)["positions"]) == st["samples"]
 
 
 def test_sample_rejects_bad_radius(tmp_path, capsys):

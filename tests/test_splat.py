@@ -367,13 +367,13 @@ def test_single_splat_fragments_are_exact(cl_context, name):
     assert written > 500
 
 
-# -- `clcsg render` (clcsg.render.cli_render; wired into clcsg/cli.py by its owner) --------------
+# -- `clcsg render` (clcsg/cli/render.py) ----------------------------------------------------------
 
 
 def _run_cli(argv):
     import argparse
 
-    from clcsg.cli.render import add_render_parser, cli_render
+    from clcsg.cli.render import add_parser as add_render_parser, run as cli_render
 
     parser = argparse.ArgumentParser(prog="clcsg")
     add_render_parser(parser.add_subparsers(dest="command"))

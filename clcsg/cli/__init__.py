@@ -1,5 +1,5 @@
-"""The ``clcsg`` command line: :func:`main` parses argv and dispatches to one module per command."""
-from .app import COMMANDS, build_parser, join_negative_vectors, main, parse_bound, parse_floats, positive_int, scene_info
+"""The ``clcsg`` command line: :func:`main` parses argv and dispatches to one module per command
+(``devices``, ``info``, ``sample``, ``render``); ``app`` holds the framework and shared parsers."""
+from .app import COMMANDS, main
 
-__all__ = ["COMMANDS", "build_parser", "join_negative_vectors", "main", "parse_bound", "parse_floats",
-           "positive_int", "scene_info"]
+__all__ = ["COMMANDS", "main"]

@@ -1,9 +1,10 @@
 """The ``clcsg`` command line.
 
-Each subcommand is two functions: ``add_<name>_parser(subparsers)`` builds its argparse
-parser (with :func:`add_subcommand`, which adds the common options such as ``--device``), and
-``run_<name>(args) -> int`` does the work.  :data:`COMMANDS` is the dispatch table; to add a
-subcommand, write the two functions and add one line there.
+Each subcommand is a module of this package with two functions: ``add_parser(subparsers)``
+builds its argparse parser (with :func:`add_subcommand`, which adds the common options such as
+``--device``), and ``run(args) -> int`` does the work.  :data:`COMMANDS` is the dispatch table
+(modules are imported on first use, which keeps ``clcsg --help`` fast); to add a subcommand,
+write the module and add one line there.
 
 Errors: a :class:`~clcsg.errors.ClcsgError` prints ``clcsg: error: <message>`` (one line) and
 exits with its ``exit_code``; a bad command line exits 2 (argparse); Ctrl-C exits 130; anything
@@ -145,301 +146,6 @@ def _box(b) -> str:
     return f"{_vec(b[0])} .. {_vec(b[1])}"
 
 
-# -- clcsg devices ----------------------------------------------------------------------------
-
-
-def add_devices_parser(subparsers):
-    p = add_subcommand(
-        subparsers,
-        "devices",
-        help="list OpenCL devices and show which one is used",
-        description="""
-            List every OpenCL device with its P:D index, type and the features clcsg uses
-            (fp64, 64-bit atomics).  The device used by default is marked with '*' (with
-            --device D: the device D selects).  Oclgrind, a simulator about 1000x slower, is
-            listed but never chosen unless asked for by name or index.
-        """,
-        epilog="""
-            examples:
-              clcsg devices
-              clcsg devices --device gpu        # which device 'gpu' selects
-              PYOPENCL_CTX=1:0 clcsg devices    # the default follows PYOPENCL_CTX
-              clcsg devices --json
-        """,
-    )
-    p.add_argument("--json", action="store_true", help="print the list as JSON")
-
-
-def run_devices(args) -> int:
-    from ..cl.device import choose, list_devices
-
-    infos = list_devices()
-    problem = None
-    try:
-        chosen = choose(infos, args.device, os.environ)
-    except DeviceError as e:
-        if args.device is not None:
-            raise
-        chosen, problem = None, e  # show the table anyway: it helps fix PYOPENCL_CTX
-    if args.json:
-        rows = [dict(i.as_dict(), selected=(k == chosen)) for k, i in enumerate(infos)]
-        print(json.dumps(rows, indent=2))
-    else:
-        head = ["", "P:D", "type", "name", "platform", "CUs", "fp64", "64-bit atomics", ""]
-        rows = []
-        for k, i in enumerate(infos):
-            rows.append(
-                [
-                    "*" if k == chosen else "",
-                    i.spec,
-                    i.type,
-                    i.name,
-                    i.platform,
-                    str(i.compute_units),
-                    "yes" if i.fp64 else "no",
-                    "yes" if i.int64_atomics else "no",
-                    "(simulator, never chosen by default)" if i.is_oclgrind else "",
-                ]
-            )
-        widths = [max(len(r[c]) for r in rows + [head]) for c in range(len(head))]
-        right = {5}
-        for r in [head] + rows:
-            cells = [r[c].rjust(widths[c]) if c in right else r[c].ljust(widths[c]) for c in range(len(r))]
-            print("  ".join(cells).rstrip())
-        print()
-        if args.device is not None:
-            print(f"* = the device selected by --device {args.device}")
-        elif os.environ.get("PYOPENCL_CTX", "").strip():
-            print(f"* = the default device (PYOPENCL_CTX={os.environ['PYOPENCL_CTX'].strip()})")
-        else:
-            print("* = the default device (PYOPENCL_CTX unset: the first GPU, else the first CPU)")
-    if problem is not None:
-        raise problem
-    return 0
-
-
-# -- clcsg info -------------------------------------------------------------------------------
-
-
-def add_info_parser(subparsers):
-    from ..compile.dnf import DEFAULT_TERM_LIMIT
-
-    p = add_subcommand(
-        subparsers,
-        "info",
-        help="normalize a scene and print its statistics",
-        description="""
-            Load a scene (.json or OpenSCAD .csg), normalize it to disjunctive normal form (a
-            union of intersections of quadric literals) and print what the samplers will work
-            on: primitives, unique quadrics, DNF terms before and after pruning, term sizes,
-            term bounds and the scene bound.  Runs on the host only; the device line shows
-            which device sample/render would use.
-        """,
-        epilog="""
-            examples:
-              clcsg info examples/bracket.json
-              clcsg info model.csg --term-limit 1000000
-              clcsg info examples/bracket.json --bound -1,-1,-1,1,1,1
-              clcsg info examples/bracket.json --json > stats.json
-        """,
-    )
-    p.add_argument("scene", metavar="SCENE", help="scene file (.json or OpenSCAD .csg)")
-    p.add_argument(
-        "--term-limit",
-        metavar="N",
-        type=positive_int,
-        default=None,
-        help=f"stop with exit code 5 if the DNF would have more than N terms (default: {DEFAULT_TERM_LIMIT})",
-    )
-    p.add_argument(
-        "--bound",
-        metavar="x0,y0,z0,x1,y1,z1",
-        default=None,
-        help="box that clips unbounded terms (overrides the scene's own bound)",
-    )
-    p.add_argument("--json", action="store_true", help="print the statistics as JSON")
-
-
-MAX_LISTED_TERMS = 20
-
-
-def scene_info(
-    scene, term_limit: int | None = None, bound=None, device: str | None = None, _device: dict | None = None
-) -> dict:
-    """Statistics of ``scene`` (a Scene, Shape or path) as plain JSON-able data.
-
-    ``bound`` ((2, 3) or None) overrides the scene's bound.  ``device`` is a device spec; the
-    result's ``"device"`` is that device's info, or None with ``"device_problem"`` set when no
-    device is available and none was asked for explicitly.
-    """
-    from ..model.scene import as_scene
-
-    sc = as_scene(scene, bound)
-    dnf = sc.normalize(term_limit)
-    sizes = [len(t) for t in dnf.terms]
-    out = {
-        "scene": sc.source,
-        "stats": {k: (v.item() if hasattr(v, "item") else v) for k, v in dnf.stats.items()},
-        "term_sizes": {
-            "min": min(sizes, default=0),
-            "mean": float(np.mean(sizes)) if sizes else 0.0,
-            "max": max(sizes, default=0),
-        },
-        "term_bounds": dnf.term_bounds.tolist(),
-        "bound": dnf.bound.tolist() if dnf.n_terms else None,
-        "user_bound": None if sc.bound is None else np.asarray(sc.bound, dtype=float).tolist(),
-        "user_bound_from": None if sc.bound is None else ("--bound" if bound is not None else "scene"),
-    }
-    out.update(device_summary(device) if _device is None else _device)
-    return out
-
-
-def device_summary(spec: str | None) -> dict:
-    """``{"device": info dict}`` for the device ``spec`` selects.
-
-    With ``spec`` None and no usable device: ``{"device": None, "device_problem": message}``
-    (host-only commands still work); an explicit ``spec`` that fails raises DeviceError.
-    """
-    from ..cl.device import choose, list_devices
-
-    try:
-        infos = list_devices()
-        return {"device": infos[choose(infos, spec, os.environ)].as_dict()}
-    except DeviceError as e:
-        if spec is not None:
-            raise
-        return {"device": None, "device_problem": str(e)}
-
-
-def format_info(info: dict) -> str:
-    """The text ``clcsg info`` prints for a :func:`scene_info` result."""
-    s = info["stats"]
-    lines = []
-
-    def row(label, value):
-        lines.append(f"{label + ':':<22}{value}")
-
-    row("scene", info["scene"])
-    d = info.get("device")
-    if d is not None:
-        fp64 = "fp64" if d["fp64"] else "no fp64"
-        atomics = "64-bit atomics" if d["int64_atomics"] else "no 64-bit atomics"
-        feats = f"{d['type']}, {fp64}, {atomics}"
-        row("device", f"{d['spec']} {d['name']} ({feats})")
-    else:
-        row("device", f"none ({info.get('device_problem', 'not available')})")
-    row("primitives", s["primitives"])
-    row("literal instances", s["literal_instances"])
-    row("unique quadrics", s["unique_quadrics"])
-    row("DNF terms", f"{s['terms']} after pruning, {s['terms_before_pruning']} before")
-    lines.append(
-        f"  pruned while distributing: {s['terms_pruned_contradiction']} holding K and not-K, "
-        f"{s['terms_pruned_disjoint']} with disjoint literal boxes"
-    )
-    lines.append(f"  pruned after:              {s['terms_pruned_empty']} with an empty supporting polytope")
-    ts = info["term_sizes"]
-    row(
-        "term sizes",
-        f"min {ts['min']}, mean {ts['mean']:.3g}, max {ts['max']} literals ({s['literals']} in all)",
-    )
-    tb = info["term_bounds"]
-    if tb:
-        lines.append("term bounds:")
-        w = len(str(len(tb) - 1))
-        for k, b in enumerate(tb[:MAX_LISTED_TERMS]):
-            lines.append(f"  {k:>{w}}  {_box(b)}")
-        if len(tb) > MAX_LISTED_TERMS:
-            lines.append(f"  ... and {len(tb) - MAX_LISTED_TERMS} more (all of them with --json)")
-    if info["user_bound"] is not None:
-        src = "from --bound" if info["user_bound_from"] == "--bound" else "from the scene file"
-        row("user bound", f"{_box(info['user_bound'])} ({src})")
-    row("scene bound", "empty (the solid has no points)" if info["bound"] is None else _box(info["bound"]))
-    return "\n".join(lines)
-
-
-def run_info(args) -> int:
-    from ..model.scene import load
-
-    bound = None if args.bound is None else parse_bound(args.bound, "--bound")
-    dev = device_summary(args.device)  # a bad --device fails before the scene is read
-    scene = load(args.scene)
-    info = scene_info(scene, term_limit=args.term_limit, bound=bound, _device=dev)
-    if args.json:
-        print(json.dumps(info, indent=2))
-    else:
-        print(format_info(info))
-    return 0
-
-
-# -- clcsg sample -----------------------------------------------------------------------------
-
-
-def add_sample_parser(subparsers):
-    from ..compile.dnf import DEFAULT_TERM_LIMIT
-
-    p = add_subcommand(
-        subparsers,
-        "sample",
-        help="sample the CSG surface and write a PLY point cloud",
-        description="""
-            Generate samples on the exact CSG surface (paper: Trettner & Kobbelt 2021): every
-            sample lies on the surface, and every point of the surface has a sample on the
-            same quadric within RADIUS.  Writes a binary PLY (x y z nx ny nz quadric radius)
-            that Open3D and MeshLab read.
-        """,
-        epilog="""
-            examples:
-              clcsg sample examples/drilled_block.json -r 0.02 -o block.ply
-              clcsg sample model.csg -r 0.5 -o model.ply --stats stats.json --device gpu
-        """,
-    )
-    p.add_argument("scene", metavar="SCENE", help="scene file (.json or OpenSCAD .csg)")
-    p.add_argument("-r", "--radius", metavar="R", required=True, help="coverage radius in scene units")
-    p.add_argument("-o", "--output", metavar="OUT.ply", required=True, help="PLY file to write")
-    p.add_argument("--stats", metavar="S.json", default=None, help="write sampling statistics as JSON")
-    p.add_argument("--floor", metavar="F", default=None,
-                   help="drop cells still unresolved below this size (default: radius / 10)")
-    p.add_argument("--term-limit", metavar="N", type=positive_int, default=None,
-                   help=f"stop with exit code 5 past N DNF terms (default: {DEFAULT_TERM_LIMIT})")
-    p.add_argument("--bound", metavar="x0,y0,z0,x1,y1,z1", default=None,
-                   help="box that clips unbounded terms (overrides the scene's own bound)")
-    p.add_argument("--no-progress", action="store_true", help="no progress display on stderr")
-    p.add_argument("--max-samples", metavar="N", type=positive_int, default=None,
-                   help="stop with exit code 5 before sampling if the estimate passes N samples "
-                        "(default: 50000000)")
-
-
-def parse_positive(text, name) -> float:
-    (v,) = parse_floats(text, 1, name)
-    if v <= 0:
-        raise UsageError(f"{name} must be positive, got {text}")
-    return v
-
-
-def run_sample(args) -> int:
-    from ..sampling.sampler import sample
-    from ..model.scene import as_scene, load
-
-    radius = parse_positive(args.radius, "--radius")
-    floor = None if args.floor is None else parse_positive(args.floor, "--floor")
-    bound = None if args.bound is None else parse_bound(args.bound, "--bound")
-    from ..cl.device import get_context
-
-    ctx = get_context(args.device)
-    scene = as_scene(load(args.scene), bound)
-    s = sample(scene, radius, device=ctx, floor=floor, term_limit=args.term_limit,
-               progress=False if args.no_progress else None, max_samples=args.max_samples)
-    s.to_ply(args.output)
-    if args.stats:
-        with open(args.stats, "w") as f:
-            json.dump(s.stats, f, indent=2, default=_jsonable)
-    st = s.stats
-    print(f"{len(s)} samples on {st['dnf_unique_quadrics']} quadrics, {st['dnf_terms']} terms "
-          f"({st['distance_queries']} distance queries, {st['levels']} levels, "
-          f"{st['unresolved']} unresolved cells) in {st['total_s']:.3f} s -> {args.output}")
-    return 0
-
-
 def _jsonable(x):
     if hasattr(x, "tolist"):
         return x.tolist()
@@ -451,24 +157,27 @@ def _jsonable(x):
 # -- the dispatch table -----------------------------------------------------------------------
 
 def _lazy(module: str, name: str) -> Callable:
-    """A function of ``clcsg.<module>`` imported on first call (keeps ``clcsg --help`` fast)."""
+    """Function ``name`` of ``clcsg.cli.<module>``, imported on first call."""
 
     def call(*args, **kw):
         import importlib
 
-        return getattr(importlib.import_module(f"clcsg.{module}"), name)(*args, **kw)
+        return getattr(importlib.import_module(f"clcsg.cli.{module}"), name)(*args, **kw)
 
-    call.__name__ = name
+    call.__name__ = f"{module}.{name}"
     return call
 
 
-#: name -> (add_<name>_parser(subparsers), run_<name>(args) -> exit code), in --help order
+def _command(module: str) -> tuple[Callable, Callable]:
+    return _lazy(module, "add_parser"), _lazy(module, "run")
+
+
+#: name -> (add_parser(subparsers), run(args) -> exit code), in --help order
 COMMANDS: dict[str, tuple[Callable, Callable]] = {
-    "devices": (add_devices_parser, run_devices),
-    "info": (add_info_parser, run_info),
-    # ---- more subcommands go here, in the same style: ----
-    "sample": (add_sample_parser, run_sample),
-    "render": (_lazy("cli.render", "add_render_parser"), _lazy("cli.render", "cli_render")),
+    "devices": _command("devices"),
+    "info": _command("info"),
+    "sample": _command("sample"),
+    "render": _command("render"),
 }
 
 
@@ -480,7 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
             """
             examples:
               clcsg devices                         # list OpenCL devices, '*' = default
-              clcsg info examples/bracket.json      # DNF statistics of a scene
+              clcsg info examples/bracket.json      # tape statistics of a scene
               clcsg info --help                     # options of a subcommand
 
             exit codes: 0 ok, 1 internal error, 2 bad command line, 3 bad input,

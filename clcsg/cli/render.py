@@ -57,7 +57,7 @@ def add_render_arguments(parser) -> None:
         p.add_argument("--device", metavar="D", default=None, help="OpenCL device ('cpu', 'gpu', 'P:D')")
 
 
-def add_render_parser(subparsers):
+def add_parser(subparsers):
     """``add_<name>_parser`` for the dispatch table of clcsg/cli.py."""
     from .app import add_subcommand
 
@@ -117,7 +117,7 @@ def cli_camera(args, bound) -> Camera:
     return Camera.look_at(eye, target, up=up, fov=fov, width=w, height=h)
 
 
-def cli_render(args) -> int:
+def run(args) -> int:
     """Run ``clcsg render`` (argparse namespace from :func:`add_render_arguments`)."""
     import math
     import time
