@@ -34,9 +34,12 @@ patch box, other quadrics by their conservative distance), and the children's re
 parent's patch grown by r) holds their patches and every splat ball of their samples.  So the
 chain ends in (i) a fill, which puts every cell point within r of a sample (the anisotropic
 slope bound in ``fill.h``), (ii) a single sample whose radius covers the patch's whole 3-D
-box, or (iii) the floor: cells whose 3-D box is smaller than the floor (default r / 10) and
-still unresolved are dropped and counted as ``unresolved`` (the paper makes the same trade,
-section 4.2); the guarantee holds for every feature wider than the floor.
+box, or (iii) the floor: cells whose 3-D box is smaller than the floor and still unresolved
+are dropped and counted as ``unresolved`` (the paper makes the same trade with r / 10,
+section 4.2); the guarantee holds for every feature wider than the floor.  The default floor
+is min(r / 10, 1e-3 of the scene's diagonal): a radius far larger than a feature does not
+raise the floor past the feature, so a bore much narrower than r still gets its samples (one
+single sample per small patch is enough for the guarantee).
 
 The substitution is per quadric, not per leaf, so coincident faces of different solids,
 surfaces shared by several parts of the tree and shared sub-graphs need no special rule.
@@ -192,7 +195,8 @@ def sample(
     'cpu', 'gpu', 'P:D' or a context from :func:`clcsg.cl.device.get_context`.
     ``normal_form``: ``"tree"`` (the CSG tape, default) or ``"dnf"`` (the paper's disjunctive
     normal form as an OR of ANDs, with its term limit ``term_limit``).  ``floor``: size below
-    which unresolved cells are dropped (default radius / 10).  ``distortion``: use the interval
+    which unresolved cells are dropped (default min(radius / 10, 1e-3 of the bound's
+    diagonal)).  ``distortion``: use the interval
     distortion bound (True) or the worst case max(sqrt 3, bound) (False).  ``capacity``: initial
     (cells, samples[, arena[, clip]]) buffer sizes (tests force tiny ones).
     ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.sampling.guard`;
@@ -205,14 +209,18 @@ def sample(
         raise UsageError(f"radius must be a number, got {radius!r}") from None
     if not (math.isfinite(radius) and radius > 0):
         raise UsageError(f"radius must be a positive finite number, got {radius}")
-    floor = radius / 10 if floor is None else float(floor)
-    if not (math.isfinite(floor) and floor > 0):
-        raise UsageError(f"floor must be a positive finite number, got {floor}")
+    if floor is not None:
+        floor = float(floor)
+        if not (math.isfinite(floor) and floor > 0):
+            raise UsageError(f"floor must be a positive finite number, got {floor}")
     timings = {}
     t0 = time.perf_counter()
     sc = as_scene(scene, bound)
     tape = sc.compile(normal_form, term_limit)
     timings["compile_s"] = time.perf_counter() - t0
+    if floor is None:
+        diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+        floor = min(radius / 10, 1e-3 * diag) if diag > 0 else radius / 10
 
     ctx = scene_context(device)
     real = np.dtype(_device.real_dtype(ctx))
@@ -246,7 +254,8 @@ def sample(
     timings["finish_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     if len(samples) == 0:
-        warnings.warn(f"{sc.source}: the solid has no surface at radius {radius:.6g}; no samples", stacklevel=2)
+        warnings.warn(f"{sc.source}: no samples: no surface was found above the floor of {floor:.3g} "
+                      f"({sub.totals['unresolved']} cells smaller than it were left unresolved)", stacklevel=2)
     stats.update(sub.totals)
     stats.update(
         samples=len(samples),
