@@ -106,9 +106,13 @@ def test_chain_of_1000_nested_differences(cl_context, tmp_path):
 
 
 def _shared(levels):
+    """x_{k+1} = x_k & (x_k | box_k) with binary nodes (the operators would flatten x_k's
+    operands into the new node): the tree has 2^levels copies of the sphere, the DAG one."""
+    from clcsg.model.csg import Intersection, Union
+
     x = clcsg.sphere(1.0)
-    for k in range(levels):  # the tree has 2^levels leaves; the DAG levels + 1 nodes
-        x = x & (x | clcsg.box(0.3, center=(np.cos(k), np.sin(k), 0.9)))
+    for k in range(levels):
+        x = Intersection((x, Union((x, clcsg.box(0.3, center=(np.cos(k), np.sin(k), 0.9))))))
     return x
 
 
