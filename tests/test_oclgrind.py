@@ -85,7 +85,7 @@ BENIGN = {
 #: real problems found by this job in other modules and reported (docs/robustness.md, "Known
 #: gaps"); tolerated (and counted) so the job guards everything else.  CLCSG_OCLGRIND_STRICT=1
 #: fails on them too (to check a fix); remove an entry once it is fixed.
-KNOWN_GAPS: dict = {}  # none open ("finish-mask-write-only" was fixed: the mask is built privately)
+KNOWN_GAPS: dict = {}  # none open
 
 #: the uninitialized-value checker of Oclgrind 21.10 loses track of initialized buffers once
 #: the sampler has reallocated buffers in the process (a second sampling, or the growth path of
@@ -160,9 +160,9 @@ DRIVER = textwrap.dedent(
 
     import clcsg
     from clcsg.rendering.camera import Camera
-    from clcsg.cli.main import main
+    from clcsg.cli import main
     from clcsg.cl.device import get_context
-    from clcsg.rendering.api import raytrace, render
+    from clcsg import raytrace, render
 
     warnings.simplefilter("ignore")
     args = json.loads(sys.argv[1])
@@ -192,7 +192,7 @@ DRIVER = textwrap.dedent(
         out["oclgrind"], out["pocl"] = summary(a), summary(b)
     elif case == "sampler_growth":
         shape, r = SCENES["drilled"]
-        out["tiny_buffers"] = summary(clcsg.sample(shape, r, device=ocl, capacity=(2, 2), progress=False))
+        out["tiny_buffers"] = summary(clcsg.sample(shape, r, device=ocl, capacity=(2, 2, 2, 2), progress=False))
         out["pocl"] = summary(clcsg.sample(shape, r, device=ref, progress=False))
     elif case == "float32":
         os.environ["CLCSG_PRECISION"] = "float"
@@ -200,15 +200,15 @@ DRIVER = textwrap.dedent(
         a = clcsg.sample(shape, r, device=ocl, progress=False)
         out["sampler"] = summary(a)
         out["sampler_pocl"] = summary(clcsg.sample(shape, r, device=ref, progress=False))
-        cam = Camera.fit(a.dnf, 32, 24)
-        img, ray = render(a, cam, device=ocl), raytrace(a.dnf, cam, device=ocl)
+        cam = Camera.fit(a.tape, 32, 24)
+        img, ray = render(a, cam, device=ocl), raytrace(a.tape, cam, device=ocl)
         out["render"] = {"mask_agree": float((img.mask == ray.mask).mean()), "covered": int(ray.mask.sum()),
                          "nan": bool(np.isnan(img.depth).any() or np.isnan(ray.depth).any())}
     elif case == "renderer":
         for name in ("drilled", "coincident"):
             shape, r = SCENES[name]
             s = clcsg.sample(shape, r, device=ref, progress=False)
-            cam = Camera.fit(s.dnf, 32, 24)
+            cam = Camera.fit(s.tape, 32, 24)
             rows = {}
             for sa in (True, False):
                 for bf in (True, False):
@@ -218,8 +218,8 @@ DRIVER = textwrap.dedent(
                         "mask_agree": float((a.mask == b.mask).mean()),
                         "ids_agree": float((a.ids == b.ids).mean()),
                         "nan": bool(np.isnan(a.depth).any()), "covered": int(a.mask.sum())}
-            a = raytrace(s.dnf, cam, device=ocl)
-            b = raytrace(s.dnf, cam, device=ref)
+            a = raytrace(s.tape, cam, device=ocl)
+            b = raytrace(s.tape, cam, device=ref)
             rows["raytrace"] = {"mask_agree": float((a.mask == b.mask).mean()),
                                 "ids_agree": float((a.ids == b.ids).mean()),
                                 "nan": bool(np.isnan(a.depth).any()), "covered": int(a.mask.sum())}
@@ -273,9 +273,6 @@ def classify(block: str) -> str:
                 and "'param_name'" in block):
             return "api-probe"
         return "error"
-    if (block.startswith(("Invalid read from write-only buffer", "Uninitialized value written to global memory"))
-            and "Kernel: finish" in block and "mask[1 + k / 32] |=" in block):
-        return "finish-mask-write-only"
     if block.startswith("Read-write data race") and "Kernel: splat" in block:
         # the source lines Oclgrind quotes: the plain read and the atomic, nothing else
         src = {ln.strip() for ln in block.splitlines()[1:]
@@ -414,8 +411,8 @@ def test_log_parser_keeps_real_errors():
     assert [classify(b) for b in oclgrind_reports(stderr)] == kinds
     api = "Oclgrind - OpenCL runtime error detected\n\tFunction: clSetKernelArg\n\tError:    CL_INVALID_ARG_SIZE\n"
     assert classify(parse_log(api)[0]) == "error"
-    mask = ("Invalid read from write-only buffer\n\tKernel: finish\n\tAt line 738 (column 54) of input.cl:\n"
-            "\t  if (fabs(d) < s.radius) mask[1 + k / 32] |= 1u << (k % 32);\n")
-    assert classify(parse_log(mask)[0]) == "finish-mask-write-only"
+    write_only = ("Invalid read from write-only buffer\n\tKernel: finish\n\tAt line 38 (column 5) of input.cl:\n"
+                  "\t  out[m++] = o;\n")
+    assert classify(parse_log(write_only)[0]) == "error"
     other_race = SAMPLE_LOG.split("\n\n")[1].replace("atom_min(slot, key);", "framebuffer[i] = key;")
     assert classify(parse_log(other_race)[0]) == "error"

@@ -346,8 +346,10 @@ class _Subdivision:
 
         queue = self.ctx.queue
         tape = self.scene.packed.tape
-        self.arena = self._buffer(self.cap_arena * tape.itemsize, "tape arena")
-        cl.enqueue_copy(queue, self.arena, tape)
+        check_allocation(self.ctx, self.cap_arena * tape.itemsize, "tape arena")
+        arena = np.zeros(self.cap_arena, dtype=tape.dtype)
+        arena[:len(tape)] = tape
+        self.arena = upload(self.ctx, arena, writable=True)
         arena_used = len(tape)
         cells_in = upload(self.ctx, self.roots, writable=True)
         n_in = len(self.roots)
