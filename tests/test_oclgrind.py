@@ -87,12 +87,10 @@ BENIGN = {
 #: fails on them too (to check a fix); remove an entry once it is fixed.
 KNOWN_GAPS: dict = {}  # none open
 
-#: the uninitialized-value checker of Oclgrind 21.10 loses track of initialized buffers once
-#: the sampler has reallocated buffers in the process (a second sampling, or the growth path of
-#: one): it then flags reads of cells that read back valid and equal to PoCL's.  So every
-#: driver case runs at most one sampling on Oclgrind, and the growth-path case runs without
-#: that checker (memory, race and API checks stay on).
-NO_UNINITIALIZED = {"sampler_growth"}
+#: cases that run without Oclgrind's uninitialized-value checker: none (it loses track of
+#: device-to-device copies and of rows written into a fresh buffer; the sampler and the ray
+#: tracer therefore grow and create their arenas from host memory)
+NO_UNINITIALIZED: set = set()
 
 
 def _find_icd_library() -> str | None:

@@ -96,12 +96,13 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     bhi = np.array([(hi[0], hi[1], hi[2], 0)], dtype=real3)[0]
     tiles = cl.Buffer(context.ctx, mf.READ_WRITE, ntx * nty * 8)
     counters = np.zeros(3, dtype=np.uint32)
-    counters_buf = upload(context, counters, writable=True)
     cap = max(ntx * nty * min(n + 1, 64), 4 * (n + 1))
     while True:
-        arena = cl.Buffer(context.ctx, mf.READ_WRITE, cap * packed.tape.itemsize)
+        # from host memory: Oclgrind's uninitialized-value checker loses rows written into a
+        # fresh buffer and read back by the same work-item
+        arena = upload(context, np.zeros(cap, dtype=packed.tape.dtype), writable=True)
         counters[:] = 0
-        cl.enqueue_copy(q, counters_buf, counters)
+        counters_buf = upload(context, counters, writable=True)  # host data, not a write into a used buffer
         ev_prune = kernel(prg, "prune_tiles")(q, (ntx, nty), None, scene.quadrics, scene.tape, np.int32(n), view_buf,
                                               blo, bhi, arena, np.uint32(cap), counters_buf, tiles)
         cl.enqueue_copy(q, counters, counters_buf, wait_for=[ev_prune])

@@ -154,23 +154,49 @@ def estimate_samples(tape, radius: float) -> int:
 
 
 class _Progress:
-    """A one-line progress display on stderr for long runs (only on a terminal)."""
+    """Progress of the level loop on the current reporter (:mod:`clcsg.io.progress`: a bar on
+    a terminal, JSON lines with ``--progress json``, nothing in a pipe or with ``progress=False``).
 
-    def __init__(self, enabled):
-        self.enabled = enabled if enabled is not None else sys.stderr.isatty()
-        self.t0 = time.perf_counter()
-        self.shown = False
+    Done / total count cells: the work of a level is its cells.  The total is a forecast,
+    refined as levels finish: the cells classified so far, plus the next level's cells (known
+    exactly), growing by the ratio seen over the last two levels (cells split in two, along x
+    and y in turn) until the expected last level, about 2 log2(largest root cell / floor)
+    (cells are dropped as unresolved below the floor).  The ETA is the rate of the levels so
+    far times the cells left.  Samples so far and the first estimate (``estimate_samples``, an
+    area bound) are shown next to the bar.
+    """
 
-    def level(self, level, cells, samples):
-        if not self.enabled or time.perf_counter() - self.t0 < 0.5:
-            return
-        self.shown = True
-        sys.stderr.write(f"\rsampling: level {level:3d}  {cells:10,d} cells  {samples:12,d} samples")
-        sys.stderr.flush()
+    def __init__(self, enabled, estimate=0, roots=None, floor=None, max_levels=400):
+        from ..io.progress import for_option
+
+        self.reporter = for_option(enabled)
+        self.estimate = int(estimate)
+        self.levels_expected = max_levels
+        if roots is not None and len(roots) and floor:
+            extent = float(np.max(np.maximum(roots["x1"] - roots["x0"], roots["y1"] - roots["y0"])))
+            if extent > floor:
+                self.levels_expected = min(max_levels, round(2 * math.log2(extent / floor)) + 2)
+        outer = self.reporter.active()
+        self.own = outer is None or outer.name != "sample"
+        self.step = self.reporter.step("sample", "sampling") if self.own else outer
+        self.cells = 0
+        self.history: list[int] = []
+
+    def level(self, level, cells, samples, children=0):
+        self.cells += cells
+        self.history.append(cells)
+        prev = self.history[-2] if len(self.history) > 1 else cells
+        growth = (children / prev) ** 0.5 if len(self.history) > 1 else children / max(cells, 1)
+        growth = min(max(growth, 0.5), 1.8)
+        remaining = max(1, self.levels_expected - level - 1)
+        ahead = children * sum(growth ** k for k in range(remaining)) if children else 0
+        self.step.update(done=self.cells, total=int(self.cells + ahead), label="sampling", unit="cells",
+                         phase=level == 0, level=level + 1, samples=samples, estimated=self.estimate)
 
     def done(self):
-        if self.shown:
-            sys.stderr.write("\n")
+        self.step.update(total=self.cells, label="sampling: clip programs")
+        if self.own:
+            self.step.close()
 
 
 def sample(
@@ -322,7 +348,7 @@ class _Subdivision:
         self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(4 * len(roots), 4096)
         self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(2 * estimate, 4096)
         self.cap_arena = max(len(tape) + 2, int(cap[2])) if len(cap) > 2 else max(64 * len(tape), 1 << 16)
-        self.progress = _Progress(progress)
+        self.progress = _Progress(progress, estimate, roots, floor, max_levels)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
         self.grown = {"cells": 0, "samples": 0, "arena": 0}
@@ -334,12 +360,16 @@ class _Subdivision:
         return cl.Buffer(self.ctx.ctx, cl.mem_flags.READ_WRITE, max(int(nbytes), 16))
 
     def _grown_copy(self, old, used_bytes, new_bytes, what):
+        """A larger buffer holding the first ``used_bytes`` of ``old``, made from host memory (a
+        device-to-device copy would do, but Oclgrind's uninitialized-value checker loses track
+        of such copies; growing is rare)."""
         import pyopencl as cl
 
-        new = self._buffer(new_bytes, what)
+        check_allocation(self.ctx, new_bytes, what)
+        data = np.zeros(max(int(new_bytes), 16), dtype=np.uint8)
         if used_bytes:
-            cl.enqueue_copy(self.ctx.queue, new, old, byte_count=used_bytes)
-        return new
+            cl.enqueue_copy(self.ctx.queue, data[:used_bytes], old)
+        return upload(self.ctx, data, writable=True)
 
     def run(self):
         import pyopencl as cl
@@ -356,7 +386,6 @@ class _Subdivision:
         cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
         counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
-        counters_buf = self._buffer(counters.nbytes, "counter")
         kernel = cl.Kernel(self.prg, "classify")
         n_samples = 0
         level = 0
@@ -367,7 +396,9 @@ class _Subdivision:
                 counters[:] = 0
                 counters[_SLOT["samples"]] = n_samples
                 counters[_SLOT["arena"]] = arena_used
-                cl.enqueue_copy(queue, counters_buf, counters)
+                # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
+                # checker does not see host writes into an existing buffer)
+                counters_buf = upload(self.ctx, counters, writable=True)
                 kernel(queue, launch_size(n_in), (WORK_GROUP,),
                        self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
                        cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
@@ -407,7 +438,7 @@ class _Subdivision:
             })
             n_samples = n_samples_out
             arena_used = arena_out
-            self.progress.level(level, n_in, n_samples)
+            self.progress.level(level, n_in, n_samples, n_cells_out)
             cells_in, cells_out = cells_out, cells_in
             # the old input buffer becomes the next output: make sure it is large enough
             if self.cap_cells * self.cdt.itemsize > cells_out.size:
@@ -441,13 +472,12 @@ def _finish(ctx, prg, scene, frames_rec, tasks, sub, tape, packed, radius, capac
     rows = scene.packed.tape.itemsize
     cap_clip = max(2 * len(packed.tape), int(cap[3])) if len(cap) > 3 else max(n, 1 << 14)
     counters = np.zeros(2, dtype=np.uint32)
-    counters_buf = sub._buffer(counters.nbytes, "counter")
     kernel = cl.Kernel(prg, "finish")
     grown = 0
     while True:
         clip_buf = sub._buffer(cap_clip * rows, "clip")
         counters[:] = 0
-        cl.enqueue_copy(q, counters_buf, counters)
+        counters_buf = upload(ctx, counters, writable=True)
         kernel(q, launch_size(n), (WORK_GROUP,), scene.quadrics, upload(ctx, frames_rec), upload(ctx, tasks),
                sub.samples, np.int32(n), sub.arena, clip_buf, np.uint32(cap_clip), counters_buf,
                *scene.colour_args(), nb, bufs["signs"], bufs["primitives"], bufs["clip_first"], bufs["clip_count"])
