@@ -197,19 +197,17 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     /* split along the longest edge */
     uint slot = atomic_add(&counters[SC_CELLS], 2u);
     /* the children's tape: pruned over this patch grown by the radius (so it stays valid over
-     * every splat ball their samples get), written only if that drops a leaf */
+     * every splat ball their samples get), written only if that drops a row */
     int child_first = c.tape_first, child_count = n;
-    if (n > 1) {
-        prune_region grown = patch_region(&pf, c, t_lo, t_hi, radius);
+    prune_region grown = patch_region(&pf, c, t_lo, t_hi, radius);
+    if (n > 1 && tape_prune_shrinks(tape, n, qs, &grown, t.quadric, &w->evals)) {
         uint base = atomic_add(&counters[SC_ARENA], (uint)(n + 1));
         if (base + (uint)(n + 1) <= cap_arena) {
             int first, count;
             tape_prune(tape, n, qs, &grown, t.quadric, arena + base, &first, &count, &w->evals);
-            if (count < n) {
-                child_first = (int)base + first;
-                child_count = count;
-                w->tapes_written = 1;
-            }
+            child_first = (int)base + first;
+            child_count = count;
+            w->tapes_written = 1;
         }
     }
     if (slot + 1 >= cap_cells) return OUT_SPLIT;

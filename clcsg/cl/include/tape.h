@@ -141,6 +141,20 @@ inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, con
     return d >= reach ? ST_F : d <= -reach ? ST_T : ST_LIVE;
 }
 
+/* Does pruning over g drop a row?  It does iff some leaf not on self_q keeps one sign over g
+ * (that leaf's row goes); stops at the first such leaf. */
+inline bool tape_prune_shrinks(__global const tape_op *t, int n, __global const quadric_rec *qs,
+                               const prune_region *g, int self_q, uint *evals)
+{
+    for (int k = 0; k < n; ++k) {
+        tape_op o = t[k];
+        if (o.op != OP_LEAF || o.a == self_q) continue;
+        ++*evals;
+        if (leaf_over_region(qs, o.a, o.b, g) != ST_LIVE) return true;
+    }
+    return false;
+}
+
 /* Prune tape t (n rows) over region g with self_q substituted.
  * Returns the decision: +1 both sides known and equal over the region (no surface of self_q in
  * it), -1 known and different (all of self_q in it is surface), 0 otherwise.
