@@ -27,4 +27,4 @@ from .rendering.image import Image
 from .rendering.raytracer import raytrace
 from .rendering.splat import render
 from .sampling.sampler import sample
-from .sampling.samples import Samples
+from .sampling.samples import Samples, load_samples

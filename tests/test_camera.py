@@ -58,22 +58,64 @@ def test_pixel_formula_and_projection_roundtrip():
         assert cam.pixel_of(cam.eye + 7.0 * d[i, j]) == (i, j)
 
 
-def test_fit_shows_the_whole_bounding_sphere():
+def _corners(bound):
+    return np.array([[bound[i][0], bound[j][1], bound[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+
+def test_fit_frames_the_bound_at_90_percent():
     bound = np.array([[-1.0, -2.0, 0.0], [3.0, 1.0, 0.5]])
+    c = bound.mean(0)
+    rng = np.random.default_rng(1)
+    inner = rng.uniform(bound[0], bound[1], (2000, 3))
     for W, H in [(64, 48), (48, 64), (100, 20)]:
         cam = Camera.fit(bound, W, H, fov=45)
-        c = bound.mean(0)
-        R = 0.5 * np.linalg.norm(bound[1] - bound[0])
-        assert np.allclose(cam.target, c)
-        # every point of the sphere projects inside the image
-        rng = np.random.default_rng(1)
-        u = rng.normal(size=(2000, 3))
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        xy, z = cam.project(c + R * u)
+        xy, z = cam.project(_corners(bound))
         assert np.all(z > 0)
-        assert np.all((xy[:, 0] >= 0) & (xy[:, 0] <= W) & (xy[:, 1] >= 0) & (xy[:, 1] <= H))
-        # and it is reasonably tight (margin 5 %)
-        assert np.max(np.abs(xy[:, 0] - W / 2)) > 0.8 * W / 2 or np.max(np.abs(xy[:, 1] - H / 2)) > 0.8 * H / 2
+        # the corners span 90 % of the frame in the larger relative extent, centred
+        extent = (xy.max(0) - xy.min(0)) / [W, H]
+        assert max(extent) == pytest.approx(0.9, abs=1e-4)
+        assert np.allclose(0.5 * (xy.max(0) + xy.min(0)), [W / 2, H / 2], atol=1e-4 * max(W, H))
+        # so the whole box is in view, 5 % from the border
+        xy, z = cam.project(inner)
+        assert np.all(z > 0)
+        assert np.all((xy >= 0.05 * np.array([W, H]) - 1e-6) & (xy <= 0.95 * np.array([W, H]) + 1e-6))
+        # the view direction is the default one; the target is on the view axis, at the center's depth
+        d = np.array([0.62, -0.95, 0.55])
+        assert np.allclose(cam.forward, -d / np.linalg.norm(d), atol=1e-12)
+        assert np.allclose(np.cross(cam.target - cam.eye, cam.forward), 0, atol=1e-9)
+        assert (cam.target - cam.eye) @ cam.forward == pytest.approx((c - cam.eye) @ cam.forward)
+
+
+def test_fit_frames_points_and_samples_like_objects():
+    rng = np.random.default_rng(2)
+    u = rng.normal(size=(5000, 3))
+    pts = 0.7 * u / np.linalg.norm(u, axis=1, keepdims=True) + [2.0, -1.0, 0.5]  # a sphere of points
+    for W, H in [(96, 72), (72, 96)]:
+        cam = Camera.fit(pts, W, H)
+        xy, _ = cam.project(pts)
+        extent = (xy.max(0) - xy.min(0)) / [W, H]
+        assert max(extent) == pytest.approx(0.9, abs=1e-4)
+        assert np.allclose(0.5 * (xy.max(0) + xy.min(0)), [W / 2, H / 2], atol=1e-3)
+
+    class HasPositions:  # what Samples offers: positions frame the camera, not the bound
+        positions = pts
+        bound = np.array([[-10.0] * 3, [10.0] * 3])
+
+    cam = Camera.fit(HasPositions(), 96, 72)
+    xy, _ = cam.project(pts)
+    assert max((xy.max(0) - xy.min(0)) / [96, 72]) == pytest.approx(0.9, abs=1e-4)
+
+
+def test_fit_without_centering_looks_at_the_center():
+    bound = np.array([[-1.0, -2.0, 0.0], [3.0, 1.0, 0.5]])
+    cam = Camera.fit(bound, 64, 48, centered=False)
+    assert np.allclose(cam.target, bound.mean(0), atol=1e-9)
+    xy, _ = cam.project(_corners(bound))
+    extent = (xy.max(0) - xy.min(0)) / [64, 48]
+    side = np.abs(xy - [32, 24]).max(0) / [32, 24]
+    # the binding constraint is met exactly: 90 % of the frame or 5 % from a border
+    assert max(extent) <= 0.9 + 1e-4 and max(side) <= 0.95 + 1e-4
+    assert max(extent) == pytest.approx(0.9, abs=1e-4) or max(side) == pytest.approx(0.95, abs=1e-4)
 
 
 def test_fit_default_is_three_quarter_view_from_above():
@@ -89,8 +131,12 @@ def test_fit_accepts_objects_with_bound():
     class HasBound:
         bound = np.array([[0, 0, 0], [1, 1, 1.0]])
 
-    cam = Camera.fit(HasBound(), 32, 24)
+    cam = Camera.fit(HasBound(), 32, 24, centered=False)
     assert np.allclose(cam.target, 0.5)
+    centred = Camera.fit(HasBound(), 32, 24)
+    assert np.allclose(centred.forward, cam.forward)
+    xy, _ = centred.project(_corners(HasBound.bound))
+    assert np.allclose(0.5 * (xy.max(0) + xy.min(0)), [16, 12], atol=1e-4)
 
 
 def test_orbit():
@@ -143,6 +189,8 @@ def test_fit_and_orbit_validation():
         Camera.fit(np.array([[0, 0, 0], [np.nan, 1, 1]]), 10, 10)
     with pytest.raises(UsageError):
         Camera.fit(np.zeros(3), 10, 10)
+    with pytest.raises(UsageError, match="fill"):
+        Camera.fit(np.array([[0, 0, 0], [1, 1, 1.0]]), 10, 10, fill=1.5)
     with pytest.raises(UsageError):
         list(orbit(np.array([[0, 0, 0], [1, 1, 1.0]]), 0))
     with pytest.raises(UsageError):

@@ -302,11 +302,15 @@ BAD = [
     (S('{"quadric": {"matrix": [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]}}'), "$.root.quadric.matrix: quadric matrix must not be zero"),
     (S('{"quadric": {"matrix": [1, 0, 0, 0, 1, 0, 0, 1, 0]}}'), "$.root.quadric.matrix: expected a symmetric 4x4 matrix (4 rows of 4 numbers) or 10 coefficients, got array of 9"),
     # colors
-    (S('{"box": {}, "color": [1, 0]}'), "$.root.color: expected [r, g, b] or [r, g, b, a] with components in [0, 1], got array of 2"),
+    (S('{"box": {}, "color": [1, 0]}'), '$.root.color: expected [r, g, b], [r, g, b, a], a color name or "#rrggbb[aa]", got array of 2'),
     (S('{"box": {}, "color": [1, 2, 0]}'), "$.root.color[1]: color components must be in [0, 1], got 2"),
     (S('{"box": {}, "color": [1, 0, 0, -0.5]}'), "$.root.color[3]: color components must be in [0, 1], got -0.5"),
     (S('{"box": {}, "color": [1, "0", 0]}'), "$.root.color[1]: expected a number, got string"),
-    (S('{"box": {}, "color": "red"}'), "$.root.color: expected [r, g, b], [r, g, b, a] or \"#rrggbb[aa]\", got 'red'"),
+    (S('{"box": {}, "color": "reddish"}'), "$.root.color: unknown color name 'reddish'"),
+    (S('{"box": {}, "color": "stelblue"}'), "$.root.color: unknown color name 'stelblue' (did you mean 'steelblue'?)"),
+    (S('{"box": {}, "color": "#12"}'), '$.root.color: expected a color name or "#rgb", "#rgba", "#rrggbb" or "#rrggbbaa", got \'#12\''),
+    (S('{"box": {}, "color": "#12345"}'), "$.root.color: expected a color name or"),
+    (S('{"box": {}, "color": 7}'), '$.root.color: expected [r, g, b], [r, g, b, a], a color name or "#rrggbb[aa]", got number'),
     (S('{"union": [], "color": [1, 0, 0]}'), "$.root.color: color is only allowed on primitives, not on a union node"),
     # transforms
     (S('{"box": {}, "transform": {"translate": [1, 2, 3]}}'), "$.root.transform: expected a list of transform steps"),
@@ -399,6 +403,20 @@ def test_file_level_errors(tmp_path):
         scenefile.load_json(deep)
 
 
+def test_deep_chains_load_without_recursion():
+    """1,000 nested differences: saved with a def every SAVE_DEPTH levels, validated against
+    the schema one node at a time (no recursion per level), loaded back to the same graph."""
+    shape = solids.box(2.0)
+    for i in range(1000):
+        shape = csg.Difference([shape, solids.sphere(0.1, center=(i / 1000, 0, 0))])
+    text = scenefile.dumps(scenefile.scene_to_dict(shape))
+    loaded = scenefile.loads_json(text, "deep.json").shape
+    assert_same_graph(shape, loaded)
+    bad = text.replace('"radius": 0.1', '"radius": -0.1', 1)  # the innermost sphere, deep down
+    with pytest.raises(SceneError, match=r"sphere\.radius: must be positive, got -0\.1$"):
+        scenefile.loads_json(bad, "deep.json")
+
+
 def test_dict_entry_point_checks_python_values():
     with pytest.raises(SceneError, match=r"^d: \$\.root\.sphere\.radius: number NaN is not allowed"):
         scenefile.scene_from_dict({"clcsg": 1, "root": {"sphere": {"radius": float("nan")}}}, "d")
@@ -473,8 +491,12 @@ def test_schema_structure():
     defs = schema["$defs"]
     for ref in all_refs(schema):
         assert ref.startswith("#/$defs/") and ref[len("#/$defs/"):] in defs, ref
-    node_refs = {alt["$ref"].rsplit("/", 1)[1] for alt in defs["node"]["oneOf"]}
-    assert node_refs == {*solids.KINDS, *scenefile.OPERATIONS, *scenefile.UNARY, "ref"}
+    node = defs["node"]
+    every_kind = {*solids.KINDS, *scenefile.OPERATIONS, *scenefile.UNARY, "ref"}
+    # a node has exactly the keys of one kind (dispatch on the kind key) ...
+    assert {k: v["$ref"] for k, v in node["dependentSchemas"].items()} == {k: f"#/$defs/{k}" for k in every_kind}
+    assert node["not"] == {"propertyNames": {"enum": list(scenefile.NODE_EXTRA_KEYS)}}  # not only extras: a kind
+    assert set(defs[node["propertyNames"]["$ref"].rsplit("/", 1)[1]]["enum"]) == every_kind | set(scenefile.NODE_EXTRA_KEYS)
     for kind in solids.KINDS:
         params = solids.parameters(kind)
         ps = defs["params_" + kind]
@@ -482,10 +504,15 @@ def test_schema_structure():
         required = {n for n, d in params.items() if d is __import__("inspect").Parameter.empty}
         assert set(ps.get("required", [])) == required, kind
         assert set(defs[kind]["properties"]) == {kind, *scenefile.NODE_EXTRA_KEYS}
+        assert defs[kind]["required"] == [kind] and defs[kind]["additionalProperties"] is False
     for op in [*scenefile.OPERATIONS, *scenefile.UNARY, "ref"]:
         assert set(defs[op]["properties"]) == {op, "transform", "comment"}
-    steps = {next(iter(alt["properties"])) for alt in defs["step"]["oneOf"]}
-    assert steps == set(scenefile.TRANSFORM_STEPS)
+        assert defs[op]["required"] == [op] and defs[op]["additionalProperties"] is False
+    # ... and a transform step exactly one key
+    step = defs["step"]
+    assert step["minProperties"] == step["maxProperties"] == 1
+    assert list(step["properties"]) == list(scenefile.TRANSFORM_STEPS)
+    assert defs[step["propertyNames"]["$ref"].rsplit("/", 1)[1]]["enum"] == list(scenefile.TRANSFORM_STEPS)
 
 
 def _validate(instance, schema, root, path="$"):
@@ -494,7 +521,8 @@ def _validate(instance, schema, root, path="$"):
     list of error strings."""
     known = {"$schema", "$id", "title", "description", "$defs", "$ref", "type", "const", "required",
              "properties", "additionalProperties", "propertyNames", "items", "prefixItems", "minItems",
-             "maxItems", "oneOf", "not", "minimum", "maximum", "exclusiveMinimum", "pattern", "minLength"}
+             "maxItems", "oneOf", "anyOf", "not", "minimum", "maximum", "exclusiveMinimum", "pattern", "minLength",
+             "enum", "minProperties", "maxProperties", "dependentSchemas"}
     unknown = set(schema) - known
     assert not unknown, f"the test validator does not know {unknown}"
     errs = []
@@ -505,12 +533,16 @@ def _validate(instance, schema, root, path="$"):
         errs += _validate(instance, target, root, path)
     t = schema.get("type")
     types = {"object": dict, "array": list, "string": str}
-    if t == "number" and (isinstance(instance, bool) or not isinstance(instance, (int, float))):
+    if t in ("number", "integer") and (isinstance(instance, bool) or not isinstance(instance, (int, float))):
         return errs + [f"{path}: not a number"]
+    if t == "integer" and not float(instance).is_integer():
+        return errs + [f"{path}: not an integer"]
     if t in types and not isinstance(instance, types[t]):
         return errs + [f"{path}: not {t}"]
     if "const" in schema and not (instance == schema["const"] and not isinstance(instance, bool)):
         errs.append(f"{path}: not {schema['const']}")
+    if "enum" in schema and not any(instance == e and type(instance) is type(e) for e in schema["enum"]):
+        errs.append(f"{path}: not one of the enum")
     if isinstance(instance, (int, float)) and not isinstance(instance, bool):
         if "minimum" in schema and instance < schema["minimum"]:
             errs.append(f"{path}: below minimum")
@@ -527,6 +559,11 @@ def _validate(instance, schema, root, path="$"):
         for k in schema.get("required", []):
             if k not in instance:
                 errs.append(f"{path}: missing {k}")
+        if len(instance) < schema.get("minProperties", 0) or len(instance) > schema.get("maxProperties", len(instance)):
+            errs.append(f"{path}: number of properties")
+        for k, sub in schema.get("dependentSchemas", {}).items():
+            if k in instance:
+                errs += _validate(instance, sub, root, path)
         props = schema.get("properties", {})
         for k, v in instance.items():
             if "propertyNames" in schema:
@@ -552,6 +589,8 @@ def _validate(instance, schema, root, path="$"):
         ok = [alt for alt in schema["oneOf"] if not _validate(instance, alt, root, path)]
         if len(ok) != 1:
             errs.append(f"{path}: matches {len(ok)} of oneOf")
+    if "anyOf" in schema and not any(not _validate(instance, alt, root, path) for alt in schema["anyOf"]):
+        errs.append(f"{path}: matches none of anyOf")
     if "not" in schema and not _validate(instance, schema["not"], root, path):
         errs.append(f"{path}: matches not")
     return errs
@@ -570,6 +609,13 @@ SCHEMA_BAD = [
     {"clcsg": 1, "root": {"box": {}, "transform": [{"scale": 1, "translate": [0, 0, 0]}]}},
     {"clcsg": 1, "root": {"intersection": []}},
     {"clcsg": 1, "root": {"ref": 3}},
+    {"clcsg": 1, "root": {}},
+    {"clcsg": 1, "root": {"transform": []}},
+    {"clcsg": 1, "root": {"box": {}, "transform": [{}]}},
+    {"clcsg": 1, "root": {"box": {}, "color": "#12"}},
+    {"clcsg": 1, "root": {"box": {}, "color": "steel blue"}},
+    {"clcsg": 1, "root": {"difference": [{"box": {}}, {"sphere": {"radius": 0}}]}},
+    {"clcsg": 1, "root": {"box": {}}, "defs": {"": {"box": {}}}},
 ]
 
 
@@ -580,6 +626,8 @@ def _schema_documents():
     prims = [csg.Primitive(k, {}) for k in solids.KINDS if k != "quadric"]
     prims.append(solids.quadric(np.diag([1.0, 1, 1, -1])))
     docs.append(scenefile.scene_to_dict(Scene(csg.Difference([shape, *prims]).scale((1, 2, 3)), UB)))
+    docs.append({"clcsg": 1, "root": {"union": [{"box": {}, "color": "SteelBlue"}, {"sphere": {}, "color": "#f9d72c"},
+                                                {"cone": {}, "color": "#fa0c"}, {"ellipsoid": {}, "color": "transparent"}]}})
     return docs
 
 

@@ -10,6 +10,12 @@ Errors: a :class:`~clcsg.errors.ClcsgError` prints ``clcsg: error: <message>`` (
 exits with its ``exit_code``; a bad command line exits 2 (argparse); Ctrl-C exits 130; anything
 else is a bug and prints ``clcsg: internal error: ...`` and exits 1.  ``--debug`` re-raises
 instead, to show the traceback.
+
+Progress: every subcommand takes ``--progress {auto,bar,json,none}`` and ``--quiet``;
+:func:`main` makes the matching :class:`~clcsg.io.progress.Reporter` the current one while the
+command runs (steps longer than half a second get a bar on a terminal, nothing in a pipe; with
+``json`` every event, warnings and errors included, is one JSON object per line on stderr).
+Commands end with a one-line summary on stdout (not with ``--quiet``).
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from typing import Callable
 import numpy as np
 
 from .. import __version__
-from ..errors import ClcsgError, DeviceError, UsageError
+from ..errors import ClcsgError, UsageError
 
 PROG = "clcsg"
 
@@ -117,8 +123,27 @@ def _term_width() -> int:
         return 98
 
 
+PROGRESS_HELP = (
+    "progress on stderr: 'auto' (default: bars on a terminal, nothing in a pipe), 'bar', 'json' (one JSON "
+    "object per line: start, progress, end, warning, error and summary events) or 'none'"
+)
+
+#: what "unresolved cells" are, for the epilogs of the commands that sample
+UNRESOLVED_HELP = """
+    unresolved cells:
+      The sampler subdivides every quadric's sampling planes into cells.  A cell it still cannot
+      decide (surface or not, covered or not) when it has shrunk below the floor (clcsg sample
+      --floor; default min(RADIUS / 10, 1/1000 of the scene's diagonal)) is dropped and counted as
+      "unresolved" (statistic "unresolved").  Such cells lie along edges and tangent contacts,
+      where two surfaces meet: thousands are normal, their number grows with the length of the
+      edges over the floor.  The coverage guarantee holds for every feature wider than the
+      floor; a feature thinner than the floor can be missed: pass a smaller --floor.
+"""
+
+
 def add_subcommand(subparsers, name: str, help: str, description: str, epilog: str = ""):
-    """A subcommand parser with the options every subcommand has (``--device``, ``--debug``)."""
+    """A subcommand parser with the options every subcommand has (``--device``, ``--debug``,
+    ``--quiet``, ``--progress``)."""
     p = subparsers.add_parser(
         name,
         help=help,
@@ -131,6 +156,9 @@ def add_subcommand(subparsers, name: str, help: str, description: str, epilog: s
     g.add_argument(
         "--debug", action="store_true", default=argparse.SUPPRESS, help="show the traceback on errors"
     )
+    g.add_argument("-q", "--quiet", action="store_true", help="no progress and no summary line (errors and "
+                   "warnings are still shown)")
+    g.add_argument("--progress", choices=("auto", "bar", "json", "none"), default="auto", help=PROGRESS_HELP)
     return p
 
 
@@ -216,13 +244,35 @@ def _format_warning(message, category, filename, lineno, line=None) -> str:
     return f"{PROG}: warning: {' '.join(str(message).split())}\n"
 
 
+def _json_warning(message, category, filename, lineno, line=None) -> str:
+    """Warnings as JSON lines (``--progress json``)."""
+    return json.dumps({"event": "warning", "message": " ".join(str(message).split()),
+                       "category": category.__name__}) + "\n"
+
+
+def _reporter(args):
+    """The progress reporter that ``args`` (--progress, --quiet, sample's --no-progress) ask for."""
+    from ..io.progress import Reporter
+
+    mode = getattr(args, "progress", "auto")
+    if getattr(args, "no_progress", False) and mode != "json":
+        mode = "none"
+    quiet = bool(getattr(args, "quiet", False))
+    if quiet and mode in ("auto", "bar"):
+        mode = "none"
+    return Reporter(mode, quiet=quiet)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (never raises unless ``--debug``)."""
     import warnings
 
+    from ..io.progress import using
+
     warnings.formatwarning = _format_warning
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv  # known even if parsing fails
+    as_json = False
     try:
         parser = build_parser()
         try:
@@ -230,13 +280,21 @@ def main(argv: list[str] | None = None) -> int:
         except SystemExit as e:  # --help, --version, bad command line
             return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         debug = bool(getattr(args, "debug", False))
+        rep = _reporter(args)
+        as_json = rep.mode == "json"
+        if as_json:
+            warnings.formatwarning = _json_warning
         _add, run = COMMANDS[args.command]
-        return int(run(args) or 0)
+        with using(rep):
+            return int(run(args) or 0)
     except ClcsgError as e:
         if debug:
             raise
         msg = " ".join(str(e).split("\n")) or type(e).__name__
-        _err(f"error: {msg}")
+        if as_json:
+            print(json.dumps({"event": "error", "message": msg, "exit_code": e.exit_code}), file=sys.stderr, flush=True)
+        else:
+            _err(f"error: {msg}")
         return e.exit_code
     except KeyboardInterrupt:
         if debug:

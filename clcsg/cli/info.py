@@ -101,12 +101,22 @@ def format_info(info: dict) -> str:
 def run(args) -> int:
     from ..compile.summary import scene_info
     from ..model.scene import load
+    from .runs import Run
 
     bound = None if args.bound is None else parse_bound(args.bound, "--bound")
     dev = device_summary(args.device)  # a bad --device fails before the scene is read
-    scene = load(args.scene)
-    info = scene_info(scene, normal_form=args.normal_form, term_limit=args.term_limit, bound=bound,
-                      listing=args.tape)
+    run = Run("info")
+    with run.step("load", f"loading {args.scene}"):
+        scene = load(args.scene)
+    with run.step("compile", "compiling the scene" + (" and its DNF" if args.normal_form == "dnf" else "")):
+        info = scene_info(scene, normal_form=args.normal_form, term_limit=args.term_limit, bound=bound,
+                          listing=args.tape)
     info.update(dev)
     print(json.dumps(info, indent=2) if args.json else format_info(info))
+    if not args.json:  # --json output stays one JSON document
+        t = info["tape"]
+        run.summary(f"{args.scene}: {t['primitives']} primitives, {info['unique_quadrics']} unique quadrics, "
+                    f"tape of {t['instructions']} instructions")
+    else:
+        run.reporter.close_all()
     return 0

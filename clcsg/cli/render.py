@@ -1,45 +1,69 @@
-"""``clcsg render``: sample and splat-render a scene (or ray trace it) to an image."""
+"""``clcsg render``: sample and splat-render a scene (or ray trace it, or render saved samples)."""
 
 from __future__ import annotations
 
+import os
+import textwrap
+
+import numpy as np
+
 from ..errors import UsageError
 from ..rendering.camera import Camera
-from ..rendering.raytracer import raytrace
-from ..rendering.splat import render
 
 RENDER_DESCRIPTION = """
-    Render a scene to PNG.  The default method samples the CSG surface (clcsg sample) and draws
-    the samples as splats with local quadric ray tracing and clipping (paper section 6):
-    pixel-perfect, like the exact ray tracer (--method raytrace), which needs no sampling.
-    Without --eye/--target the camera fits the scene's bounding sphere in a 3/4 view.
+    Render a scene to an image (.png, .jpg, .webp or .tif, by the extension of OUT).  The
+    default method samples the CSG surface (clcsg sample) and draws the samples as splats
+    with local quadric ray tracing and clipping (paper section 6): pixel-perfect, like the
+    exact ray tracer (--method raytrace), which needs no sampling.  SCENE may also be samples
+    saved by `clcsg sample -o S.npz`: they are drawn as they are, without sampling again.
+    Without --eye/--target the camera frames the solid in a 3/4 view from the front right and
+    above: its silhouette (found by a small probe ray trace) spans 90% of the image, the same
+    view for both methods.
 """
 
 RENDER_EPILOG = """
     examples:
       clcsg render examples/bracket.json -o bracket.png
-      clcsg render part.json -o part.png -r 0.05 --size 1280x960 --eye 4,-5,3 --target 0,0,0
+      clcsg render part.json -o part.webp -r 0.05 --size 1280x960 --eye 4,-5,3 --target 0,0,0
       clcsg render part.json -o ref.png --method raytrace --depth ref_depth.npy --ids ref_ids.npy
+      clcsg render model.csg -o model.png --colors openscad --background '#ffffe5'
+      clcsg render part.json -o part.png --transparent
+      clcsg sample part.json -r 0.02 -o part.npz && clcsg render part.npz -o part.png
 """
+
+SAMPLE_FILES = (".npz", ".ply")
 
 
 def add_render_arguments(parser) -> None:
     """Add the ``clcsg render`` arguments to an argparse parser.  ``--device`` is added only
     if the parser does not have it yet (``cli.add_subcommand`` adds it)."""
+    from .app import positive_int
+
     p = parser
-    p.add_argument("scene", metavar="SCENE", help="scene file (.json or OpenSCAD .csg)")
-    p.add_argument("-o", "--output", metavar="OUT.png", required=True, help="image file to write (PNG)")
+    p.add_argument("scene", metavar="SCENE",
+                   help="scene file (.json, OpenSCAD .csg or .scad) or samples saved as .npz by clcsg sample")
+    p.add_argument("-o", "--output", metavar="OUT.png", required=True,
+                   help="image file to write: .png, .jpg/.jpeg (no alpha), .webp (lossless) or .tif/.tiff")
     p.add_argument("-r", "--radius", metavar="R", default=None,
                    help="splat radius in scene units (default: 1/100 of the scene bound's diagonal)")
     p.add_argument("--method", choices=("splat", "raytrace"), default="splat",
                    help="splat (sample, then render splats; default) or raytrace (exact ray tracing)")
+    p.add_argument("--normal-form", choices=("tree", "dnf"), default="tree",
+                   help="the CSG tree itself (default) or the paper's disjunctive normal form (same image)")
     p.add_argument("--size", metavar="WxH", default="640x480", help="image size in pixels (default 640x480)")
     p.add_argument("--eye", metavar="X,Y,Z", default=None, help="camera position (default: fitted)")
     p.add_argument("--target", metavar="X,Y,Z", default=None,
                    help="point the camera looks at (default: the center of the scene bound)")
     p.add_argument("--up", metavar="X,Y,Z", default="0,0,1", help="up direction (default 0,0,1)")
     p.add_argument("--fov", metavar="DEG", default="45", help="vertical field of view in degrees (default 45)")
-    p.add_argument("--background", metavar="R,G,B[,A]", default="1,1,1",
-                   help="background color, components in [0, 1] (or 0-255 if any is above 1); default white")
+    p.add_argument("--background", metavar="COLOR", default="1,1,1",
+                   help="background: R,G,B[,A] in [0, 1] (or 0-255 if any is above 1), a color name (white) or "
+                        "#rrggbb[aa]; default white")
+    p.add_argument("--transparent", action="store_true",
+                   help="transparent background (alpha 0; formats without alpha show the background color)")
+    p.add_argument("--colors", choices=("clcsg", "openscad"), default="clcsg",
+                   help="color of primitives without one: clcsg's light grey (default) or OpenSCAD's default "
+                        "face color #f9d72c (its Cornfield scheme)")
     p.add_argument("--depth", metavar="DEPTH.npy", default=None,
                    help="write the depth (distance along the view ray, inf on background) as float32 .npy")
     p.add_argument("--ids", metavar="IDS.npy", default=None,
@@ -48,8 +72,6 @@ def add_render_arguments(parser) -> None:
     p.add_argument("--no-surface-aligned", action="store_true",
                    help="splat bounds from the whole ball instead of the surface-aligned slab")
     p.add_argument("--no-backface-culling", action="store_true", help="do not cull back-facing splats")
-    from .app import positive_int
-
     p.add_argument("--max-samples", metavar="N", type=positive_int, default=None,
                    help="splat method: stop with exit code 5 before sampling if the estimate passes N "
                         "samples (default: 50000000)")
@@ -59,10 +81,11 @@ def add_render_arguments(parser) -> None:
 
 def add_parser(subparsers):
     """``add_<name>_parser`` for the dispatch table of clcsg/cli.py."""
-    from .app import add_subcommand
+    from .app import UNRESOLVED_HELP, add_subcommand
 
-    p = add_subcommand(subparsers, "render", help="render a scene to PNG (splats or exact ray tracing)",
-                       description=RENDER_DESCRIPTION, epilog=RENDER_EPILOG)
+    p = add_subcommand(subparsers, "render", help="render a scene to an image (splats or exact ray tracing)",
+                       description=RENDER_DESCRIPTION,
+                       epilog=textwrap.dedent(RENDER_EPILOG) + textwrap.dedent(UNRESOLVED_HELP))
     add_render_arguments(p)
     return p
 
@@ -82,106 +105,180 @@ def parse_size(text) -> tuple[int, int]:
 
 
 def parse_background(text) -> tuple[float, ...]:
-    """``"R,G,B[,A]"``: components in [0, 1], or 0-255 if any is above 1."""
-    from .app import parse_floats
+    """``"R,G,B[,A]"`` (components in [0, 1], or 0-255 if any is above 1), a color name or
+    ``#hex`` (:func:`clcsg.io.colors.parse_color_text`)."""
+    from ..io.colors import ColorError, parse_color_text
 
-    parts = str(text).replace(",", " ").split()
-    if len(parts) not in (3, 4):
-        raise UsageError(f"--background: expected R,G,B or R,G,B,A, got {text!r}")
-    v = parse_floats(text, len(parts), "--background")
-    if any(x > 1.0 for x in v):
-        v = tuple(x / 255.0 for x in v)
-    if not all(0.0 <= x <= 1.0 for x in v):
-        raise UsageError(f"--background: components must be in [0, 1] (or 0-255), got {text!r}")
-    return v
+    try:
+        return parse_color_text(text, allow_255=True)
+    except ColorError as e:
+        raise UsageError(f"--background: {e}") from None
 
 
-def cli_camera(args, bound) -> Camera:
-    """The camera of ``clcsg render``'s options: fitted to ``bound`` unless --eye/--target."""
+def view_options(args) -> dict:
+    """The camera options (--size, --fov, --up, --eye, --target), parsed and checked."""
+    from ..rendering.camera import _fov, _vec3
     from .app import parse_floats
 
     w, h = parse_size(args.size)
     (fov,) = parse_floats(args.fov, 1, "--fov")
+    _fov(fov)
     up = parse_floats(args.up, 3, "--up")
-    center = 0.5 * (bound[0] + bound[1])
-    if args.eye is None and args.target is None:
-        return Camera.fit(bound, w, h, fov=fov, up=up)
-    target = center if args.target is None else parse_floats(args.target, 3, "--target")
-    if args.eye is None:
-        fitted = Camera.fit(bound, w, h, fov=fov, up=up)
-        import numpy as np
+    if not any(up):
+        raise UsageError("--up must be a non-zero vector")
+    eye = None if args.eye is None else _vec3(parse_floats(args.eye, 3, "--eye"), "--eye")
+    target = None if args.target is None else _vec3(parse_floats(args.target, 3, "--target"), "--target")
+    if eye is not None and target is not None and np.array_equal(eye, target):
+        raise UsageError(f"--eye and --target: eye and target must differ, both are {eye.tolist()}")
+    return {"w": w, "h": h, "fov": fov, "up": up, "eye": eye, "target": target}
 
+
+def cli_camera(args, bound, fit=None) -> Camera:
+    """The camera of ``clcsg render``'s options: ``fit(w, h, fov, up)`` (default: fitted to
+    ``bound``) unless --eye/--target; --target alone keeps the fitted view direction and
+    distance, --eye alone looks at the center of ``bound``."""
+    v = view_options(args)
+    w, h, fov, up = v["w"], v["h"], v["fov"], v["up"]
+    if fit is None:
+        def fit(w, h, fov, up):
+            return Camera.fit(bound, w, h, fov=fov, up=up)
+    center = 0.5 * (np.asarray(bound[0]) + np.asarray(bound[1]))
+    if v["eye"] is None and v["target"] is None:
+        return fit(w, h, fov, up)
+    target = center if v["target"] is None else v["target"]
+    if v["eye"] is None:
+        fitted = fit(w, h, fov, up)
         eye = np.asarray(target) + (fitted.eye - fitted.target)
     else:
-        eye = parse_floats(args.eye, 3, "--eye")
+        eye = v["eye"]
     return Camera.look_at(eye, target, up=up, fov=fov, width=w, height=h)
+
+
+def _check_outputs(args) -> None:
+    """Every output path, before any work."""
+    from ..io.outputs import check_image_output, check_output
+
+    check_image_output(args.output)
+    for option, path, ext, what in (("--depth", args.depth, ".npy", "depth"), ("--ids", args.ids, ".npy", "ids"),
+                                    ("--stats", args.stats, ".json", "statistics")):
+        if path:
+            check_output(path, ext, what, option)
+
+
+def _saved_samples(args, run):
+    """The samples of a ``.npz`` SCENE (None for a scene file)."""
+    ext = os.path.splitext(str(args.scene))[1].lower()
+    if ext not in SAMPLE_FILES:
+        return None
+    if ext == ".ply":
+        raise UsageError(f"{args.scene}: a PLY point cloud has no CSG tape to clip the splats with; "
+                         "save samples for rendering as .npz (clcsg sample -o samples.npz)")
+    if args.method == "raytrace":
+        raise UsageError(f"--method raytrace needs a scene file (.json, .csg, .scad), not saved samples ({args.scene})")
+    if args.radius is not None:
+        raise UsageError(f"--radius does not apply to saved samples ({args.scene}): they keep the radius they "
+                         "were sampled with")
+    from ..sampling.samples import load_samples
+
+    with run.step("load", f"loading {args.scene}"):
+        return load_samples(args.scene)
+
+
+def _empty_image(size, background, method):
+    from ..rendering.image import Image
+
+    w, h = size
+    bg = np.round(255 * np.asarray(background[:4])).astype(np.uint8)
+    return Image(np.broadcast_to(bg, (h, w, 4)).copy(), np.full((h, w), np.inf, np.float32),
+                 np.full((h, w), -1, np.int32), np.full((h, w), -1, np.int32),
+                 {"method": method, "covered_pixels": 0, "total_seconds": 0.0})
 
 
 def run(args) -> int:
     """Run ``clcsg render`` (argparse namespace from :func:`add_render_arguments`)."""
-    import math
-    import time
+    import warnings
 
-    import numpy as np
-
-    from .app import parse_floats
     from ..cl.device import get_context
-    from ..model.scene import load
+    from ..io.colors import ColorError, scheme_color
+    from ..rendering.raytracer import raytrace
+    from ..rendering.splat import render
+    from .app import parse_floats
+    from .runs import Run
 
+    _check_outputs(args)  # before any work: an unknown extension fails at once
     background = parse_background(args.background)
-    size = parse_size(args.size)
+    if args.transparent:
+        background = background[:3] + (0.0,)
+        if os.path.splitext(args.output)[1].lower() in (".jpg", ".jpeg"):
+            warnings.warn(f"{args.output}: JPEG has no alpha channel: the background is {background[:3]}, "
+                          "not transparent", stacklevel=2)
+    view = view_options(args)
+    size = (view["w"], view["h"])
+    try:
+        default_color = scheme_color(getattr(args, "colors", "clcsg"))
+    except ColorError as e:
+        raise UsageError(f"--colors: {e}") from None
     radius = None
     if args.radius is not None:
         (radius,) = parse_floats(args.radius, 1, "--radius")
         if radius <= 0:
             raise UsageError(f"--radius must be positive, got {args.radius}")
-    scene = load(args.scene)
+    run = Run("render")
+    samples = _saved_samples(args, run)
     normal_form = getattr(args, "normal_form", "tree")
-    tape = scene.compile(normal_form)
+    if samples is None:
+        from ..model.scene import load
+
+        with run.step("load", f"loading {args.scene}"):
+            scene = load(args.scene)
+        with run.step("compile", "compiling the scene"):
+            tape = scene.compile(normal_form)
+    else:
+        tape = samples.tape
     ctx = get_context(getattr(args, "device", None))
     stats = {}
+    options = dict(device=ctx, background=background)
     if tape.empty:
-        import warnings
-
-        from ..rendering.image import Image
-
         warnings.warn(f"{args.scene}: the solid is empty; the image is all background", stacklevel=2)
-        w, h = size
-        bg = np.round(255 * np.asarray((tuple(background) + (1.0,))[:4])).astype(np.uint8)
-        img = Image(np.broadcast_to(bg, (h, w, 4)).copy(), np.full((h, w), np.inf, np.float32),
-                    np.full((h, w), -1, np.int32), np.full((h, w), -1, np.int32),
-                    {"method": args.method, "covered_pixels": 0, "total_seconds": 0.0})
-        what = "empty solid"
+        img, what = _empty_image(size, background, args.method), "empty solid"
     elif args.method == "raytrace":
-        camera = cli_camera(args, tape.bound)
-        img = raytrace(tape, camera, device=ctx, background=background)
+        from ..io.colors import recolor_defaults
+
+        recolor_defaults(tape, default_color)
+        with run.step("frame", "framing the view (probe ray trace)"):
+            camera = cli_camera(args, tape.bound, lambda w, h, fov, up: Camera.fit_silhouette(
+                tape, w, h, fov=fov, up=up, device=ctx))
+        with run.step("render", f"ray tracing {camera.width}x{camera.height}"):
+            img = raytrace(tape, camera, **options)
         what = "ray traced"
     else:
-        from ..sampling.sampler import sample
+        if samples is None:
+            from ..sampling.sampler import sample
 
-        camera = cli_camera(args, tape.bound)
-        if radius is None:
-            diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
-            radius = diag / 100 if diag > 0 else 1.0
-        t0 = time.perf_counter()
-        samples = sample(scene, radius, device=ctx, progress=False, normal_form=normal_form,
-                         max_samples=getattr(args, "max_samples", None))
-        t_sample = time.perf_counter() - t0
-        stats["sampling"] = dict(samples.stats)
-        img = render(samples, camera, device=ctx, background=background,
-                     surface_aligned=not args.no_surface_aligned,
-                     backface_culling=not args.no_backface_culling)
-        what = f"{len(samples)} splats (r = {radius:.6g}, sampled in {t_sample:.3f} s)"
+            if radius is None:
+                diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+                radius = diag / 100 if diag > 0 else 1.0
+            with run.step("sample", "sampling: building the OpenCL program"):
+                samples = sample(scene, radius, device=ctx, progress=None, normal_form=normal_form,
+                                 max_samples=getattr(args, "max_samples", None))
+            stats["sampling"] = dict(samples.stats)
+        if default_color is not None:
+            samples.with_default_color(default_color)
+        with run.step("frame", "framing the view (probe ray trace)"):
+            camera = cli_camera(args, samples.bound, lambda w, h, fov, up: Camera.fit_silhouette(
+                samples.tape, w, h, fov=fov, up=up, device=ctx))
+        with run.step("render", f"rendering {len(samples):,} splats at {camera.width}x{camera.height}"):
+            img = render(samples, camera, surface_aligned=not args.no_surface_aligned,
+                         backface_culling=not args.no_backface_culling, **options)
+        what = f"{len(samples):,} splats (r = {samples.radius:.6g})"
     img.stats.update(stats)
-    img.save(args.output)
-    if args.depth:
-        img.save_depth(args.depth)
-    if args.ids:
-        img.save_ids(args.ids)
-    if args.stats:
-        img.save_stats(args.stats)
-    st = img.stats
-    secs = st.get("kernel_seconds", float("nan"))
-    ms = f"{1e3 * secs:.1f} ms on the device" if math.isfinite(secs) else f"{st['total_seconds']:.3f} s"
-    print(f"{what}: {size[0]}x{size[1]}, {st['covered_pixels']} surface pixels, {ms} -> {args.output}")
+    with run.step("write", f"writing {args.output}"):
+        for path, save in ((args.output, img.save), (args.depth, img.save_depth), (args.ids, img.save_ids),
+                           (args.stats, img.save_stats)):
+            if path:
+                save(path)
+                run.wrote(path)
+    covered = int(img.stats.get("covered_pixels", 0))
+    run.summary(f"{what}: {size[0]}x{size[1]}, {covered:,} surface pixels", method=args.method,
+                covered_pixels=covered, samples=None if samples is None else len(samples))
     return 0

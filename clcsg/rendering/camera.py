@@ -25,12 +25,21 @@ z = (p - eye).forward; pixel (i, j) covers [j, j + 1) x [i, i + 1).
 
 *Depth* everywhere in clcsg is the distance along the unit view ray: depth = |p - eye| for the
 hit point p (not the z coordinate).
+
+Framing
+-------
+:meth:`Camera.fit` frames what it is given from a direction: the projection of the points
+(samples' positions, or the 8 corners of a bound) spans ``fill`` (90 %) of the frame in its
+larger relative extent (width / W or height / H) and is centred.  :meth:`Camera.fit_silhouette`
+frames the solid's silhouette itself: it ray traces two small probe images and fits their hit
+points, so the default view of ``clcsg render --method raytrace`` is as tight as a view fitted
+to samples.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -89,6 +98,111 @@ def _bound(subject) -> np.ndarray:
     return b
 
 
+def _points_and_bound(subject) -> tuple[np.ndarray, np.ndarray]:
+    """(points (N, 3), bound (2, 3)) of what :meth:`Camera.fit` frames."""
+    pts = getattr(subject, "positions", None)
+    if pts is None and not hasattr(subject, "bound"):
+        try:
+            arr = np.asarray(subject, dtype=np.float64)
+        except (TypeError, ValueError):
+            arr = None
+        if arr is not None and arr.ndim == 2 and arr.shape[1] == 3 and arr.shape[0] != 2:
+            pts = arr
+    if pts is not None:
+        pts = np.asarray(pts, dtype=np.float64).reshape(-1, 3)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        if len(pts):
+            return pts, np.array([pts.min(axis=0), pts.max(axis=0)])
+    b = _bound(subject)
+    corners = np.array([[b[i][0], b[j][1], b[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    return corners, b
+
+
+def _framed_eye(points, eye, frame, tans, fill, centered=True, iterations=50) -> np.ndarray:
+    """The eye, moved from ``eye`` along the view axes of ``frame`` (its directions are kept),
+    at which ``points`` project centred and span ``fill`` of the larger relative extent (with
+    ``centered=False`` only along the view axis, keeping every side (1 - fill) / 2 of the frame
+    from the border).
+
+    In the frame of the eye a point is (x, y, z) (right, up, forward) and projects to
+    (x / z, y / z) (tangent units; the frame's half-width is tan of the half field of view).
+    Moving the eye by (dx, dy) sideways and t backwards maps it to (x - dx, y - dy, z + t).
+    For the two extreme points of an axis, a and b, centring and spanning fill are two linear
+    equations, (x_a - dx) = k (z_a + t) and (x_b - dx) = -k (z_b + t) with k = fill * tan: each
+    step solves them for the axis that needs the larger distance, centres the other axis at
+    that distance, and repeats while the extreme points change.
+    """
+    fwd, right, upv = frame.forward, frame.right, frame.up
+    eye = np.array(eye, dtype=np.float64)
+    m = 0.5 * (1.0 + fill)
+    for _ in range(iterations):
+        rel = points - eye
+        z = rel @ fwd
+        if not np.all(z > 0):
+            break
+        xs, ys = rel @ right, rel @ upv
+        axes = []
+        for c, tan in ((xs, tans[0]), (ys, tans[1])):
+            q = c / z
+            a, b = int(np.argmax(q)), int(np.argmin(q))
+            k = fill * tan
+            if centered:
+                t = 0.5 * ((c[a] - c[b]) / k - z[a] - z[b])
+                shift = c[a] - k * (z[a] + t)
+            else:  # looking at the center: the pair's extent is fill, or a side reaches m
+                t = max(_spread_distance(c[a], z[a], c[b], z[b], 2 * k),
+                        c[a] / (m * tan) - z[a], -c[b] / (m * tan) - z[b])
+                shift = 0.0
+            axes.append((t, shift, c, a, b))
+        binding = 0 if axes[0][0] >= axes[1][0] else 1
+        t, _, _, _, _ = axes[binding]
+        t = max(t, 0.05 * float(z.max()) - float(z.min()))  # keep every point well in front
+        shifts = []
+        for k, (_, shift, c, a, b) in enumerate(axes):
+            if centered and k != binding:  # centre the other axis at the chosen distance
+                wa, wb = 1.0 / (z[a] + t), 1.0 / (z[b] + t)
+                shift = (c[a] * wa + c[b] * wb) / (wa + wb)
+            shifts.append(shift if centered else 0.0)
+        step = shifts[0] * right + shifts[1] * upv - t * fwd
+        eye = eye + step
+        if float(np.linalg.norm(step)) <= 1e-12 * max(float(z.max()), 1e-300):
+            break
+    return eye
+
+
+def _spread_distance(xa, za, xb, zb, width) -> float:
+    """The t with xa / (za + t) - xb / (zb + t) = width (the spread falls as t grows)."""
+    lo = max(-za, -zb) + 1e-12 * max(abs(za), abs(zb), 1e-300)
+    def spread(t):
+        return xa / (za + t) - xb / (zb + t)
+    if spread(lo) <= width:
+        return lo
+    hi = max(abs(za), abs(zb), 1e-300)
+    while spread(hi) > width:
+        hi *= 2.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if spread(mid) > width:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def _pixel_corner_points(camera, image) -> np.ndarray:
+    """World points of the corners of every pixel that sees the surface, at its hit depth."""
+    d00, dx, dy = camera.pixel_basis()
+    i, j = np.nonzero(image.mask)
+    depth = image.depth[i, j].astype(np.float64)
+    out = []
+    for di in (-0.5, 0.5):
+        for dj in (-0.5, 0.5):
+            d = d00 + (j + dj)[:, None] * dx + (i + di)[:, None] * dy
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            out.append(camera.eye + depth[:, None] * d)
+    return np.concatenate(out)
+
+
 @dataclass(frozen=True)
 class Camera:
     """A pinhole camera (see the module docstring for the pixel/ray contract).
@@ -104,6 +218,7 @@ class Camera:
     fov: float  # vertical, degrees
     width: int
     height: int
+    sky: np.ndarray | None = None  # (3,) unit: the ``up`` given to look_at (the world's up, for lighting)
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
@@ -132,21 +247,28 @@ class Camera:
         r = np.cross(fwd, u)
         r /= np.linalg.norm(r)
         u = np.cross(r, fwd)  # exactly orthonormal
-        for a in (eye, target, fwd, r, u):
+        sky = up / nu
+        for a in (eye, target, fwd, r, u, sky):
             a.setflags(write=False)
-        return cls(eye, target, fwd, r, u, fov, w, h)
+        return cls(eye, target, fwd, r, u, fov, w, h, sky)
 
     @classmethod
-    def fit(cls, bound, width=640, height=480, fov=45.0, direction=DEFAULT_DIRECTION, up=(0, 0, 1),
-            margin=1.05) -> "Camera":
-        """A camera looking at the center of ``bound`` from ``direction`` (a vector from the
-        target towards the eye), far enough that the bound's circumscribed sphere (radius R)
-        is inside the view: distance = margin * R / sin(min(fov_v, fov_h) / 2).
+    def fit(cls, subject, width=640, height=480, fov=45.0, direction=DEFAULT_DIRECTION, up=(0, 0, 1),
+            fill=0.9, centered=True) -> "Camera":
+        """A camera looking from ``direction`` (a vector from the target towards the eye) that
+        frames ``subject``: its projection spans ``fill`` of the frame in its larger relative
+        extent (width / W or height / H), centred in the image.  ``target`` is the point of the
+        view axis at the depth of the subject's center (the center of its box).  With
+        ``centered=False`` the camera looks at that center itself and only the distance is
+        fitted: the extent spans at most ``fill`` and no side comes closer to the border than
+        (1 - fill) / 2 of the frame.
 
-        ``bound`` is (lo, hi) corners or anything with a ``.bound`` (a Dnf, Samples' dnf).  If
-        ``direction`` is parallel to ``up``, another up (the y axis, else x) is used.
+        ``subject``: points ((N, 3), N != 2), anything with ``.positions`` (:class:`Samples`:
+        the samples frame the silhouette closely), or a bound ((lo, hi) corners or anything
+        with a ``.bound``: a Tape, Dnf, Scene), framed by its 8 corners.  If ``direction`` is
+        parallel to ``up``, another up (the y axis, else x) is used.
         """
-        b = _bound(bound)
+        points, b = _points_and_bound(subject)
         w, h = _size(width, height)
         fov = _fov(fov)
         direction = _vec3(direction, "direction")
@@ -154,21 +276,53 @@ class Camera:
         if nd == 0.0:
             raise UsageError("direction must be a non-zero vector")
         direction = direction / nd
+        fill = float(fill)
+        if not (math.isfinite(fill) and 0.0 < fill <= 1.0):
+            raise UsageError(f"fill must be in (0, 1], got {fill}")
+        up = _vec3(up, "up")
+        if abs(up @ direction) > (1 - 1e-9) * np.linalg.norm(up):
+            up = np.array([0.0, 1.0, 0.0]) if abs(direction[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
         center = 0.5 * (b[0] + b[1])
         radius = 0.5 * float(np.linalg.norm(b[1] - b[0]))
         if radius == 0.0:
             radius = max(1e-3 * max(np.abs(center).max(), 1.0), 1e-9)
         half_v = math.radians(fov) / 2
         half_h = math.atan(math.tan(half_v) * w / h)
-        dist = float(margin) * radius / math.sin(min(half_v, half_h))
-        up = _vec3(up, "up")
-        if abs(up @ direction) > (1 - 1e-9) * np.linalg.norm(up):
-            up = np.array([0.0, 1.0, 0.0]) if abs(direction[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        return cls.look_at(center + dist * direction, center, up, fov, w, h)
+        eye = center + radius / math.sin(min(half_v, half_h)) * direction  # the bounding sphere in view
+        frame = cls.look_at(eye, center, up, fov, w, h)
+        eye = _framed_eye(points, eye, frame, (math.tan(half_h), math.tan(half_v)), fill, bool(centered))
+        target = eye + ((center - eye) @ frame.forward) * frame.forward
+        return cls.look_at(eye, target, up, fov, w, h)
+
+    @classmethod
+    def fit_silhouette(cls, scene, width=640, height=480, fov=45.0, direction=DEFAULT_DIRECTION, up=(0, 0, 1),
+                       fill=0.9, device=None, probe=64, passes=1) -> "Camera":
+        """Like :meth:`fit`, but framing the solid's silhouette: starting from the fit of the
+        scene's bound, ray trace a probe image (``probe`` pixels on its longer side) and fit
+        the points its pixels see (each pixel's corners at its hit depth); ``passes`` times.
+        One pass frames within about one probe pixel.  ``scene``: a Shape, Scene, path, Tape or
+        Samples; ``device`` as in :func:`clcsg.raytrace`."""
+        from ..cl.device import context_of
+        from .raytracer import as_tape, trace
+
+        tape = as_tape(scene)
+        cam = cls.fit(tape.bound, width, height, fov, direction, up, fill)
+        if tape.empty:
+            return cam
+        ctx = context_of(device)
+        pw, ph = (probe, max(1, round(probe * cam.height / cam.width))) if cam.width >= cam.height else \
+            (max(1, round(probe * cam.width / cam.height)), probe)
+        for _ in range(int(passes)):
+            small = cam.resized(pw, ph)
+            img = trace(ctx, tape, small)
+            if not img.mask.any():
+                break
+            cam = cls.fit(_pixel_corner_points(small, img), width, height, fov, direction, up, fill)
+        return cam
 
     def resized(self, width, height) -> "Camera":
         """The same view at another image size (the vertical field of view is kept)."""
-        return Camera.look_at(self.eye, self.target, self.up, self.fov, width, height)
+        return replace(Camera.look_at(self.eye, self.target, self.up, self.fov, width, height), sky=self.sky)
 
     # -- the pixel / ray contract -------------------------------------------------------------
     @property
@@ -227,8 +381,10 @@ def orbit(subject, n=8, elevation=25.0, width=None, height=None, fov=None, up=(0
     orthogonal to ``up``, equally spaced in azimuth.
 
     ``subject`` is a :class:`Camera` (orbit around its target at its distance, starting from
-    its azimuth, keeping its size and fov unless given) or a bound / Dnf (each view fitted like
-    :meth:`Camera.fit`; size defaults to 640x480, fov to 45).
+    its azimuth, keeping its size and fov unless given) or what :meth:`Camera.fit` frames
+    (points, Samples, a bound, Tape, Dnf): all views look at its center from one distance, the
+    least at which each view frames it (``Camera.fit(..., centered=False)``); size defaults to
+    640x480, fov to 45.
     """
     try:
         n = int(n)
@@ -257,17 +413,21 @@ def orbit(subject, n=8, elevation=25.0, width=None, height=None, fov=None, up=(0
     a = start / np.linalg.norm(start)
     b = np.cross(up, a)
     ce, se = math.cos(math.radians(el)), math.sin(math.radians(el))
-    for k in range(n):
-        phi = 2.0 * math.pi * k / n
-        d = ce * (math.cos(phi) * a + math.sin(phi) * b) + se * up
-        if isinstance(subject, Camera):
-            dist = float(np.linalg.norm(subject.eye - subject.target))
-            yield Camera.look_at(
-                subject.target + dist * d, subject.target, up,
-                subject.fov if fov is None else fov,
-                subject.width if width is None else width,
-                subject.height if height is None else height,
-            )
-        else:
-            yield Camera.fit(subject, 640 if width is None else width, 480 if height is None else height,
-                             45.0 if fov is None else fov, direction=d, up=up)
+    dirs = [ce * (math.cos(2.0 * math.pi * k / n) * a + math.sin(2.0 * math.pi * k / n) * b) + se * up
+            for k in range(n)]
+    if isinstance(subject, Camera):
+        target, dist = subject.target, float(np.linalg.norm(subject.eye - subject.target))
+        fov = subject.fov if fov is None else fov
+        width = subject.width if width is None else width
+        height = subject.height if height is None else height
+    else:
+        # one circle for all views (a steady turntable): the distance at which every view
+        # frames the subject (Camera.fit looking at its center), the largest of them
+        width, height, fov = 640 if width is None else width, 480 if height is None else height, \
+            45.0 if fov is None else fov
+        fits = [Camera.fit(subject, width, height, fov, direction=d, up=up, centered=False) for d in dirs]
+        _, box = _points_and_bound(subject)
+        target = 0.5 * (box[0] + box[1])
+        dist = max(float(np.linalg.norm(c.eye - target)) for c in fits)
+    for d in dirs:
+        yield Camera.look_at(target + dist * d, target, up, fov, width, height)

@@ -43,14 +43,18 @@ class Image:
         return self.ids >= 0
 
     def save(self, path) -> None:
-        """Write the color image as PNG (any format Pillow knows, chosen by the extension)."""
-        from PIL import Image as PILImage
+        """Write the color image; the format is the extension's: ``.png``, ``.jpg`` / ``.jpeg``
+        (no alpha: the alpha channel is dropped), ``.webp`` (lossless) or ``.tif`` / ``.tiff``
+        (see :mod:`clcsg.io.outputs`).  Another extension is a UsageError."""
+        from ..io.outputs import write_image
 
-        p = os.fspath(path)
-        try:
-            PILImage.fromarray(np.ascontiguousarray(self.rgba), mode="RGBA").save(p)
-        except (OSError, ValueError, KeyError) as e:
-            raise UsageError(f"{p}: cannot write image: {e}") from None
+        write_image(self.rgba, path)
+
+    def _repr_png_(self) -> bytes:
+        """The image as PNG, for Jupyter and IPython."""
+        from ..io.outputs import png_bytes
+
+        return png_bytes(self.rgba)
 
     def save_depth(self, path) -> None:
         """Write the depth as a .npy file: (H, W) float32, +inf on background."""

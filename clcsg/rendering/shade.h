@@ -1,6 +1,6 @@
 /* The view (pinhole camera in device coordinates) and the shading shared by the exact ray
  * tracer (raytrace.cl) and the splat resolve pass (resolve.cl), so both produce the same
- * pixels for the same hit.  Mirrored by view_dtype() in clcsg/host/raytracer.py.
+ * pixels for the same hit.  Mirrored by view_dtype() in clcsg/rendering/view.py.
  *
  * Camera contract (clcsg/camera.py): the un-normalized direction of pixel (i, j), row 0 at the
  * top, is d00 + j dx + i dy; the view ray is eye + t v with v = d / |d| and t the depth.  A point
@@ -25,11 +25,18 @@ typedef struct {
     int height;
     float background[4]; /* RGBA in [0, 1], written as is (already display-encoded) */
     float key[3];        /* unit direction towards the key light (world) */
-    float ambient;       /* Blinn-Phong weights; colors are linearized with gamma first */
-    float diffuse;
-    float specular;
+    float fill[3];       /* unit direction towards the fill light (world) */
+    float sky[3];        /* unit world up: where the hemisphere light comes from */
+    float ambient;       /* hemisphere light from the sky ... */
+    float ground;        /* ... and from below, as a fraction of the sky's */
+    float diffuse;       /* weight of the three directional lights: */
+    float headlight;     /*   the headlight at the eye, */
+    float key_light;     /*   the key light, */
+    float fill_light;    /*   the fill light */
+    float rim;           /* light along the silhouette (grazing view) */
+    float specular;      /* Blinn-Phong highlight of the key light */
     float shininess;
-    float gamma;
+    float gamma;         /* colors are linearized with gamma, lit, and encoded with 1 / gamma */
 } view_rec;
 
 inline real3 view_eye(__global const view_rec *vw) { return vload3(0, vw->eye); }
@@ -46,11 +53,21 @@ inline real3 view_ray(__global const view_rec *vw, int i, int j)
 inline float shade_pow(float x, float y) { return exp2(y * log2(x)); }
 inline float3 shade_pow3(float3 x, float y) { return exp2(y * log2(x)); }
 
-/* Blinn-Phong with two white lights: a headlight at the eye (direction -v) and a key light
- * (vw->key).  base: RGBA of the quadric in display (sRGB-like) space, linearized with gamma;
- * n: the solid's outward unit normal (sign * grad Q / |grad Q|, eq. 4); v: unit view ray.
- * The normal is flipped towards the viewer (two-sided), so a view from inside still shades.
- * Returns 8-bit RGBA, gamma encoded. */
+/* The default look (clcsg.rendering.view.Shading), in linear light:
+ *
+ *   albedo * (hemisphere + diffuse * (headlight d_head + key_light d_key + fill_light d_fill)
+ *             + rim (1 - |n.v|)^3) + specular * highlight(key)
+ *
+ * The hemisphere term, ambient * lerp(ground, 1, (1 + n.sky) / 2), lights every face by its
+ * orientation alone, so faces that no directional light reaches (the inside of a hollow box,
+ * the underside of a lip) still differ from each other: floors brighter than walls, walls
+ * brighter than ceilings.  The headlight keeps faces seen head-on brighter than grazing ones;
+ * the key light (upper left, camera frame) and the weaker fill (lower right) separate faces of
+ * equal view angle.  The lights are white, so shading scales a primitive's colour without
+ * shifting its hue.  base: RGBA of the primitive in display (sRGB-like) space; n: the solid's
+ * outward unit normal (sign * grad Q / |grad Q|, eq. 4); v: unit view ray.  The normal is
+ * flipped towards the viewer (two-sided), so a view from inside still shades.  Returns 8-bit
+ * RGBA, gamma encoded. */
 inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v)
 {
     if (dot(n, v) > 0.0f) n = -n;
@@ -58,13 +75,16 @@ inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v
     float3 albedo = shade_pow3(clamp(base.xyz, 0.0f, 1.0f), g);
     float3 key = vload3(0, vw->key);
     float3 head = -v;
-    float d_head = fmax(dot(n, head), 0.0f);
+    float facing = fmax(dot(n, head), 0.0f);
+    float up = 0.5f + 0.5f * dot(n, vload3(0, vw->sky));
+    float hemi = vw->ambient * (vw->ground + (1.0f - vw->ground) * up);
     float d_key = fmax(dot(n, key), 0.0f);
-    float3 h_key = normalize(key + head);
-    float s_head = shade_pow(d_head, vw->shininess);            /* half vector of the headlight is -v */
-    float s_key = d_key > 0.0f ? shade_pow(fmax(dot(n, h_key), 0.0f), vw->shininess) : 0.0f;
-    float3 c = albedo * (vw->ambient + vw->diffuse * (0.45f * d_head + 0.75f * d_key))
-             + vw->specular * (0.25f * s_head + 0.5f * s_key);
+    float d_fill = fmax(dot(n, vload3(0, vw->fill)), 0.0f);
+    float edge = 1.0f - facing;
+    float light = hemi + vw->diffuse * (vw->headlight * facing + vw->key_light * d_key + vw->fill_light * d_fill)
+                + vw->rim * edge * edge * edge;
+    float s_key = d_key > 0.0f ? shade_pow(fmax(dot(n, normalize(key + head)), 0.0f), vw->shininess) : 0.0f;
+    float3 c = albedo * light + vw->specular * s_key;
     c = shade_pow3(clamp(c, 0.0f, 1.0f), 1.0f / g);
     float4 out = (float4)(c, clamp(base.w, 0.0f, 1.0f)) * 255.0f + 0.5f;
     return convert_uchar4_sat(out);

@@ -191,10 +191,11 @@ class _Progress:
         remaining = max(1, self.levels_expected - level - 1)
         ahead = children * sum(growth ** k for k in range(remaining)) if children else 0
         self.step.update(done=self.cells, total=int(self.cells + ahead), label="sampling", unit="cells",
-                         phase=level == 0, level=level + 1, samples=samples, estimated=self.estimate)
+                         phase=level == 0, level=level + 1, samples=samples, estimated=self.estimate,
+                         note=f"level {level + 1}, {samples:,} samples (estimate {self.estimate:,})", always=True)
 
     def done(self):
-        self.step.update(total=self.cells, label="sampling: clip programs")
+        self.step.update(total=self.cells, label="sampling: clip programs", note="")
         if self.own:
             self.step.close()
 

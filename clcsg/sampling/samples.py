@@ -21,7 +21,18 @@ class Samples:
     (tape rows; empty: no clipping): a fragment of its splat on the quadric is kept iff the
     program's membership differs between the quadric's two sides.  Equal programs are stored
     once.  Guarantee: every point of the CSG surface has a sample on the same quadric within
-    ``radius`` (the sampler's radius; ``radii`` may be smaller where a small cell allowed it).
+    ``radius`` (the sampler's radius; ``radii`` may be smaller where a small cell allowed it),
+    except in features narrower than the floor: ``stats["unresolved"]`` counts the
+    *unresolved cells*, cells the sampler could still not decide (surface or not, covered or
+    not) when they had shrunk below the floor (``stats["floor"]``, by default min(radius / 10,
+    1e-3 of the scene's diagonal)); they are dropped.  They lie along edges and tangent
+    contacts, where two surfaces meet, so thousands are normal (their number grows with the
+    edge length over the floor); a feature thinner than the floor can be missed (pass a
+    smaller ``floor`` to :func:`clcsg.sample`).
+
+    Output: :meth:`to_ply` (binary PLY, double precision), :meth:`save` / :func:`load_samples`
+    (``.npz`` with the tape: render again without the scene), :meth:`to_open3d` and
+    :meth:`to_trimesh` (point clouds of those libraries).
     """
 
     positions: np.ndarray
@@ -65,14 +76,11 @@ class Samples:
     def records(self, real=None) -> np.ndarray:
         """The samples as ``sample_rec`` structs in device coordinates."""
         rec = np.zeros(len(self), dtype=sample_dtype(self.packed.real if real is None else real))
-        rec["pos"] = self.positions - self.packed.origin
-        rec["normal"] = self.normals
-        rec["radius"] = self.radii
-        rec["quadric"] = self.quadrics
-        rec["sign"] = self.signs
-        rec["primitive"] = self.primitives
-        rec["clip_first"] = self.clip_first
-        rec["clip_count"] = self.clip_count
+        fields = {"pos": self.positions - self.packed.origin, "normal": self.normals, "radius": self.radii,
+                  "quadric": self.quadrics, "sign": self.signs, "primitive": self.primitives,
+                  "clip_first": self.clip_first, "clip_count": self.clip_count}
+        for name, values in fields.items():
+            rec[name] = values
         return rec
 
     def device_buffers(self, context, real=None):
@@ -86,9 +94,48 @@ class Samples:
                                  upload(context, tape_rows(self.clip_ops)))
         return self._device[key]
 
+    def with_default_color(self, color) -> int:
+        """Give the primitives that have clcsg's default colour the colour ``color`` (RGBA or
+        any colour :func:`clcsg.io.colors.parse_color` reads, e.g. OpenSCAD's ``"#f9d72c"``);
+        returns how many primitives changed.  The device buffers are packed again."""
+        from ..io.colors import parse_color, recolor_defaults
+
+        n = recolor_defaults(self.tape, parse_color(color))
+        if n:
+            self.packed = pack(self.tape, self.packed.real, self.packed.origin)
+            self._device.clear()
+        return n
+
     # -- output -------------------------------------------------------------------------------
     def to_ply(self, path, float32: bool = False) -> None:
         """Binary PLY (Open3D, MeshLab, plyfile read it); see :func:`clcsg.io.ply.write_samples`."""
         from ..io.ply import write_samples
 
         write_samples(self, path, float32=float32)
+
+    def save(self, path) -> None:
+        """Write the samples and their tape as ``.npz`` (:mod:`clcsg.io.samples_npz`):
+        :func:`load_samples` reads them back, ``clcsg render samples.npz`` renders them."""
+        from ..io.samples_npz import save_samples
+
+        save_samples(self, path)
+
+    def to_open3d(self):
+        """An ``open3d.geometry.PointCloud`` (points, normals, colours); needs ``pip install open3d``."""
+        from ..io.interop import to_open3d
+
+        return to_open3d(self)
+
+    def to_trimesh(self):
+        """A ``trimesh.PointCloud`` (vertices, RGBA colours; normals and ids in ``metadata``);
+        needs ``pip install trimesh``."""
+        from ..io.interop import to_trimesh
+
+        return to_trimesh(self)
+
+
+def load_samples(path) -> Samples:
+    """Samples written by :meth:`Samples.save` (``.npz``), ready to render again."""
+    from ..io.samples_npz import load_samples as _load
+
+    return _load(path)

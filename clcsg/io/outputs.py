@@ -1,0 +1,85 @@
+"""Output files: the formats clcsg writes, chosen by extension and checked before any work.
+
+Images (:func:`write_image`, via Pillow): ``.png``, ``.jpg`` / ``.jpeg``, ``.webp`` (lossless,
+so the pixels are exact) and ``.tif`` / ``.tiff``; RGBA where the format has alpha, RGB for
+JPEG (the alpha channel is dropped: transparent pixels show the background colour).  Samples:
+``.ply`` (binary PLY, :mod:`clcsg.io.ply`) and ``.npz`` (everything needed to render them
+again, :mod:`clcsg.io.samples_npz`).  Per-pixel arrays are ``.npy``, statistics ``.json``.
+
+:func:`check_output` raises a one-line :class:`~clcsg.errors.UsageError` for an unknown
+extension or a missing directory, so that ``clcsg sample -o x.png`` fails at once instead of
+after the sampling.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+
+import numpy as np
+
+from ..errors import UsageError
+
+#: image extension -> Pillow format
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP", ".tif": "TIFF", ".tiff": "TIFF"}
+#: Pillow formats without an alpha channel
+NO_ALPHA = frozenset({"JPEG"})
+#: sample extension -> format
+SAMPLE_FORMATS = {".ply": "PLY", ".npz": "NPZ"}
+#: Pillow's options per format: lossless WebP keeps the exact pixels; high-quality JPEG
+_SAVE_OPTIONS = {"WEBP": {"lossless": True, "exact": True}, "JPEG": {"quality": 95}, "TIFF": {"compression": "tiff_lzw"}}
+
+
+def _names(formats) -> str:
+    exts = list(formats)
+    return ", ".join(exts[:-1]) + " or " + exts[-1] if len(exts) > 1 else exts[0]
+
+
+def check_output(path, formats, what: str, option: str | None = "-o") -> str:
+    """The format of output ``path`` from its extension (a key of ``formats``: a dict of
+    extension -> format, or a single extension); UsageError if the extension is unknown or
+    the directory does not exist."""
+    if isinstance(formats, str):
+        formats = {formats: formats.lstrip(".").upper()}
+    p = os.fspath(path)
+    where = p if option is None else f"{option} {p}"
+    ext = os.path.splitext(p)[1].lower()
+    if ext not in formats:
+        got = f"{ext!r}" if ext else "no extension"
+        raise UsageError(f"{where}: unknown {what} format ({got}); use {_names(formats)}")
+    folder = os.path.dirname(os.path.abspath(p))
+    if not os.path.isdir(folder):
+        raise UsageError(f"{where}: cannot write there: no such directory {os.path.dirname(p) or '.'!r}")
+    return formats[ext]
+
+
+def check_image_output(path, option: str | None = "-o") -> str:
+    return check_output(path, IMAGE_FORMATS, "image", option)
+
+
+def check_samples_output(path, option: str | None = "-o") -> str:
+    return check_output(path, SAMPLE_FORMATS, "sample", option)
+
+
+def _pil_image(rgba: np.ndarray, fmt: str):
+    from PIL import Image as PILImage
+
+    im = PILImage.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8))
+    return im.convert("RGB") if fmt in NO_ALPHA else im
+
+
+def write_image(rgba: np.ndarray, path) -> None:
+    """Write an (H, W, 4) uint8 image in the format of ``path``'s extension."""
+    p = os.fspath(path)
+    fmt = check_image_output(p, None)
+    try:
+        _pil_image(rgba, fmt).save(p, format=fmt, **_SAVE_OPTIONS.get(fmt, {}))
+    except (OSError, ValueError, KeyError) as e:
+        raise UsageError(f"{p}: cannot write image: {e}") from None
+
+
+def png_bytes(rgba: np.ndarray) -> bytes:
+    """The image as PNG file contents (for Jupyter's ``_repr_png_``)."""
+    buf = io.BytesIO()
+    _pil_image(rgba, "PNG").save(buf, format="PNG")
+    return buf.getvalue()

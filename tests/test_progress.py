@@ -1,0 +1,193 @@
+"""Progress: tqdm bars on a terminal (a real pseudo-terminal), nothing but the summary in a
+pipe, JSON lines with --progress json, silence with --quiet; the sampler's forecast."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import pty
+import re
+import select
+import subprocess
+import sys
+
+import pytest
+
+import clcsg
+from clcsg.io.progress import Reporter, current, for_option, using
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENE = os.path.join(ROOT, "examples", "pawn.csg")
+SAMPLE = ["sample", SCENE, "-r", "0.4"]
+SUMMARY = re.compile(r"^[\d,]+ samples on \d+ quadrics \(r = 0\.4, \d+ levels, [\d,]+ unresolved cells\) "
+                     r"in [\d.]+ s \(load [\d.]+, sample [\d.]+, write [\d.]+\) -> .*\.ply$")
+
+
+def env(**extra):
+    e = dict(os.environ, CLCSG_PROGRESS_DELAY="0", COLUMNS="120")
+    e.pop("CLCSG_PRECISION", None)
+    e.update(extra)
+    return e
+
+
+def run_in_pty(argv, timeout=120):
+    """Run ``python -m clcsg argv`` with stdin, stdout and stderr on a new pseudo-terminal;
+    returns (exit code, everything it wrote)."""
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "clcsg", *argv], stdin=slave, stdout=slave, stderr=slave,
+                            env=env(), close_fds=True)
+    os.close(slave)
+    out = b""
+    try:
+        while True:
+            ready, _, _ = select.select([master], [], [], timeout)
+            if not ready:
+                proc.kill()
+                break
+            try:
+                chunk = os.read(master, 1 << 16)
+            except OSError:  # the child closed the terminal
+                break
+            if not chunk:
+                break
+            out += chunk
+    finally:
+        os.close(master)
+        proc.wait(timeout=30)
+    return proc.returncode, out.decode("utf-8", "replace")
+
+
+def run_in_pipe(argv):
+    return subprocess.run([sys.executable, "-m", "clcsg", *argv], capture_output=True, text=True, timeout=120,
+                          env=env())
+
+
+def test_a_terminal_shows_bars_and_the_summary(tmp_path):
+    rc, out = run_in_pty(SAMPLE + ["-o", str(tmp_path / "p.ply")])
+    assert rc == 0, out
+    frames = [f for f in re.split(r"[\r\n]+", out) if f.strip()]
+    bars = [f for f in frames if f.startswith("sampling: ") and "%|" in f and "level" in f]
+    assert len(bars) >= 5, out[-2000:]
+    # done / total in cells with an ETA and the samples so far against the estimate
+    for bar in bars:
+        assert re.search(r"\d+%\|.*\| [\d.]+[kMG]?/[\d.]+[kMG]? cells \[\d\d:\d\d<\d\d:\d\d, level \d+, [\d,]+ samples "
+                         r"\(estimate [\d,]+\)\]", bar), bar
+    assert bars[-1].startswith("sampling: 100%|")
+    assert any(f.startswith("sampling: clip programs: 100%|") for f in frames)
+    assert any(f.startswith("loading ") for f in frames)
+    assert SUMMARY.match(frames[-1].strip()), frames[-1]
+    assert (tmp_path / "p.ply").stat().st_size > 1000
+
+
+def test_a_pipe_gets_only_the_summary(tmp_path):
+    r = run_in_pipe(SAMPLE + ["-o", str(tmp_path / "p.ply")])
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == ""
+    lines = r.stdout.splitlines()
+    assert len(lines) == 1 and SUMMARY.match(lines[0]), r.stdout
+
+
+def test_quiet_prints_nothing(tmp_path):
+    rc, out = run_in_pty(SAMPLE + ["-o", str(tmp_path / "p.ply"), "--quiet"])
+    assert rc == 0 and out.strip() == "", out
+    assert (tmp_path / "p.ply").exists()
+
+
+def test_json_progress_is_one_object_per_line(tmp_path):
+    out = tmp_path / "p.ply"
+    r = run_in_pipe(SAMPLE + ["-o", str(out), "--progress", "json"])
+    assert r.returncode == 0, r.stderr
+    events = [json.loads(line) for line in r.stderr.splitlines()]  # every line parses
+    kinds = [e["event"] for e in events]
+    assert kinds[0] == "start" and kinds[-1] == "summary" and "progress" in kinds
+    steps = {e["step"] for e in events if e["event"] == "start"}
+    assert steps == {"load", "sample", "write"}
+    ends = {e["step"]: e for e in events if e["event"] == "end"}
+    assert set(ends) == steps and all(e["elapsed"] >= 0 for e in ends.values())
+    progress = [e for e in events if e["event"] == "progress"]
+    assert all(e["unit"] == "cells" and 0 < e["done"] <= e["total"] for e in progress)
+    last = progress[-1]
+    assert last["done"] == last["total"] and last["eta"] == 0 and last["samples"] > 0 and last["estimated"] > 0
+    levels = [e["level"] for e in progress if "level" in e]
+    assert levels == sorted(levels) and levels[-1] >= 10
+    summary = events[-1]
+    assert summary["command"] == "sample" and summary["outputs"] == [str(out)] and summary["samples"] > 0
+    assert set(summary["seconds"]) == {"load", "sample", "write", "total"}
+    assert SUMMARY.match(r.stdout.strip())  # the summary line is still printed
+
+
+def test_json_mode_reports_warnings_and_errors_as_json(tmp_path):
+    empty = tmp_path / "empty.csg"
+    empty.write_text("difference() { cube(1); cube(2, center = true); }\n")
+    r = run_in_pipe(["sample", str(empty), "-r", "0.1", "-o", str(tmp_path / "e.ply"), "--progress", "json"])
+    assert r.returncode == 0, r.stderr
+    events = [json.loads(line) for line in r.stderr.splitlines()]
+    warnings = [e for e in events if e["event"] == "warning"]
+    assert warnings and "empty" in warnings[0]["message"]
+    r = run_in_pipe(["sample", str(tmp_path / "missing.json"), "-r", "0.1", "-o", str(tmp_path / "e.ply"),
+                     "--progress", "json"])
+    assert r.returncode == 3
+    (err,) = [json.loads(line) for line in r.stderr.splitlines() if '"error"' in line]
+    assert err["exit_code"] == 3 and "no such file" in err["message"]
+
+
+# -- the reporter itself --------------------------------------------------------------------------
+class Tty(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_reporter_modes():
+    assert Reporter("auto", stream=io.StringIO()).mode == "none"
+    assert Reporter("auto", stream=Tty()).mode == "bar"
+    assert Reporter("auto", stream=Tty(), quiet=True).mode == "none"
+    with pytest.raises(ValueError, match="progress mode"):
+        Reporter("fancy")
+    assert for_option(False).mode == "none" and for_option(True).mode == "bar"
+    rep = Reporter("json", stream=io.StringIO())
+    assert for_option(rep) is rep and for_option(None) is not rep
+    with using(rep):
+        assert current() is rep and for_option(None) is rep
+    assert current() is not rep
+
+
+def test_bars_wait_for_the_delay_and_clear_when_done():
+    fast = Tty()
+    rep = Reporter("bar", stream=fast, delay=10.0)
+    with rep.step("load", "loading x") as st:
+        st.update(done=3, total=10)
+    assert fast.getvalue() == ""  # shorter than the delay: never shown
+    slow = Tty()
+    rep = Reporter("bar", stream=slow, delay=0.0)
+    with rep.step("sample", "sampling", unit="cells") as st:
+        st.update(done=30, total=120, note="level 3")
+    text = slow.getvalue()
+    assert "sampling:  25%|" in text and "30/120 cells" in text and "level 3" in text
+    assert text.endswith("\r")  # the bar is cleared (leave=False)
+
+
+def test_json_reporter_events():
+    buf = io.StringIO()
+    rep = Reporter("json", stream=buf)
+    with rep.step("render", "rendering") as st:
+        st.update(done=1, total=4, phase=True)
+        st.update(done=4)
+    rep.summary("render", "done in 1 s", out=io.StringIO(), pixels=12)
+    events = [json.loads(line) for line in buf.getvalue().splitlines()]
+    assert [e["event"] for e in events] == ["start", "progress", "progress", "end", "summary"]
+    assert events[1]["total"] == 4 and events[2]["done"] == 4 and events[2]["eta"] == 0
+    assert events[-1]["text"] == "done in 1 s" and events[-1]["pixels"] == 12
+
+
+def test_the_sampler_reports_levels_and_a_forecast(cl_context):
+    buf = io.StringIO()
+    rep = Reporter("json", stream=buf)
+    s = clcsg.sample(clcsg.box(2) - clcsg.sphere(1.3), 0.1, device=cl_context, progress=rep)
+    events = [json.loads(line) for line in buf.getvalue().splitlines()]
+    progress = [e for e in events if e["event"] == "progress" and e["label"] == "sampling"]
+    assert [e["level"] for e in progress] == list(range(1, s.stats["levels"] + 1))
+    assert progress[-1]["done"] == sum(s.stats["cells_per_level"]) == progress[-1]["total"]
+    assert progress[-1]["samples"] == len(s) and progress[-1]["estimated"] >= len(s) / 4
+    assert all(e["total"] >= e["done"] for e in progress)
+    assert events[-1]["event"] == "end" and events[-1]["step"] == "sample"
