@@ -13,6 +13,10 @@
 * :func:`shapes` draws CSG graphs (union / intersection / difference / complement, transforms,
   nesting) whose leaves come from a small pool and whose sub-trees are sometimes reused, so
   the graphs share nodes (DAGs, not just trees).
+* :func:`csg_programs` draws random programs as a dataset pipeline would (boxes, spheres,
+  cylinders, cone frusta, rotated and scaled, in unions / differences / intersections up to
+  three deep, within [-6, 6]^3): a :class:`clcsg.model.random_programs.RandomProgram` with the
+  Shape and its OpenSCAD ``.csg`` text.
 
 All values are plain floats, tuples and numpy arrays in a unit-ish range.
 """
@@ -380,3 +384,13 @@ def shared_nodes(shape: csg.Shape) -> set[int]:
         for c in node.children():
             parents[id(c)] = parents.get(id(c), 0) + 1
     return {i for i, n in parents.items() if n > 1}
+
+
+# -- random programs ----------------------------------------------------------------------------
+def csg_programs(max_depth: int = 3) -> st.SearchStrategy:
+    """:func:`clcsg.model.random_programs.random_program` driven by hypothesis' own randomness
+    (``st.randoms()``): every draw of the generator is a hypothesis choice, so failures shrink
+    towards fewer levels, fewer operands and smaller parameters."""
+    from clcsg.model.random_programs import random_program
+
+    return st.randoms(use_true_random=False).map(lambda r: random_program(r, max_depth=max_depth))

@@ -1,9 +1,14 @@
-"""Smoke tests of the benchmark harness (bench/): no timing assertions, a few seconds in all."""
+"""Smoke tests of the benchmark harness (bench/): small pieces of every part on tiny inputs, no
+timing thresholds, about half a minute in all."""
 
 from __future__ import annotations
 
+import ast
+import json
+import math
 import os
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -15,12 +20,20 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from bench import micro, zoo  # noqa: E402
+from bench import common, micro, models, peers, zoo  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _quiet():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
 
 
 @pytest.mark.parametrize("model", zoo.MODELS, ids=lambda m: m.name)
 def test_zoo_has_the_paper_complexity(model):
     assert clcsg.Scene(model.build()).normalize().n_quadrics == model.quadrics
+    assert model.name in zoo.PAPER_TABLE2
 
 
 def test_zoo_files_match_the_generator():
@@ -29,8 +42,33 @@ def test_zoo_files_match_the_generator():
         assert clcsg.load(path).normalize().n_quadrics == m.quadrics
 
 
+def test_example_parts_exist():
+    for name in zoo.EVERYDAY + (zoo.SPONGE,):
+        assert os.path.exists(zoo.example_path(name, "csg")), name
+        assert os.path.exists(zoo.example_path(name, "scad")), name
+
+
+def test_no_import_cycles_between_bench_modules():
+    """common and zoo import no other bench module; the parts import only common and zoo."""
+    bench_dir = os.path.join(ROOT, "bench")
+    imports = {}
+    for f in os.listdir(bench_dir):
+        if not f.endswith(".py"):
+            continue
+        tree = ast.parse(open(os.path.join(bench_dir, f), encoding="utf-8").read())
+        mods = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                mods.update([node.module] if node.module else [a.name for a in node.names])
+        imports[f[:-3]] = mods
+    assert imports["common"] == set() and imports["zoo"] == set()
+    for name, mods in imports.items():
+        if name != "__main__":
+            assert mods <= {"common", "zoo"}, (name, mods)
+
+
 def test_micro_kernels_run(cl_context):
-    """Every micro kernel builds and returns finite sums (a tiny launch, not a measurement)."""
+    """Every Table 1 micro kernel builds and returns finite sums (a tiny launch, not a measurement)."""
     real = cl_context.real_dtype
     for dependent in (False, True):
         r = micro.Runner(cl_context, real, dependent)
@@ -39,18 +77,94 @@ def test_micro_kernels_run(cl_context):
             assert np.isfinite(r.checksum[kernel]), kernel
 
 
+def test_tape_query_benchmark(cl_context):
+    """The tape distance query (bench/kernels/query.cl) on a zoo model's tape, both shapes: numbers
+    exist, leaf distances per query > 0 on the root tape, pruning never adds leaves."""
+    rows = micro.measure_queries(cl_context, 1, models=("drilled_die",), limit=128, min_launch=0.0)
+    shapes = {(r["normal_form"], r["tape"]) for r in rows}
+    assert shapes == {(nf, t) for nf in ("tree", "dnf") for t in ("root tape", "pruned over 2r")}
+    for r in rows:
+        assert r["queries"] > 0 and r["points"] > 0
+        assert math.isfinite(r["ns_per_query_per_core"]) and r["ns_per_query_per_cu"] > 0
+        assert r["checksum_finite"]
+    for nf in ("tree", "dnf"):
+        root = next(r for r in rows if r["normal_form"] == nf and r["tape"] == "root tape")
+        pruned = next(r for r in rows if r["normal_form"] == nf and r["tape"] != "root tape")
+        # a point on one of the die's 5 quadrics evaluates the other 4 on the root tape
+        assert 0 < root["leaf_distances_per_query"] <= root["leaves"]
+        assert pruned["leaf_distances_per_query"] <= root["leaf_distances_per_query"]
+        assert pruned["tape_rows_mean"] <= root["instructions"]
+
+
+def test_models_rows_have_both_shapes(cl_context):
+    """A models row set (lens, large size only): tree and DNF side by side with the sampler's
+    statistics and the ratio to the paper."""
+    m = zoo.model("lens")
+    scene = clcsg.Scene(m.build(), source=m.name)
+    info, rows = models.shape_rows(cl_context, scene, m.name, "zoo", {"large": zoo.SIZES["large"]}, 1, 0.0,
+                                   paper=lambda size: zoo.paper_row(m.name, size))
+    assert [r["normal_form"] for r in rows] == ["tree", "dnf"]
+    assert info["tree"]["instructions"] > 0 and info["dnf"]["instructions"] > 0
+    for r in rows:
+        assert not r.get("skipped")
+        assert r["samples"] > 0 and r["sampling_s"] > 0 and r["distance_queries"] > 0
+        assert r["leaf_distances_per_query"] > 0
+        assert r["prune_evaluations"] > 0
+        assert r["tape_mean"]["mean"] > 0 and r["tape_max"]["max"] >= r["tape_mean"]["mean"]
+        assert r["unresolved"] >= 0 and r["levels"] > 0
+        assert r["ratio_to_paper"] == pytest.approx(r["sampling_s"] * cl_context.info.compute_units / 1.51e-3)
+    # the same solid: the same samples
+    assert rows[0]["samples"] == rows[1]["samples"]
+    text = models.table({"environment": {"device": "d", "compute_units": 2}, "rows": rows,
+                         "targets": models.targets(rows, 2)})
+    assert "| lens | large |" in text
+    json.dumps(rows, default=common._json_default)
+
+
+def test_models_records_the_dnf_limit(cl_context):
+    """A part whose DNF passes the term limit gets a tree row and a 'dnf: term limit' row."""
+    scene = clcsg.load(zoo.example_path("rook", "csg"))
+    info, rows = models.shape_rows(cl_context, scene, "rook", "openscad part", {"r": 0.05}, 1, 0.0)
+    tree, dnf = rows
+    assert tree["normal_form"] == "tree" and tree["samples"] > 0 and tree["leaf_distances_per_query"] > 0
+    assert dnf["skipped"] == "dnf: term limit" and info["dnf_skipped"] == "dnf: term limit"
+
+
 def test_manifold_translation_matches_the_quadrics():
     """The manifold3d version of a zoo model lies near its quadrics (coarse tessellation)."""
     manifold3d = pytest.importorskip("manifold3d")
-    from bench import peers
 
     shape = zoo.flange()
-    dnf = clcsg.Scene(shape).normalize()
-    diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
-    mesh = peers.Translator(manifold3d, 32, dnf.bound).build(shape).to_mesh()
+    tape = clcsg.Scene(shape).compile("tree")
+    diag = common.diagonal(tape.bound)
+    mesh = peers.Translator(manifold3d, 32, tape.bound).build(shape).to_mesh()
     pts, _ = peers.sample_mesh(mesh, 2000, np.random.default_rng(0))
-    err = peers.surface_error(dnf, pts)
+    err = peers.surface_error(tape, pts)
     assert err.max() < 0.02 * diag
     # and the mesh's bound is the scene's
-    assert np.allclose(pts.min(0), dnf.bound[0], atol=0.02 * diag)
-    assert np.allclose(pts.max(0), dnf.bound[1], atol=0.02 * diag)
+    assert np.allclose(pts.min(0), tape.bound[0], atol=0.02 * diag)
+    assert np.allclose(pts.max(0), tape.bound[1], atol=0.02 * diag)
+
+
+def test_manifold_builds_the_sponge_exactly():
+    """The Menger sponge (boxes only) translates to manifold3d with no tessellation error."""
+    manifold3d = pytest.importorskip("manifold3d")
+    scene = clcsg.load(zoo.example_path(zoo.SPONGE, "csg"))
+    tape = scene.compile("tree")
+    mesh = peers.Translator(manifold3d, 16, tape.bound).build(scene.shape).to_mesh()
+    pts, ntri = peers.sample_mesh(mesh, 2000, np.random.default_rng(0))
+    assert ntri > 1000
+    assert peers.surface_error(tape, pts).max() < 1e-6 * common.diagonal(tape.bound)
+
+
+def test_render_row_pieces(cl_context):
+    """The render part's pieces on a tiny image: the tree ray tracer reports its tile pruning,
+    the splats an overdraw."""
+    from bench import render
+
+    tape = clcsg.Scene(zoo.lens()).compile("tree")
+    cam = common.fit_camera(tape.bound, 64, 36, zoo.model("lens").direction)
+    t, st = render.time_render(clcsg.raytrace, tape, cam, cl_context, 1)
+    rec = render.raytrace_record(t, st)
+    assert rec["seconds"] > 0 and rec["tile_tape_mean"] > 0 and rec["prune_seconds"] >= 0
+    assert rec["covered_pixels"] > 0

@@ -22,6 +22,7 @@ import os
 import subprocess
 import sys
 import time
+import types
 import warnings
 
 import numpy as np
@@ -42,11 +43,11 @@ from clcsg.errors import (
 from clcsg.sampling import guard
 from clcsg.cl.device import DeviceInfo, choose, require_int64_atomics
 from clcsg.sampling.sampler import sample
-from clcsg.rendering.api import raytrace, render
-from clcsg.sampling.samples import read_ply
+from clcsg import raytrace, render
+from clcsg.io.ply import read_samples as read_ply
 
-import oracle
-from coverage import assert_same_samples, surface_residuals, uncovered
+import tree_oracle as T
+from coverage import assert_same_samples, uncovered
 from test_raytrace import compare as compare_with_oracle
 from test_sampler import SCENES as SAMPLER_SCENES
 from test_splat import check as check_splats
@@ -149,8 +150,8 @@ CLI_ERRORS = [
     ("render {d}/ok.json -o {o}/x.png --up 0,0,0", 2, "up"),
     ("render {d}/ok.json -o {o}/x.png --background 0,0", 2, "--background"),
     ("render {d}/ok.json -o {o}/x.png --background 0,0,-1", 2, "--background"),
-    ("render {d}/ok.json -o {o}/x.xyz --method raytrace --size 8x6", 2, "cannot write image"),
-    ("render {d}/ok.json -o {o}/no/such/dir/x.png --method raytrace --size 8x6", 2, "cannot write image"),
+    ("render {d}/ok.json -o {o}/x.xyz --method raytrace --size 8x6", 2, "unknown image format"),
+    ("render {d}/ok.json -o {o}/no/such/dir/x.png --method raytrace --size 8x6", 2, "cannot write there"),
     ("sample {d}/ok.json -r 0.5 -o {o}/no/such/dir/x.ply", 2, "cannot write"),
     # devices
     ("info {d}/ok.json --device nosuch", 4, "unknown device 'nosuch'"),
@@ -160,7 +161,7 @@ CLI_ERRORS = [
     pytest.param("render {d}/ok.json -o {o}/x.png --device oclgrind", 4, "Oclgrind is not installed",
                  marks=pytest.mark.skipif(_oclgrind_listed(), reason="Oclgrind is installed here")),
     # limits
-    ("info {d}/many_terms.json --term-limit 50", 5, "--term-limit"),
+    ("info {d}/many_terms.json --normal-form dnf --term-limit 50", 5, "--term-limit"),
     ("sample {d}/ok.json -r 1e-5 -o {o}/x.ply", 5, "raise --max-samples"),
     ("sample {d}/ok.json -r 1e-300 -o {o}/x.ply", 5, "use a larger --radius"),
     ("sample {d}/ok.json -r 0.01 --max-samples 100 -o {o}/x.ply", 5, "limit of 100 samples"),
@@ -326,7 +327,7 @@ def test_dnf_past_its_limit_is_caught_in_seconds(tmp_path, capsys):
     path = tmp_path / "holes.json"
     clcsg.save(clcsg.box(2) - clcsg.union(*small), path)
     t = time.perf_counter()
-    rc = cli.main(["info", str(path)])
+    rc = cli.main(["info", str(path), "--normal-form", "dnf"])
     took = time.perf_counter() - t
     err = capsys.readouterr().err
     assert rc == 5 and "--term-limit" in err and len(err.strip().splitlines()) == 1
@@ -336,8 +337,8 @@ def test_dnf_past_its_limit_is_caught_in_seconds(tmp_path, capsys):
 # -- the resource guard -------------------------------------------------------------------------
 
 
-def _dnf(shape):
-    return clcsg.model.scene.as_scene(shape).normalize()
+def _tape(shape):
+    return clcsg.model.scene.as_scene(shape).compile()
 
 
 def test_area_bounds_are_upper_bounds():
@@ -346,7 +347,7 @@ def test_area_bounds_are_upper_bounds():
     assert guard.quadric_area_bound(plane, [-1] * 3, [1] * 3) >= 3 * math.sqrt(3) - 1e-12
     zplane = clcsg.halfspace((0, 0, 1), 0.3).quadrics()[0].matrix
     assert guard.quadric_area_bound(zplane, [-1] * 3, [1] * 3) == pytest.approx(4.0)
-    # exact areas of whole surfaces against the bound the DNF gives
+    # exact areas of whole surfaces against the bound the tape gives
     cases = [
         (clcsg.sphere(1.0), 4 * math.pi),
         (clcsg.box(2.0), 24.0),
@@ -356,12 +357,12 @@ def test_area_bounds_are_upper_bounds():
         (clcsg.box(2) - clcsg.sphere(0.3), 24 + 4 * math.pi * 0.09),
     ]
     for shape, area in cases:
-        est = guard.estimate(_dnf(shape), 0.1)
+        est = guard.estimate_tape(_tape(shape), 0.1)
         assert est.area >= area * (1 - 1e-12), (shape, est.area, area)
         assert est.area <= 6 * area, (shape, est.area, area)  # not absurd either
     # a small hole in a big block counts with its own box, not the block's
-    block = guard.estimate(_dnf(clcsg.box(20)), 0.1).area
-    holed = guard.estimate(_dnf(clcsg.box(20) - clcsg.sphere(0.5)), 0.1).area
+    block = guard.estimate_tape(_tape(clcsg.box(20)), 0.1).area
+    holed = guard.estimate_tape(_tape(clcsg.box(20) - clcsg.sphere(0.5)), 0.1).area
     assert holed - block < 10
 
 
@@ -379,14 +380,14 @@ def test_estimate_is_never_far_below_the_real_count(cl_context, name):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sc = clcsg.load(os.path.join(EXAMPLES, name))
-        b = sc.normalize().bound
+        b = sc.compile().bound
         r = float(np.linalg.norm(b[1] - b[0])) / 50
-    dnf = sc.normalize()
+    tape = sc.compile()
     for radius in (r, r / 2):
-        est = guard.estimate(dnf, radius)
+        est = guard.estimate_tape(tape, radius)
         n = len(sample(sc, radius, device=cl_context, progress=False))
         assert n <= 4 * est.samples, f"{name} r={radius:g}: {n} samples, estimate {est.samples:.0f}"
-        assert est.samples <= 20 * n, f"{name} r={radius:g}: {n} samples, estimate {est.samples:.0f}"
+        assert est.samples <= 8 * n, f"{name} r={radius:g}: {n} samples, estimate {est.samples:.0f}"
 
 
 def test_tiny_radius_fails_fast_before_any_kernel(cl_context, monkeypatch):
@@ -395,7 +396,7 @@ def test_tiny_radius_fails_fast_before_any_kernel(cl_context, monkeypatch):
     def forbidden(*a, **k):
         raise AssertionError("the guard must stop before packing, building or launching")
 
-    patched = [name for name in ("pack", "build", "_subdivide", "_finish") if hasattr(sampler, name)]
+    patched = [name for name in ("pack", "build", "_Subdivision", "_finish") if hasattr(sampler, name)]
     assert len(patched) >= 3, patched
     for name in patched:
         monkeypatch.setattr(sampler, name, forbidden)
@@ -411,29 +412,29 @@ def test_tiny_radius_fails_fast_before_any_kernel(cl_context, monkeypatch):
     assert "bracket.json" in msg and "samples" in msg and "--radius" in msg and "--max-samples" in msg
     # the suggested radius passes the guard
     fit = float(msg.split("about ")[-1].split()[0])
-    guard.check(big.normalize(), fit, cl_context.info)
+    guard.check_tape(big.compile(), fit, cl_context.info)
 
 
 def test_guard_limits_and_messages(cl_context):
-    dnf = _dnf(clcsg.sphere(1.0))
-    est = guard.check(dnf, 0.1, cl_context.info)  # a normal case passes
+    tape = _tape(clcsg.sphere(1.0))
+    est = guard.check_tape(tape, 0.1, cl_context.info)  # a normal case passes
     assert 100 < est.samples < 10_000 and est.device_bytes > 0
     with pytest.raises(LimitError, match="limit of 1,000 samples"):
-        guard.check(dnf, 0.01, max_samples=1000)
-    guard.check(dnf, 0.01, max_samples=10**6)
+        guard.check_tape(tape, 0.01, max_samples=1000)
+    guard.check_tape(tape, 0.01, max_samples=10**6)
     # the memory cap comes from the device: a synthetic device with 64 MiB
     small = _info(global_mem=64 << 20, max_mem_alloc=16 << 20)
     with pytest.raises(LimitError, match="global memory"):
-        guard.check(dnf, 0.002, small)
+        guard.check_tape(tape, 0.002, small)
     with pytest.raises(LimitError, match="largest allocation"):
-        guard.check(dnf, 0.002, _info(global_mem=64 << 30, max_mem_alloc=16 << 20))
+        guard.check_tape(tape, 0.002, _info(global_mem=64 << 30, max_mem_alloc=16 << 20))
     # no limit short of the 32-bit indices of the kernels
     with pytest.raises(LimitError, match="32-bit"):
-        guard.check(dnf, 1e-5, max_samples=math.inf)
+        guard.check_tape(tape, 1e-5, max_samples=math.inf)
     for bad in (0, -1, NAN, "x"):
         with pytest.raises(UsageError):
-            guard.check(dnf, 0.1, max_samples=bad)
-    assert guard.check(_dnf(clcsg.sphere(1) - clcsg.sphere(2)), 1e-9).samples == 0
+            guard.check_tape(tape, 0.1, max_samples=bad)
+    assert guard.check_tape(_tape(clcsg.sphere(1) - clcsg.sphere(2)), 1e-9).samples == 0
 
 
 def test_normal_runs_pass_the_guard(cl_context, tmp_path, capsys):
@@ -456,14 +457,14 @@ EMPTY = {
 
 @pytest.mark.parametrize("name", sorted(EMPTY))
 def test_empty_solids_warn_and_give_empty_results(cl_context, name):
-    dnf = _dnf(EMPTY[name])
-    assert dnf.n_terms == 0
-    with pytest.warns(UserWarning, match="no surface"):
+    tape = _tape(EMPTY[name])
+    assert tape.empty
+    with pytest.warns(UserWarning, match="empty"):
         s = sample(EMPTY[name], 0.1, device=cl_context)
     assert len(s) == 0 and s.positions.shape == (0, 3)
     cam = Camera.look_at((4, -3, 2), (0, 0, 0), width=16, height=12)
     for img in (render(s, cam, device=cl_context, background=(0, 0, 1)),
-                raytrace(dnf, cam, device=cl_context, background=(0, 0, 1))):
+                raytrace(tape, cam, device=cl_context, background=(0, 0, 1))):
         assert not img.mask.any() and np.all(np.isinf(img.depth))
         assert np.all(img.rgba[..., :3] == [0, 0, 255])
 
@@ -487,7 +488,7 @@ def test_empty_files_info_reports_zero_terms(tmp_path, capsys, name):
     import json
 
     info = json.loads(capsys.readouterr().out)
-    assert info["stats"]["terms"] == 0 and info["bound"] is None
+    assert info["dnf_terms"] == 0 and info["bound"] is None
 
 
 @pytest.mark.parametrize("name", ["empty.csg", "a_minus_a.json"])
@@ -499,7 +500,7 @@ def test_cli_sample_of_an_empty_solid_writes_an_empty_ply(tmp_path, capsys, name
         warnings.simplefilter("always")
         rc = cli.main(["sample", str(path), "-r", "0.1", "-o", str(out)])
     err = capsys.readouterr().err
-    assert any("no surface" in str(x.message) for x in w)
+    assert any("empty" in str(x.message) for x in w)
     assert rc == 0, err
     assert len(read_ply(out)["positions"]) == 0
 
@@ -562,25 +563,29 @@ def test_degenerate_geometry_stays_exact(cl_context, name):
         assert np.all(np.isfinite(a))
     assert np.allclose(np.linalg.norm(s.normals, axis=1), 1.0)
     # every sample on the surface, the surface covered
-    dnf = s.dnf
-    size = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
-    on_q, csg = surface_residuals(s)
-    assert on_q.max() <= 1e-5 * size and csg.max() <= 1e-5 * size
-    ref = oracle.surface_points(dnf, n_dirs=16, res=48)
+    tape = s.tape
+    size = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+    Q = tape.quadrics[s.quadrics]
+    on_q, on_csg = T.sample_residuals(shape, s.positions, Q)
+    assert on_q.max() <= 1e-5 * size and on_csg.all()
+    pad = 1e-3 * size
+    ref = T.surface_points(shape, tape.bound + [[-pad], [pad]], n_lines=10000)
     assert len(ref) > 100
-    missing = uncovered(ref.points, ref.quadrics, s, r, slack=1e-5)
+    ids = T.quadric_table(shape).match(tape.quadrics)
+    mapped = types.SimpleNamespace(positions=s.positions, quadrics=ids[s.quadrics])
+    missing = uncovered(ref.points, ref.quadrics, mapped, r, slack=1e-5)
     assert len(missing) == 0, f"{len(missing)} surface points uncovered, e.g. {ref.points[missing[:3]].tolist()}"
     # renders: the ray tracer equals the float64 oracle away from fragile pixels, the splats
     # equal the ray tracer
-    for cam in views(dnf, 48, 36)[:2]:
-        ref_img = raytrace(dnf, cam, device=cl_context)
+    for cam in views(tape, 48, 36)[:2]:
+        ref_img = raytrace(tape, cam, device=cl_context)
         assert np.all(np.isfinite(ref_img.depth[ref_img.mask]))
-        compare_with_oracle(ref_img, dnf, cam)
+        compare_with_oracle(ref_img, shape, tape, cam)
         for sa, bf in [(True, True), (False, False)]:
             img = render(s, cam, device=cl_context, surface_aligned=sa, backface_culling=bf)
             assert np.all(np.isfinite(img.depth[img.mask]))
             o, d = cam.rays()
-            fragile = oracle.fragile(dnf, o, d, rel=1e-9)
+            fragile = T.fragile(shape, o, d, rel=1e-9)
             agree = (img.mask == ref_img.mask)[~fragile].mean()
             assert agree >= 0.999, f"masks agree on {agree:.5f} of the non-fragile pixels"
             check_splats(img, ref_img)
@@ -594,17 +599,17 @@ CAPACITY_SCENES = ["sphere", "rounded_cube", "sharp_tips", "flush_tops", "cone_f
 
 def _same_samples(big, tiny):
     assert len(big) > 0
-    assert_same_samples(big, tiny, ("distance_queries", "unresolved", "filled", "single", "discarded", "split",
-                                     "levels"))
+    assert_same_samples(big, tiny, ("distance_queries", "leaf_distances", "unresolved", "filled", "single",
+                                     "discarded", "split", "levels"))
 
 
 @pytest.mark.parametrize("name", CAPACITY_SCENES)
 def test_tiny_buffers_lose_nothing(cl_context, name):
     shape, r = SAMPLER_SCENES[name]
-    big = sample(shape, r, device=cl_context, capacity=(1 << 20, 1 << 20))
-    tiny = sample(shape, r, device=cl_context, capacity=(2, 2))
+    big = sample(shape, r, device=cl_context, capacity=(1 << 20, 1 << 20, 1 << 22, 1 << 20))
+    tiny = sample(shape, r, device=cl_context, capacity=(2, 2, 2, 2))
     assert tiny.stats["buffer_growths"]["cells"] > 0 and tiny.stats["buffer_growths"]["samples"] > 0
-    assert big.stats["buffer_growths"] == {"cells": 0, "samples": 0}
+    assert big.stats["buffer_growths"] == {"cells": 0, "samples": 0, "arena": 0}
     _same_samples(big, tiny)
 
 
@@ -612,9 +617,9 @@ def test_tiny_buffers_lose_nothing_on_an_example(cl_context):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sc = clcsg.load(os.path.join(EXAMPLES, "flange.csg"))
-    b = sc.normalize().bound
+    b = sc.compile().bound
     r = float(np.linalg.norm(b[1] - b[0])) / 40
-    _same_samples(sample(sc, r, device=cl_context), sample(sc, r, device=cl_context, capacity=(2, 2)))
+    _same_samples(sample(sc, r, device=cl_context), sample(sc, r, device=cl_context, capacity=(2, 2, 2, 2)))
 
 
 def test_renderer_has_no_capacity_limited_buffer(cl_context):
@@ -625,8 +630,8 @@ def test_renderer_has_no_capacity_limited_buffer(cl_context):
     many = sample(shape, r / 3, device=cl_context)
     few = sample(shape, 0.6, device=cl_context)
     for s, (w, h) in ((many, (8, 6)), (few, (160, 120))):
-        cam = Camera.fit(s.dnf, w, h)
-        ref = raytrace(s.dnf, cam, device=cl_context)
+        cam = Camera.fit(s.tape, w, h)
+        ref = raytrace(s.tape, cam, device=cl_context)
         img = render(s, cam, device=cl_context)
         assert img.stats["splats_drawn"] + img.stats["splats_offscreen"] + img.stats["splats_culled"] == len(s)
         assert (img.mask == ref.mask).mean() >= 0.99

@@ -168,6 +168,7 @@ class _Builder:
         self.kind = [_CONST, _CONST]
         self.args: list = [(1,), (0,)]
         self._ids = {(_CONST, (1,)): _TRUE, (_CONST, (0,)): _FALSE}
+        self.complement = {_TRUE: _FALSE, _FALSE: _TRUE}  # node -> its complement, where both exist
 
     def node(self, kind, args) -> int:
         key = (kind, args)
@@ -196,6 +197,9 @@ class _Builder:
                     return absorbing
                 lits.add((q, s))
             seen.append(i)
+        members = set(seen)
+        if any(self.complement.get(i, -1) in members for i in seen):  # x & ~x is empty, x | ~x everything
+            return absorbing
         if not seen:
             return neutral
         if len(seen) == 1:
@@ -288,6 +292,7 @@ def _expression(shape: Shape, table: QuadricTable, b: _Builder, source: str) -> 
                 memo[key] = b.combine(_OR, [b.leaf(q, -s) for q, s in lits])
             else:
                 memo[key] = b.combine(_AND, [b.leaf(q, s) for q, s in lits])
+            _pair(b, memo, key)
             continue
         kind, kids = _children(node, m, neg)
         keys = [(id(c), cm.tobytes(), cn) for c, cm, cn in kids]
@@ -304,7 +309,16 @@ def _expression(shape: Shape, table: QuadricTable, b: _Builder, source: str) -> 
             memo[key] = _FALSE if kind == _OR else _TRUE
         else:
             memo[key] = b.combine(kind, ids)
+        _pair(b, memo, key)
     return memo[(id(shape), np.eye(4).tobytes(), False)]
+
+
+def _pair(b: _Builder, memo: dict, key) -> None:
+    """Record that the expressions of (node, m, neg) and (node, m, not neg) are complements."""
+    other = memo.get((key[0], key[1], not key[2]))
+    if other is not None:
+        b.complement[memo[key]] = other
+        b.complement[other] = memo[key]
 
 
 def _needs(b: _Builder, root: int) -> dict:

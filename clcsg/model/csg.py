@@ -242,7 +242,9 @@ def contains(shape: Shape, points) -> np.ndarray:
     """Membership of ``points`` (..., 3) in the solid, evaluated on the graph itself.
 
     This is the direct definition (no normalization): the reference the DNF is checked
-    against.  Points exactly on a surface count as inside.
+    against.  Points exactly on a surface count as inside.  The graph is evaluated without
+    recursion (deep chains are fine), and a node reached again under the same chain of
+    transforms is evaluated once (a DAG costs its number of distinct nodes, not of paths).
     """
     pts = np.asarray(points, dtype=np.float64)
     flat = pts.reshape(-1, 3)
@@ -250,29 +252,95 @@ def contains(shape: Shape, points) -> np.ndarray:
 
 
 def _contains(shape: Shape, x: np.ndarray) -> np.ndarray:
-    if isinstance(shape, Primitive):
-        inside = np.ones(len(x), dtype=bool)
-        for q in shape.quadrics():
-            inside &= q.value(x) <= 0.0
-        return inside
-    if isinstance(shape, Union):
-        out = np.zeros(len(x), dtype=bool)
-        for s in shape.operands:
-            out |= _contains(s, x)
-        return out
-    if isinstance(shape, Intersection):
-        out = np.ones(len(x), dtype=bool)
-        for s in shape.operands:
-            out &= _contains(s, x)
-        return out
-    if isinstance(shape, Difference):
-        out = _contains(shape.operands[0], x)
-        for s in shape.operands[1:]:
-            out &= ~_contains(s, x)
-        return out
-    if isinstance(shape, Complement):
-        return ~_contains(shape.operand, x)
-    if isinstance(shape, Transformed):
-        inv = np.linalg.inv(shape.matrix)
-        return _contains(shape.operand, x @ inv[:3, :3].T + inv[:3, 3])
-    raise TypeError(f"not a CSG node: {type(shape).__name__}")
+    """Post-order evaluation with an explicit stack.
+
+    A *frame* is the point array in the coordinates of a node: frame 0 is ``x``; the operand
+    of a Transformed node T seen in frame f is in frame (T, f), whose points are f's points
+    mapped by T's inverse (as the recursive definition did, edge by edge).  Results are keyed
+    by (node, frame); a result is dropped once all its parents have used it and a frame once
+    its Transformed node is done, so memory follows the depth of the graph, not its size.
+    """
+    frame_ids: dict = {}  # (id(Transformed), parent frame) -> frame id
+
+    def child_frames(node, f):
+        if isinstance(node, Transformed):
+            key = (id(node), f)
+            cf = frame_ids.get(key)
+            if cf is None:
+                cf = frame_ids[key] = len(frame_ids) + 1
+            return [(node.operand, cf)]
+        if isinstance(node, (Union, Intersection, Difference)):
+            return [(c, f) for c in node.operands]
+        if isinstance(node, Complement):
+            return [(node.operand, f)]
+        if isinstance(node, Primitive):
+            return []
+        raise TypeError(f"not a CSG node: {type(node).__name__}")
+
+    # pass 1: how many parents use each (node, frame)
+    uses: dict = {}
+    seen = set()
+    stack = [(shape, 0)]
+    while stack:
+        node, f = stack.pop()
+        key = (id(node), f)
+        if key in seen:
+            continue
+        seen.add(key)
+        for c, cf in child_frames(node, f):
+            ck = (id(c), cf)
+            uses[ck] = uses.get(ck, 0) + 1
+            if ck not in seen:
+                stack.append((c, cf))
+
+    # pass 2: evaluate
+    frames = {0: x}
+    results: dict = {}
+
+    def take(key):
+        n = uses[key] - 1
+        uses[key] = n
+        return results.pop(key) if n == 0 else results[key]
+
+    stack = [(shape, 0, False)]
+    while stack:
+        node, f, expanded = stack.pop()
+        key = (id(node), f)
+        if key in results:
+            continue
+        kids = child_frames(node, f)
+        if not expanded and kids:
+            stack.append((node, f, True))
+            for c, cf in reversed(kids):
+                if (id(c), cf) not in results:
+                    if isinstance(node, Transformed) and cf not in frames:
+                        inv = np.linalg.inv(node.matrix)
+                        frames[cf] = frames[f] @ inv[:3, :3].T + inv[:3, 3]
+                    stack.append((c, cf, False))
+            continue
+        if isinstance(node, Primitive):
+            pts = frames[f]
+            out = np.ones(len(pts), dtype=bool)
+            for q in node.quadrics():
+                out &= q.value(pts) <= 0.0
+        else:
+            vals = [take((id(c), cf)) for c, cf in kids]
+            if isinstance(node, Union):
+                out = np.zeros(len(x), dtype=bool)
+                for v in vals:
+                    out |= v
+            elif isinstance(node, Intersection):
+                out = np.ones(len(x), dtype=bool)
+                for v in vals:
+                    out &= v
+            elif isinstance(node, Difference):
+                out = vals[0].copy()
+                for v in vals[1:]:
+                    out &= ~v
+            elif isinstance(node, Complement):
+                out = ~vals[0]
+            else:  # Transformed: its frame is no longer needed
+                out = vals[0]
+                frames.pop(kids[0][1], None)
+        results[key] = out
+    return results[(id(shape), 0)]

@@ -8,7 +8,8 @@
  * grows it and re-runs).
  *
  * raytrace: one work-item per pixel, ray e + t v (unit v).  Walk the roots of the tile tape's
- * leaves in increasing t > 0 (the next root is the smallest one past the current; roots at
+ * leaves in increasing t > 0 inside the scene bound (where the tile's pruned tape is exact;
+ * the solid lies in the bound) (the next root is the smallest one past the current; roots at
  * the same t are all tried): a root t on quadric q is a hit iff the tape's membership at
  * p = e + t v with q substituted differs between q's two sides, i.e. p is on the CSG
  * surface.  No 1-D interval CSG and no "outside view" assumption: views from inside the solid
@@ -75,7 +76,16 @@ __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op
     tiles[tile] = (int2)((int)base + first, count);
 }
 
-__kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena,
+/* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses) */
+inline real2 ray_box(real3 e, real3 v, real3 lo, real3 hi)
+{
+    real3 inv = 1 / v; /* +-inf for zero components: the slab test still works */
+    real3 a = (lo - e) * inv, b = (hi - e) * inv;
+    real3 tn = fmin(a, b), tf = fmax(a, b);
+    return (real2)(fmax(fmax(tn.x, tn.y), tn.z), fmin(fmin(tf.x, tf.y), tf.z));
+}
+
+__kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, real3 blo, real3 bhi,
                        __global const int2 *tiles, __global const owner_rec *owners,
                        __global const int *owner_list, __global const prim_rec *prims,
                        __global const int2 *prim_lits, __global const view_rec *view,
@@ -94,8 +104,12 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
 
     real best = INFINITY;
     int best_q = -1;
-    real t_cur = 0;
-    bool searching = n > 0 && !(n == 1 && tape[0].op == OP_CONST);
+    /* the tile's tape is exact only inside the tile's region: the roots inside the bound */
+    real slack = 64 * REAL_EPS * (length(blo) + length(bhi) + length(e));
+    real2 seg = ray_box(e, v, blo - slack, bhi + slack);
+    real t_cur = fmax(seg.x, (real)0);
+    t_cur = t_cur > 0 ? t_cur * (1 - 4 * REAL_EPS) : 0; /* a root exactly at the entry is kept */
+    bool searching = n > 0 && !(n == 1 && tape[0].op == OP_CONST) && seg.x <= seg.y;
     while (searching) {
         /* the smallest root past t_cur over the tape's leaves */
         real t_next = INFINITY;
@@ -107,7 +121,7 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
             for (int m = 0; m < nr; ++m)
                 if (r[m] > t_cur && r[m] < t_next) t_next = r[m];
         }
-        if (!isfinite(t_next)) break;
+        if (!isfinite(t_next) || t_next > seg.y) break;
         real3 p = e + t_next * v;
         for (int k = 0; k < n && best_q < 0; ++k) {
             tape_op o = tape[k];

@@ -89,8 +89,11 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     # per-tile pruning, with the overflow protocol of the sampler's arena
     ntx, nty = -(-W // TILE), -(-H // TILE)
     n = len(packed.tape)
-    lo = (tape.bound[0] - packed.origin).astype(real)
-    hi = (tape.bound[1] - packed.origin).astype(real)
+    # padded by the rounding that moving the quadrics to the origin leaves (relative to the
+    # world coordinates): a hit on a face of the bound must stay inside it
+    pad = 1e-9 * (float(np.abs(tape.bound).max()) + float(np.linalg.norm(tape.bound[1] - tape.bound[0])))
+    lo = (tape.bound[0] - packed.origin - pad).astype(real)
+    hi = (tape.bound[1] - packed.origin + pad).astype(real)
     real3 = cl.cltypes.double3 if real == np.float64 else cl.cltypes.float3
     blo = np.array([(lo[0], lo[1], lo[2], 0)], dtype=real3)[0]
     bhi = np.array([(hi[0], hi[1], hi[2], 0)], dtype=real3)[0]
@@ -109,7 +112,7 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
         if int(counters[0]) <= cap:
             break
         cap = int(counters[0]) + int(counters[0]) // 2
-    ev = kernel(prg, "raytrace")(q, (W, H), None, scene.quadrics, arena, tiles, *scene.colour_args(), view_buf,
+    ev = kernel(prg, "raytrace")(q, (W, H), None, scene.quadrics, arena, blo, bhi, tiles, *scene.colour_args(), view_buf,
                                  *outs)
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev])

@@ -1,9 +1,12 @@
 """Resource guard: estimate the work of sampling a DNF at a radius before allocating anything.
 
 :func:`estimate` bounds the area of the CSG surface from the DNF alone (no device work) and
-turns it into a sample count and a memory size; :func:`check` raises
-:class:`~clcsg.errors.LimitError` (exit code 5) when a limit is passed, with the estimate and
-how to proceed.  :func:`clcsg.host.sampler.sample` calls :func:`check` right after
+turns it into a sample count and a memory size; :func:`estimate_regions` does the same from
+per-quadric regions computed on the CSG tree (:func:`clcsg.compile.bounds.quadric_regions`:
+the boxes of the faces of the primitive instances holding each quadric, within the instances'
+boxes and the scene bound).  :func:`check` (for a DNF or an :class:`Estimate`) and
+:func:`check_estimate` raise :class:`~clcsg.errors.LimitError` (exit code 5) when a limit is
+passed, with the estimate and how to proceed.  :func:`clcsg.host.sampler.sample` calls :func:`check` right after
 normalization, before it builds a kernel or allocates a buffer, so a radius that is far too
 small for the scene fails in milliseconds instead of exhausting memory.
 
@@ -62,7 +65,9 @@ __all__ = [
     "HARD_MAX_SAMPLES",
     "Estimate",
     "check",
+    "check_estimate",
     "estimate",
+    "estimate_regions",
     "memory_limit",
     "quadric_area_bound",
 ]
@@ -270,6 +275,83 @@ def estimate(dnf, radius: float, real_itemsize: int = 8) -> Estimate:
     return _make_estimate(r, area, edges, tasks, real_itemsize, per_quadric)
 
 
+def _surface_meets(matrix, lo, hi) -> np.ndarray:
+    """Mask of the boxes (lo, hi: (N, 3)) that the surface Q = 0 may meet: exact for planes
+    (the range of the linear function over the box holds 0), for other quadrics the
+    conservative distance at the box center against the half-diagonal (|d| never exceeds the
+    distance to the surface, so a surface farther than the half-diagonal misses the box)."""
+    from ..model.quadric import Quadric
+
+    m = np.asarray(matrix, dtype=np.float64)
+    c = 0.5 * (lo + hi)
+    half = 0.5 * (hi - lo)
+    scale = np.abs(m).max()
+    if np.abs(m[:3, :3]).max() <= 1e-14 * scale:
+        g = 2.0 * m[:3, 3]
+        mid = c @ g + m[3, 3]
+        spread = half @ np.abs(g)
+        return np.abs(mid) <= spread + 1e-12 * (scale + np.abs(mid))
+    d = Quadric(m).distance(c)
+    r = np.linalg.norm(half, axis=1)
+    return ~(np.abs(d) > r * (1 + 1e-9) + 1e-12)
+
+
+def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: int = 8, tasks=None) -> Estimate:
+    """The :class:`Estimate` of sampling the surface at ``radius`` from per-quadric regions.
+
+    ``quadric_matrices``: (U, 4, 4) the unique quadrics; ``regions``: U arrays (k_u, 2, 3), the
+    boxes where quadric u can carry CSG surface (:func:`clcsg.compile.bounds.quadric_regions`:
+    the faces of the primitive instances holding u, within their boxes and the scene bound).
+    The area of u is bounded as in :func:`estimate`: per region box (intersected with the box
+    of u's surface, dropped where the surface misses it) by the plane / convex / saddle rules,
+    summed over the boxes or taken once for the box around all of them, whichever is smaller.
+    ``tasks``: the number of sampling tasks; None for 6 per quadric that carries surface
+    (3 sampling planes x 2 sheets).
+    """
+    from ..model.quadric import Quadric
+    from ..compile.bounds import literal_box
+
+    r = float(radius)
+    if not (math.isfinite(r) and r > 0):
+        raise UsageError(f"radius must be a positive finite number, got {radius}")
+    mats = np.asarray(quadric_matrices, dtype=np.float64).reshape(-1, 4, 4)
+    if len(regions) != len(mats):
+        raise ValueError(f"{len(regions)} region lists for {len(mats)} quadrics")
+    area = 0.0
+    edges = 0.0
+    n_tasks = 0
+    per_quadric = []
+    for m, reg in zip(mats, regions):
+        reg = np.asarray(reg, dtype=np.float64).reshape(-1, 2, 3)
+        if not len(reg):
+            per_quadric.append(0.0)
+            continue
+        sb = _surface_box(Quadric(m), literal_box)
+        if sb is None:
+            per_quadric.append(0.0)
+            continue
+        lo = np.maximum(reg[:, 0], sb[0])
+        hi = np.minimum(reg[:, 1], sb[1])
+        ok = np.all(hi >= lo, axis=1)
+        lo, hi = lo[ok], hi[ok]
+        if len(lo):
+            ok = _surface_meets(m, lo, hi)
+            lo, hi = lo[ok], hi[ok]
+        if not len(lo):
+            per_quadric.append(0.0)
+            continue
+        kind = _kind(m)
+        ulo, uhi = lo.min(axis=0, keepdims=True), hi.max(axis=0, keepdims=True)
+        a = min(float(_area_bounds(kind, lo, hi).sum()), float(_area_bounds(kind, ulo, uhi)[0]))
+        per_quadric.append(a)
+        area += a
+        edges += min(4.0 * float(np.sum(hi - lo)), 4.0 * float(np.sum(uhi - ulo)))
+        n_tasks += 6
+    if tasks is not None:
+        n_tasks = int(tasks)
+    return _make_estimate(r, area, edges, n_tasks, real_itemsize, per_quadric)
+
+
 # -- the check ------------------------------------------------------------------------------------
 
 
@@ -320,17 +402,35 @@ def check(dnf, radius: float, info=None, *, max_samples=None, max_memory=None, s
           real_itemsize: int = 8) -> Estimate:
     """Estimate the cost of sampling ``dnf`` at ``radius`` and raise :class:`LimitError` past a limit.
 
+    ``dnf``: a :class:`~clcsg.compile.dnf.Dnf` (estimated with :func:`estimate`) or an
+    :class:`Estimate` (taken at ``radius``, e.g. from :func:`estimate_regions`).
     ``info``: the device's :class:`~clcsg.host.device.DeviceInfo` (None: no memory limit).
     ``max_samples``: None for :data:`DEFAULT_MAX_SAMPLES`; ``math.inf`` disables the count
     limit.  ``max_memory``: bytes of device memory the run may plan to use; None for
     :data:`MEMORY_FRACTION` of the device's global memory.  Returns the :class:`Estimate`.
     """
+    _limit_value(max_samples, "max_samples")
+    _limit_value(max_memory, "max_memory")
+    if isinstance(dnf, Estimate):
+        r = float(radius)
+        if not (math.isfinite(r) and r > 0):
+            raise UsageError(f"radius must be a positive finite number, got {radius}")
+        est = dnf if r == dnf.radius else dnf.at(r)
+    else:
+        est = estimate(dnf, radius, real_itemsize)
+    return check_estimate(est, info, max_samples=max_samples, max_memory=max_memory, source=source)
+
+
+def check_estimate(est: Estimate, info=None, *, max_samples=None, max_memory=None,
+                   source: str = "scene") -> Estimate:
+    """Raise :class:`LimitError` if the estimate ``est`` passes a limit (see :func:`check` for
+    ``info``, ``max_samples``, ``max_memory``); returns ``est``.  The message names ``source``,
+    the estimate and the radius that would fit."""
     ms = _limit_value(max_samples, "max_samples")
     mm = _limit_value(max_memory, "max_memory")
     ms = DEFAULT_MAX_SAMPLES if ms is None else ms
     hard = ms > HARD_MAX_SAMPLES
     ms = min(ms, HARD_MAX_SAMPLES)
-    est = estimate(dnf, radius, real_itemsize)
     default_mem, max_alloc = memory_limit(info)
     mem_cap = default_mem if mm is None else mm
     where = "" if info is None else f" on {info.describe()}"
@@ -358,3 +458,22 @@ def check(dnf, radius: float, info=None, *, max_samples=None, max_memory=None, s
                          f"allocation the device allows ({_size(max_alloc)}{where}); {how} "
                          "or a device with more memory (--device)")
     return est
+
+
+def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
+    """The :class:`Estimate` of sampling a compiled tape: the regions of its quadrics are the
+    face boxes of the primitive instances holding them, within the scene bound
+    (:func:`clcsg.compile.bounds.quadric_regions`)."""
+    from ..compile.bounds import quadric_regions
+
+    if tape.empty:
+        return _make_estimate(float(radius), 0.0, 0.0, 0, real_itemsize)
+    regions = quadric_regions(tape.quadrics, tape.instances, tape.bound)
+    return estimate_regions(tape.quadrics, regions, radius, real_itemsize)
+
+
+def check_tape(tape, radius: float, info=None, *, max_samples=None, max_memory=None, source: str = "scene",
+               real_itemsize: int = 8) -> Estimate:
+    """:func:`estimate_tape`, then the limits of :func:`check_estimate`."""
+    est = estimate_tape(tape, radius, real_itemsize)
+    return check_estimate(est, info, max_samples=max_samples, max_memory=max_memory, source=source)

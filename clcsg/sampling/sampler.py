@@ -253,9 +253,8 @@ def sample(
     real = np.dtype(_device.real_dtype(ctx))
     from . import guard
 
-    if hasattr(guard, "check_tape"):  # TODO(wire): after the guard takes tapes
-        guard.check_tape(tape, radius, ctx.info, max_samples=max_samples, max_memory=max_memory, source=sc.source,
-                         real_itemsize=real.itemsize)
+    est = guard.check_tape(tape, radius, ctx.info, max_samples=max_samples, max_memory=max_memory,
+                           source=sc.source, real_itemsize=real.itemsize)
     t1 = time.perf_counter()
     packed = pack(tape, real)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
@@ -263,6 +262,7 @@ def sample(
     tasks, roots = root_tasks(tape, packed, frames)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
+             "estimated_samples": est.samples,
              **{f"tape_{k}": v for k, v in tape.stats.items()}}
     if len(roots) == 0 or tape.empty:
         warnings.warn(f"{sc.source}: the solid is empty; no samples", stacklevel=2)
