@@ -1,14 +1,25 @@
-"""Shared benchmark plumbing: machine/device description and result files."""
+"""Shared benchmark plumbing: machine/device description, result files, timing helpers.
+
+Every other bench module may import this one and :mod:`bench.zoo`; neither imports another
+bench module, so there are no import cycles.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import math
 import os
 import platform
 import subprocess
 import time
+import warnings
+
+import numpy as np
 
 RESULTS = os.path.join(os.path.dirname(__file__), "results")
+#: the default result directory (the gallery is written only with it)
+DEFAULT_RESULTS = RESULTS
 
 
 def git_commit() -> str:
@@ -17,6 +28,16 @@ def git_commit() -> str:
                                        cwd=os.path.dirname(__file__), stderr=subprocess.DEVNULL).strip()
     except Exception:
         return "unknown"
+
+
+def git_dirty() -> bool | None:
+    """True if the work tree differs from HEAD (other engineers edit the package meanwhile)."""
+    try:
+        out = subprocess.check_output(["git", "status", "--porcelain", "--untracked-files=no"], text=True,
+                                      cwd=os.path.dirname(__file__), stderr=subprocess.DEVNULL)
+        return bool(out.strip())
+    except Exception:
+        return None
 
 
 def environment(ctx) -> dict:
@@ -35,18 +56,39 @@ def environment(ctx) -> dict:
         "pyopencl": pyopencl.VERSION_TEXT,
         "clcsg": clcsg.__version__,
         "git_commit": git_commit(),
+        "git_dirty": git_dirty(),
         "device": ctx.info.name,
         "platform": ctx.info.platform,
         "compute_units": ctx.info.compute_units,
     }
 
 
+class Load:
+    """The load average at the start and at the end of a part (the machine is shared)."""
+
+    def __init__(self):
+        self.start = os.getloadavg()[0]
+
+    def into(self, env: dict) -> dict:
+        env["loadavg_start"] = round(self.start, 2)
+        env["loadavg_end"] = round(os.getloadavg()[0], 2)
+        return env
+
+
 def write(part: str, payload: dict) -> str:
     os.makedirs(RESULTS, exist_ok=True)
     path = os.path.join(RESULTS, f"{part}.json")
     with open(path, "w") as f:
-        json.dump(payload, f, indent=2)
+        json.dump(payload, f, indent=2, default=_json_default)
     return path
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON serializable: {type(x).__name__}")
 
 
 def best_of(fn, repeats: int):
@@ -57,3 +99,187 @@ def best_of(fn, repeats: int):
         out = fn()
         best = min(best, time.perf_counter() - t)
     return best, out
+
+
+def fmt(x, spec=".1f", scale=1.0, suffix="", none="-") -> str:
+    """``x * scale`` formatted, or ``none`` for None / NaN / inf."""
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return none
+    return f"{(x * scale if scale != 1.0 else x):{spec}}{suffix}"
+
+
+# -- OpenCL profiling -----------------------------------------------------------------------------
+
+
+def event_seconds(ev) -> float:
+    ev.wait()
+    return 1e-9 * (ev.profile.end - ev.profile.start)
+
+
+@contextlib.contextmanager
+def kernel_events():
+    """Record the profiling event of every kernel launched through ``pyopencl.Kernel.__call__``
+    inside the block: yields a list of (kernel name, event)."""
+    import pyopencl as cl
+
+    log = []
+    original = cl.Kernel.__call__
+
+    def traced(self, *args, **kwargs):
+        ev = original(self, *args, **kwargs)
+        log.append((self.function_name, ev))
+        return ev
+
+    cl.Kernel.__call__ = traced
+    try:
+        yield log
+    finally:
+        cl.Kernel.__call__ = original
+
+
+def kernel_seconds(log, name=None) -> float:
+    return sum(event_seconds(ev) for n, ev in log if name is None or n == name)
+
+
+# -- scenes ---------------------------------------------------------------------------------------
+
+
+def diagonal(bound) -> float:
+    b = np.asarray(bound, dtype=np.float64)
+    return float(np.linalg.norm(b[1] - b[0]))
+
+
+def summarize_levels(values) -> dict:
+    """mean / max / last of a per-level list (tape lengths)."""
+    v = [float(x) for x in values or []]
+    if not v:
+        return {"mean": None, "max": None, "first": None, "last": None}
+    return {"mean": float(np.mean(v)), "max": float(np.max(v)), "first": v[0], "last": v[-1]}
+
+
+def time_sampling(scene, radius, ctx, repeats=3, budget=20.0, normal_form="tree", warm=True, **kw) -> dict:
+    """Warm timing of ``clcsg.sample``: one run first (it builds the kernels for this tape's
+    register count and precision; programs are cached per process), then the best of up to
+    ``repeats`` runs (fewer once ``budget`` seconds are spent).  The dict has ``seconds`` (best
+    wall time of the whole call), ``cpu_s`` (its process CPU time), the ``classify`` and
+    ``finish`` kernel times of that run, ``first_s`` (the warm-up run, kernel builds
+    included), ``runs`` and ``samples`` (the Samples of the best run)."""
+    import clcsg
+
+    warnings.simplefilter("ignore")
+    first_s = None
+    if warm:
+        t0 = time.perf_counter()
+        clcsg.sample(scene, radius, device=ctx, normal_form=normal_form, progress=False, **kw)
+        first_s = time.perf_counter() - t0
+    best = None
+    spent = 0.0
+    runs = 0
+    for _ in range(max(1, repeats)):
+        with kernel_events() as log:
+            c0, t0 = time.process_time(), time.perf_counter()
+            s = clcsg.sample(scene, radius, device=ctx, normal_form=normal_form, progress=False, **kw)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        runs += 1
+        if best is None or wall < best["seconds"]:
+            best = {"seconds": wall, "cpu_s": cpu, "classify_kernel_s": kernel_seconds(log, "classify"),
+                    "finish_kernel_s": kernel_seconds(log, "finish"), "samples": s}
+        spent += wall
+        if spent > budget:
+            break
+    best["runs"] = runs
+    best["first_s"] = first_s
+    return best
+
+
+def sampling_record(ts: dict, cu: int) -> dict:
+    """The JSON fields of a :func:`time_sampling` result (its Samples' stats summarized)."""
+    st = ts["samples"].stats
+    tm = summarize_levels(st.get("tape_mean_per_level"))
+    tx = summarize_levels(st.get("tape_max_per_level"))
+    q = st.get("distance_queries", 0)
+    return {
+        "samples": st.get("samples"),
+        "sampling_s": ts["seconds"],
+        "sampling_cpu_s": ts["cpu_s"],
+        "sampling_s_times_cu": ts["seconds"] * cu,
+        "first_run_s": ts["first_s"],
+        "runs": ts["runs"],
+        "compile_s": st.get("compile_s"),
+        "analyse_s": st.get("analyse_s"),
+        "subdivide_s": st.get("subdivide_s"),
+        "finish_s": st.get("finish_s"),
+        "classify_kernel_s": ts["classify_kernel_s"],
+        "finish_kernel_s": ts["finish_kernel_s"],
+        "distance_queries": q,
+        "leaf_distances": st.get("leaf_distances"),
+        "leaf_distances_per_query": st.get("leaf_distances_per_query"),
+        "prune_evaluations": st.get("prune_evaluations"),
+        "prune_evaluations_per_cell": (st.get("prune_evaluations", 0) / max(1, sum(st.get("cells_per_level") or [1]))),
+        "pruned_decided": st.get("pruned_decided"),
+        "unresolved": st.get("unresolved"),
+        "discarded": st.get("discarded"),
+        "filled": st.get("filled"),
+        "single": st.get("single"),
+        "split": st.get("split"),
+        "cells": int(sum(st.get("cells_per_level") or [])),
+        "levels": st.get("levels"),
+        "tapes_written": st.get("tapes_written"),
+        "arena_rows": st.get("arena_rows"),
+        "tape_instructions": st.get("tape_instructions"),
+        "tape_leaves": st.get("tape_leaves"),
+        "tape_registers": st.get("tape_registers"),
+        "tape_mean": tm,
+        "tape_max": tx,
+        "tape_mean_per_level": st.get("tape_mean_per_level"),
+        "tape_max_per_level": st.get("tape_max_per_level"),
+        "clip_rows": st.get("clip_rows"),
+        "clipped_samples": st.get("clipped_samples"),
+        "us_per_query_kernel_per_cu": 1e6 * ts["classify_kernel_s"] * cu / q if q else None,
+    }
+
+
+# -- cameras --------------------------------------------------------------------------------------
+
+
+def fit_camera(bound, width, height, direction, fill=0.9):
+    """A camera looking at the bound's center from ``direction``, at the distance where the
+    projection of the bound's corners spans ``fill`` of the image (width or height)."""
+    from clcsg.rendering.camera import Camera
+
+    b = np.asarray(bound, dtype=np.float64)
+    cam = Camera.fit(b, width, height, direction=direction)
+    corners = np.array([[x, y, z] for x in b[:, 0] for y in b[:, 1] for z in b[:, 2]])
+    for _ in range(6):
+        xy, _z = cam.project(corners)
+        span = max(np.abs(xy[:, 0] - width / 2).max() / (width / 2), np.abs(xy[:, 1] - height / 2).max() / (height / 2))
+        if not math.isfinite(span) or abs(span / fill - 1) < 0.01:
+            break
+        d = cam.eye - cam.target
+        cam = Camera.look_at(cam.target + d * (span / fill), cam.target, up=(0, 0, 1), fov=cam.fov,
+                             width=width, height=height)
+    return cam
+
+
+def fit_to_silhouette(tape, width, height, direction, fill=0.9, ctx=None):
+    """:func:`fit_camera`, then moved along the view direction until the solid's silhouette
+    (found with a low-resolution exact ray tracing of ``tape``) spans ``fill`` of the image."""
+    import clcsg
+    from clcsg.rendering.camera import Camera
+
+    cam = fit_camera(tape.bound, width, height, direction, fill)
+    small_w = 96
+    small_h = max(2, round(small_w * height / width))
+    for _ in range(3):
+        ids = clcsg.raytrace(tape, cam.resized(small_w, small_h), device=ctx).ids
+        ys, xs = np.nonzero(ids >= 0)
+        if len(xs) == 0:
+            break
+        span = max(np.abs(xs + 0.5 - small_w / 2).max() / (small_w / 2),
+                   np.abs(ys + 0.5 - small_h / 2).max() / (small_h / 2))
+        if abs(span / fill - 1) < 0.03:
+            break
+        d = cam.eye - cam.target
+        cam = Camera.look_at(cam.target + d * (span / fill), cam.target, up=(0, 0, 1), fov=cam.fov,
+                             width=width, height=height)
+    return cam

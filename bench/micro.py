@@ -4,12 +4,10 @@ Method (also stored in the JSON as ``method``)
 ----------------------------------------------
 The evaluation rows (Q(x), N(x), h(x, y), distortion, minimum distortion over a region,
 quadric-line intersection, conservative distance d(x0)) run the package's own device functions
-(``bench/kernels/micro.cl`` includes ``clcsg/kernels/sampler.cl`` and ``quadric.h``).  Every
+(``bench/kernels/micro.cl`` includes ``cl/include/quadric.h`` and ``sampling/heightfield.h``).  Every
 work-item loads one of eight quadrics of different types (sphere, rotated ellipsoid, cylinder,
 cone, hyperboloids of one and two sheets, paraboloid, plane) and its principal frame into
 registers and derives a point in [-1, 1]^3 from its global id.  It then runs K = 256
-#: the paper's single-core clock (i9-9900K turbo)
-PAPER_GHZ = 4.8
 iterations and sums the results; the sum is the only store, so memory traffic is one quadric
 load and one store per 256 operations.  Two modes: *throughput* (the paper's kind of figure):
 iteration k evaluates at p.x = x0 + k eps, independent iterations as in a loop over an array,
@@ -32,16 +30,23 @@ sphere ("with subdivision").  They report samples per second of the whole call, 
 ``stats['subdivide_s']`` (the level loop: classify launches and their read-backs), and of the
 ``classify`` kernel alone (summed profiling events of its launches).
 
-``python -m bench micro [--quick] [--device D]``; ``--quick``: fewer repeats, float only when
-the device has no fp64, smaller sampling radii.
+The tape distance query (``bench/kernels/query.cl``): d_q(p) = ``surface_distance(tape_eval(...))``
+of ``cl/include/tape.h``, the query the sampler runs at every cell corner, timed on each zoo
+model's tape (tree and DNF shape) at up to 4096 points on its quadrics (medium-size samples of
+the tree shape, each with its own quadric substituted), K = 8 queries per work-item, launches
+of >= 100 ms, best of several.  Two tapes per point: the root tape (what a root cell queries)
+and the tape pruned over the ball of radius 2r around the point by ``tape_prune`` (what a fine
+cell of the sampler queries: its patch grown by r).  Reported: ns per query per core (process
+CPU time) and per CU (wall time), and leaf distances per query counted by the kernel.
+
+``python -m bench micro [--quick] [--device D]``; ``--quick``: fewer repeats, the first
+precision only, one sampling radius, two zoo models for the tape query.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-import re
 import time
 import warnings
 
@@ -52,7 +57,8 @@ from clcsg.cl import programs
 from clcsg.cl.device import get_context
 from clcsg.model.quadric import Quadric
 
-from .common import environment, write
+from . import zoo
+from .common import Load, environment, event_seconds, kernel_events, kernel_seconds, write
 
 KERNELS = os.path.join(os.path.dirname(__file__), "kernels")
 
@@ -92,7 +98,11 @@ def method_text() -> str:
 
 
 def sampling_text() -> str:
-    return " ".join(("The sampling rows" + __doc__.split("The sampling rows")[1].split("``python -m")[0]).split())
+    return " ".join(("The sampling rows" + __doc__.split("The sampling rows")[1].split("The tape distance")[0]).split())
+
+
+def query_text() -> str:
+    return " ".join(("The tape distance" + __doc__.split("The tape distance")[1].split("``python -m")[0]).split())
 
 
 # -- quadrics -------------------------------------------------------------------------------------
@@ -130,41 +140,12 @@ def build_micro(ctx, real, dependent=False):
 
     with open(os.path.join(KERNELS, "micro.cl"), encoding="utf-8") as f:
         src = f.read()
-    opts = programs.real_options(real) + [f"-DDEPENDENT={int(bool(dependent))}", "-DMASK_WORDS=1", "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("sampling"), "-I", programs.package_dir("rendering"), "-I", KERNELS]
+    opts = programs.build_options({"DEPENDENT": int(bool(dependent))}, real) + [
+        "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("sampling"), "-I", KERNELS]
     return cl.Program(ctx.ctx, src).build(options=opts)
 
 
 # -- timing helpers -------------------------------------------------------------------------------
-
-
-def event_seconds(ev) -> float:
-    ev.wait()
-    return 1e-9 * (ev.profile.end - ev.profile.start)
-
-
-@contextlib.contextmanager
-def kernel_events():
-    """Record the profiling event of every kernel launched through ``pyopencl.Kernel.__call__``
-    inside the block: yields a list of (kernel name, event)."""
-    import pyopencl as cl
-
-    log = []
-    original = cl.Kernel.__call__
-
-    def traced(self, *args, **kwargs):
-        ev = original(self, *args, **kwargs)
-        log.append((self.function_name, ev))
-        return ev
-
-    cl.Kernel.__call__ = traced
-    try:
-        yield log
-    finally:
-        cl.Kernel.__call__ = original
-
-
-def kernel_seconds(log, name=None) -> float:
-    return sum(event_seconds(ev) for n, ev in log if name is None or n == name)
 
 
 class Runner:
@@ -290,98 +271,144 @@ def measure_ops(ctx, real, dependent, repeats) -> list[dict]:
     return rows
 
 
-# -- the distance query of eq. 22 on the zoo models ----------------------------------------------
+# -- the tape distance query on the zoo models ---------------------------------------------------
+
+QUERY_K = 8
+#: the pruned tape of a point: the ball of this many radii around it (a fine cell's patch grown
+#: by r)
+PRUNE_RADII = 2.0
 
 
-def measure_queries(ctx, repeats, models=None, K=8) -> list[dict]:
-    """Time of one ``csg_distance`` (eq. 22) evaluation at the medium-size sample positions of
-    zoo models, with ``enough`` = 4 r (a fine cell) and infinity (a root cell), per core-second
-    of CPU time, beside the replayed count of literal distances it computes (models.query_cost)."""
+def build_query(ctx, real, n_regs):
+    """``bench/kernels/query.cl`` for a tape with ``n_regs`` registers."""
     import pyopencl as cl
 
-    from clcsg.cl.records import SceneBuffers
-    from clcsg.sampling.sampler import task_dtype
-
-    from . import models as models_mod
-    from . import zoo
-
-    real = np.dtype(ctx.real_dtype)
-    api = 2 if re.search(r"csg_distance\([^)]*task_terms", programs.source("sampling/sampler.cl")) else 1
     with open(os.path.join(KERNELS, "query.cl"), encoding="utf-8") as f:
         src = f.read()
-    opts = programs.real_options(real) + [f"-DQUERY_API={api}", "-DMASK_WORDS=1", "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("sampling"), "-I", programs.package_dir("rendering")]
-    try:
-        kern = cl.Kernel(cl.Program(ctx.ctx, src).build(options=opts), "op_csg_distance")
-    except cl.Error as e:  # the sampler's internals changed under the benchmark
-        print(f"distance query benchmark skipped: bench/kernels/query.cl does not build ({str(e).splitlines()[0]})")
-        return []
+    opts = programs.build_options({"TAPE_REGS": int(n_regs)}, real) + [
+        "-I", programs.package_dir("cl/include"), "-I", programs.package_dir("sampling")]
+    return cl.Program(ctx.ctx, src).build(options=opts)
+
+
+def query_points(ctx, scene, radius, limit=4096, seed=0):
+    """(tree tape, world positions, quadric indices) of up to ``limit`` medium-size samples."""
+    s = clcsg.sample(scene, radius, device=ctx, progress=False)
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(len(s), size=min(len(s), limit), replace=False) if len(s) else np.zeros(0, int)
+    return s.tape, s.positions[idx], s.quadrics[idx].astype(np.int32)
+
+
+def _same_quadrics(a, b, used) -> bool:
+    return len(b.quadrics) > int(max(used, default=-1)) and all(
+        np.allclose(a.quadrics[q], b.quadrics[q], rtol=0, atol=1e-12) for q in np.unique(used))
+
+
+def time_tape_queries(ctx, tape, positions, quadrics, radius, repeats=3, min_launch=None) -> list[dict]:
+    """Rows for the root tape and the pruned tapes of ``tape`` at ``positions`` (world) on
+    ``quadrics`` (indices into ``tape.quadrics``)."""
+    import pyopencl as cl
+
+    from clcsg.cl.records import SceneBuffers, pack
+
+    min_launch = MIN_LAUNCH if min_launch is None else min_launch
+    real = np.dtype(ctx.real_dtype)
+    packed = pack(tape, real)
+    sb = SceneBuffers(ctx, packed)
+    prg = build_query(ctx, real, packed.n_regs)
+    k_prune, k_query = cl.Kernel(prg, "prune_points"), cl.Kernel(prg, "op_tape_query")
+    mf = cl.mem_flags
+    m = len(positions)
+    n = len(packed.tape)
+    pts = np.ascontiguousarray((positions - packed.origin).astype(real))
+    pbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts)
+    qbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(quadrics, np.int32))
+    # the pruned tapes, one slot of n + 1 rows per point
+    arena = cl.Buffer(ctx.ctx, mf.READ_WRITE, m * (n + 1) * packed.tape.itemsize)
+    pfirst, pcount, pevals = (np.zeros(m, np.int32), np.zeros(m, np.int32), np.zeros(m, np.uint32))
+    bf, bc, be = (cl.Buffer(ctx.ctx, mf.READ_WRITE, a.nbytes) for a in (pfirst, pcount, pevals))
+    k_prune(ctx.queue, (-(-m // Runner.WG) * Runner.WG,), (Runner.WG,), sb.quadrics, sb.tape, np.int32(n), pbuf,
+            qbuf, np.int32(m), real.type(PRUNE_RADII * radius), arena, bf, bc, be)
+    for a, buf in ((pfirst, bf), (pcount, bc), (pevals, be)):
+        cl.enqueue_copy(ctx.queue, a, buf)
+    ctx.queue.finish()
+    rfirst = np.zeros(m, np.int32)
+    rcount = np.full(m, n, np.int32)
     rows = []
+    stats = tape.stats
+    cu = ctx.info.compute_units
+    for label, tapes, first, count in (("root tape", sb.tape, rfirst, rcount),
+                                       ("pruned over 2r", arena, pfirst, pcount)):
+        fbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=first)
+        cbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=count)
+        bufs = {}
+
+        def launch(nn):
+            if nn not in bufs:
+                bufs.clear()
+                bufs[nn] = (cl.Buffer(ctx.ctx, mf.WRITE_ONLY, nn * real.itemsize),
+                            cl.Buffer(ctx.ctx, mf.WRITE_ONLY, nn * 4))
+            out, lv = bufs[nn]
+            ctx.queue.finish()
+            c0 = time.process_time()
+            ev = k_query(ctx.queue, (nn,), (Runner.WG,), sb.quadrics, tapes, fbuf, cbuf, pbuf, qbuf, np.int32(m),
+                         np.int32(QUERY_K), out, lv)
+            ev.wait()
+            return event_seconds(ev), time.process_time() - c0
+
+        nn = -(-m // Runner.WG) * Runner.WG
+        launch(nn)
+        while True:
+            t, _ = launch(nn)
+            if t >= min_launch or nn >= 1 << 22:
+                break
+            nn = int(min(max(2.0, 1.5 * min_launch / max(t, 1e-6)), 16.0) * nn) // Runner.WG * Runner.WG
+        runs = [launch(nn) for _ in range(repeats)]
+        t, c = min(x for x, _ in runs), min(y for _, y in runs)
+        leaves = np.zeros(nn, np.uint32)
+        cl.enqueue_copy(ctx.queue, leaves, bufs[nn][1])
+        checksum = np.zeros(nn, real)
+        cl.enqueue_copy(ctx.queue, checksum, bufs[nn][0])
+        q = nn * QUERY_K
+        lpq = float(leaves.astype(np.float64).sum()) / q
+        rows.append({
+            "tape": label, "normal_form": tape.shape, "instructions": int(n), "leaves": int(stats["leaves"]),
+            "quadrics": int(tape.n_quadrics), "registers": int(packed.n_regs), "points": int(m),
+            "tape_rows_mean": float(count.mean()) if m else 0.0, "tape_rows_max": int(count.max()) if m else 0,
+            "prune_evaluations_per_point": float(pevals.mean()) if label != "root tape" and m else None,
+            "queries": q, "launch_s": t, "cpu_s": c, "cores_busy": c / t if t > 0 else None,
+            "ns_per_query_per_core": 1e9 * c / q, "ns_per_query_per_cu": 1e9 * t * cu / q,
+            "leaf_distances_per_query": lpq,
+            "ns_per_leaf_per_core": 1e9 * c / q / lpq if lpq > 0 else None,
+            "checksum_finite": bool(np.isfinite(checksum).all()),
+        })
+    return rows
+
+
+def measure_queries(ctx, repeats, models=None, limit=4096, min_launch=None) -> list[dict]:
+    """Tape query rows of the zoo models (``models``: names, or all), both shapes."""
+    warnings.simplefilter("ignore")
+    out = []
     for m in zoo.MODELS:
         if models is not None and m.name not in models:
             continue
-        shape = m.build()
-        dnf = clcsg.Scene(shape).normalize()
-        diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
-        radius = diag / 150
-        s = clcsg.sample(shape, radius, device=ctx, progress=False)
-        rng = np.random.default_rng(0)
-        idx = rng.choice(len(s), size=min(len(s), 4096), replace=False)
-        packed = s.packed
-        # csg_distance reads the task's quadric and polarity (and, with QUERY_API 2, its term
-        # list, which is the same for every plane and sheet of a literal group)
-        if api == 2:
-            from clcsg.sampling.sampler import analyse, root_tasks
-
-            _rec, frames = analyse(packed)
-            all_tasks, _roots, _glits, task_terms = root_tasks(dnf, packed, frames)[:4]
-            first = {}
-            for k in range(len(all_tasks)):
-                first.setdefault((int(all_tasks["quadric"][k]), int(all_tasks["sign"][k])), k)
-            tasks = all_tasks[[first[(int(s.quadrics[i]), int(s.signs[i]))] for i in idx]]
-        else:
-            tasks = np.zeros(len(idx), dtype=task_dtype(real))
-            tasks["quadric"] = s.quadrics[idx]
-            tasks["sign"] = s.signs[idx]
-            task_terms = np.zeros(1, np.int32)
-        pts = np.ascontiguousarray((s.positions[idx] - packed.origin).astype(real))
-        sb = SceneBuffers(ctx, packed)
-        mf = cl.mem_flags
-        tbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(tasks))
-        ttbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(task_terms, np.int32))
-        pbuf = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts)
-        cost = {"fine_cell": models_mod.query_cost(dnf, s, 4 * radius), "root_cell": models_mod.query_cost(dnf, s, np.inf)}
-        for label, enough in (("fine_cell", 4 * radius), ("root_cell", np.inf)):
-            n = 4096
-            out = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, n * real.itemsize)
-
-            def launch(nn):
-                ctx.queue.finish()
-                c0 = time.process_time()
-                ev = kern(ctx.queue, (nn,), (Runner.WG,), sb.quadrics, sb.literals, sb.terms, np.int32(sb.n_terms),
-                          ttbuf, tbuf, pbuf, np.int32(len(idx)), np.int32(K), real.type(enough), out)
-                ev.wait()
-                return event_seconds(ev), time.process_time() - c0
-
-            launch(Runner.WG)
-            while True:
-                if out.size < n * real.itemsize:
-                    out = cl.Buffer(ctx.ctx, mf.WRITE_ONLY, n * real.itemsize)
-                t, _ = launch(n)
-                if t >= MIN_LAUNCH or n >= 1 << 22:
-                    break
-                n = int(min(max(2.0, 1.5 * MIN_LAUNCH / max(t, 1e-6)), 16.0) * n) // Runner.WG * Runner.WG
-            runs = [launch(n) for _ in range(repeats)]
-            t, c = min(x for x, _ in runs), min(y for _, y in runs)
-            q = n * K
-            lit = cost[label]["index"]["literals_per_query"]
-            rows.append({"model": m.name, "query_api": api, "quadrics": dnf.n_quadrics, "terms": dnf.n_terms,
-                         "literals": sum(len(tt) for tt in dnf.terms), "cell": label, "enough": float(enough),
-                         "queries": q, "launch_s": t, "cpu_s": c, "ns_per_query_per_cu": 1e9 * t * ctx.info.compute_units / q,
-                         "ns_per_query_per_core": 1e9 * c / q, "replayed_literals_per_query": lit,
-                         "replayed_terms_per_query": cost[label]["index"]["terms_per_query"],
-                         "ns_per_literal_per_core": 1e9 * c / q / max(lit, 1)})
-            print(f"query {m.name} {label}: {1e9 * c / q:.0f} ns per query per core, {lit:.1f} literals", flush=True)
-    return rows
+        scene = clcsg.Scene(m.build(), source=m.name)
+        tree = scene.compile("tree")
+        diag = float(np.linalg.norm(tree.bound[1] - tree.bound[0]))
+        radius = diag * zoo.SIZES["medium"]
+        tape, pos, qs = query_points(ctx, scene, radius, limit)
+        for nf in ("tree", "dnf"):
+            t = tape if nf == "tree" else scene.compile("dnf")
+            pp, qq = pos, qs
+            if nf == "dnf" and not _same_quadrics(tape, t, qs):
+                s = clcsg.sample(scene, radius, device=ctx, normal_form="dnf", progress=False)
+                idx = np.random.default_rng(0).choice(len(s), size=min(len(s), limit), replace=False)
+                pp, qq = s.positions[idx], s.quadrics[idx].astype(np.int32)
+            for row in time_tape_queries(ctx, t, pp, qq, radius, repeats, min_launch):
+                row.update(model=m.name, radius=radius)
+                out.append(row)
+                print(f"query {m.name} {nf} {row['tape']}: {row['ns_per_query_per_core']:.0f} ns per query per "
+                      f"core, {row['leaf_distances_per_query']:.2f} leaf distances", flush=True)
+    return out
 
 
 # -- sampling rows --------------------------------------------------------------------------------
@@ -419,8 +446,8 @@ def measure_sampling(ctx, radii, repeats) -> list[dict]:
                 "operation": row, "scene": what, "radius": r, "samples": n, "levels": st["levels"],
                 "distance_queries": st["distance_queries"], "buffer_growths": st.get("buffer_growths"),
                 "total_s": wall, "subdivide_s": st["subdivide_s"], "classify_kernel_s": t_classify,
-                "finish_s": st["finish_s"], "finish_kernel_s": t_finish, "normalize_s": st["normalize_s"],
-                "analyse_s": st["analyse_s"],
+                "finish_s": st["finish_s"], "finish_kernel_s": t_finish, "compile_s": st["compile_s"],
+                "analyse_s": st["analyse_s"], "leaf_distances_per_query": st["leaf_distances_per_query"],
                 "cpu_s": cpu, "samples_per_core_s": n / cpu,
                 "samples_per_s": n / wall, "samples_per_s_subdivide": n / st["subdivide_s"],
                 "samples_per_s_classify_kernel": n / t_classify if t_classify > 0 else None,
@@ -479,13 +506,16 @@ def table(payload) -> str:
             f"{_rate(r['samples_per_s_classify_kernel'])} | "
             f"{r['ns_per_sample_per_cu_subdivide']:.1f} / {kern:.1f} | {paper} | "
             f"{r['ratio_per_cu_to_paper_subdivide']:.2f}x / {r['ratio_per_cu_to_paper_kernel']:.2f}x |")
-    lines += ["", "The distance query of eq. 22 (csg_distance) at medium-size sample positions of the zoo models",
-              "", "| model | quadrics | terms / literals | cell | ns per query per core | literals per query (replayed) | "
-              "terms visited | ns per literal |", "|---|---|---|---|---|---|---|---|"]
+    lines += ["", "The tape distance query d_q(p) = surface_distance(tape_eval(...)) at medium-size sample "
+              "positions of the zoo models (K = 8 queries per work-item)", "",
+              "| model | shape | tape | instructions / leaves / registers | tape rows (mean) | ns per query per core | "
+              "ns per query per CU (wall) | leaf distances per query | ns per leaf |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for q in payload.get("distance_queries", []):
-        lines.append(f"| {q['model']} | {q['quadrics']} | {q['terms']} / {q['literals']} | {q['cell']} | "
-                     f"{q['ns_per_query_per_core']:.0f} | {q['replayed_literals_per_query']:.1f} | "
-                     f"{q['replayed_terms_per_query']:.1f} | {q['ns_per_literal_per_core']:.1f} |")
+        lines.append(f"| {q['model']} | {q['normal_form']} | {q['tape']} | {q['instructions']} / {q['leaves']} / "
+                     f"{q['registers']} | {q['tape_rows_mean']:.1f} | {q['ns_per_query_per_core']:.0f} | "
+                     f"{q['ns_per_query_per_cu']:.0f} | {q['leaf_distances_per_query']:.2f} | "
+                     f"{f(q['ns_per_leaf_per_core'], '.1f')} |")
     c = payload["clock"]
     lines += ["", f"Clock estimate (dependent FMA chain, {c['fma_latency_cycles']} cycles per FMA): "
               f"{c['clock_ghz']:.2f} GHz per core-second of CPU time ({c['clock_ghz_wall']:.2f} GHz from wall time "
@@ -495,7 +525,7 @@ def table(payload) -> str:
 
 def run(quick=False, device=None):
     ctx = get_context(device)
-    load0 = os.getloadavg()[0]
+    load = Load()
     repeats = 2 if quick else 5
     precisions = [np.float64, np.float32] if ctx.info.fp64 else [np.float32]
     configs = [(real, False) for real in precisions] + [(precisions[0], True)]
@@ -507,16 +537,17 @@ def run(quick=False, device=None):
     clock = measure_clock(ctx, repeats)
     radii = [0.004] if quick else [0.004, 0.001]
     sampling = measure_sampling(ctx, radii, 2 if quick else 3)
-    queries = measure_queries(ctx, repeats, models=("lens", "flange") if quick else None)
-    env = environment(ctx)
-    env["loadavg_start"] = round(load0, 2)
-    env["loadavg_end"] = round(os.getloadavg()[0], 2)
+    queries = measure_queries(ctx, 2 if quick else 3, models=("lens", "flange") if quick else None,
+                              limit=1024 if quick else 4096, min_launch=0.05 if quick else None)
+    env = load.into(environment(ctx))
     payload = {
         "environment": env,
         "method": method_text(),
         "sampling_method": sampling_text(),
+        "query_method": query_text(),
         "quick": bool(quick),
         "iterations_per_work_item": K,
+        "query_iterations_per_work_item": QUERY_K,
         "min_launch_s": MIN_LAUNCH,
         "paper": "Trettner & Kobbelt 2021, Table 1: one core of an i9-9900K at 4.8 GHz, C++ (clang -O3 -march=native)",
         "clock": clock,

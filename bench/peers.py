@@ -1,33 +1,51 @@
-"""Peer comparison: manifold3d (mesh Booleans) on the same solids as the model zoo.
+"""Peer comparison: manifold3d (mesh Booleans) on the zoo solids and the Menger sponge, and
+OpenSCAD (``openscad -o part.stl part.scad``) on the everyday parts of ``examples/``.
 
-For each zoo model the CSG graph is translated node by node into manifold3d: boxes, finite
-cylinders, cone frusta, spheres and ellipsoids become ``Manifold.cube`` / ``cylinder`` /
-``sphere`` (ellipsoids: a scaled sphere) with ``circular_segments`` = n; half-spaces, slabs
-and infinite cylinders become boxes / cylinders clipped to 4x the scene bound; transforms are
-``Manifold.transform``; a complement inside an intersection becomes a difference.  At each
-tessellation level n the time of the Boolean build (construction, Booleans and ``to_mesh``,
-which forces manifold's lazy evaluation) and of sampling the result (area-weighted random
-points on its triangles, as many as clcsg's medium-size sample count) is measured, best of
-several runs.
+manifold3d: for each zoo model the CSG graph is translated node by node into manifold3d:
+boxes, finite cylinders, cone frusta, spheres and ellipsoids become ``Manifold.cube`` /
+``cylinder`` / ``sphere`` (ellipsoids: a scaled sphere) with ``circular_segments`` = n;
+half-spaces, slabs and infinite cylinders become boxes / cylinders clipped to 4x the scene
+bound; transforms are ``Manifold.transform``; a complement inside an intersection becomes a
+difference.  At each tessellation level n the time of the Boolean build (construction,
+Booleans and ``to_mesh``, which forces manifold's lazy evaluation) and of sampling the result
+(area-weighted random points on its triangles, as many as clcsg's medium-size sample count)
+is measured, best of several runs.
 
 Surface error of a sample x: the first-order distance to the nearest surface quadric of the
-scene, min over its unique quadrics Q of |Q(x)| / |grad Q(x)| (the quadrics are those of
-``clcsg.Scene(shape).normalize()``).  At the small errors of interest it equals the Euclidean
-distance to that quadric up to a relative O(error / curvature radius); being a minimum over
-all quadrics (not only the visible CSG surface) it never overstates the error.  Reported:
-maximum and RMS over the samples, relative to the diagonal of the scene bound.  clcsg's own
-samples are measured the same way.
+scene, min over its unique quadrics Q of |Q(x)| / |grad Q(x)| (the quadrics of the scene's
+compiled tape).  At the small errors of interest it equals the Euclidean distance to that
+quadric up to a relative O(error / curvature radius); being a minimum over all quadrics (not
+only the visible CSG surface) it never overstates the error.  Reported: maximum and RMS over
+the samples, relative to the diagonal of the scene bound.  clcsg's own samples are measured the
+same way.
 
 Equal accuracy: the first tessellation level whose maximum relative error is <= 1e-4; if no
 measured level reaches it, the level is extrapolated from a power-law fit (error ~ n^-a) of
 the measured levels, and the time at that level from a power-law fit of time against n;
-the output says which.  Our time is the whole ``clcsg.sample`` call at the medium size.
+the output says which.  Our time is the whole ``clcsg.sample`` call at the medium size (tree
+shape, warm: after one run that builds the kernels).
+
+The Menger sponge (``examples/menger3.csg``, 220 boxes): clcsg at r = 1% of the bound's
+diagonal against manifold3d building the same cube-minus-boxes graph (translated as above;
+boxes are exact, so every tessellation level meets the accuracy target) and sampling as many
+points, in the same run.
+
+OpenSCAD: for each everyday part, the wall time of ``openscad -o part.stl part.scad`` (CGAL
+Booleans on the tessellation the file's ``$fn`` asks for) in a temporary directory, once; and
+of ``openscad -o part.csg part.scad`` (the CSG export that ``clcsg.load("part.scad")`` runs).
+Beside it: our warm sampling time of the exported ``examples/part.csg`` at r = 1% of the
+diagonal, the ratio ours / openscad, and the end-to-end ratio (CSG export + sampling) /
+openscad STL.  Skipped, with the reason recorded, when ``openscad`` is not on PATH.
+``--quick``: two segment levels on two zoo models, two everyday parts.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import shutil
+import subprocess
+import tempfile
 import time
 import warnings
 
@@ -38,7 +56,7 @@ from clcsg.model.csg import Complement, Difference, Intersection, Primitive, Tra
 from clcsg.cl.device import get_context
 
 from . import zoo
-from .common import environment, write
+from .common import Load, diagonal, environment, fmt, time_sampling, write
 
 TARGET = 1e-4  # relative to the bound's diagonal
 SEGMENTS = [16, 32, 64, 128, 256]
@@ -157,9 +175,10 @@ def sample_mesh(mesh, count, rng):
     return a[tri] + u[:, None] * (b[tri] - a[tri]) + v[:, None] * (c[tri] - a[tri]), len(T)
 
 
-def surface_error(dnf, points, chunk=20000):
-    """First-order distance to the nearest unique quadric: min_u |Q_u(x)| / |grad Q_u(x)|."""
-    Qs = dnf.quadrics  # (U, 4, 4)
+def surface_error(tape, points, chunk=20000):
+    """First-order distance to the nearest unique quadric of ``tape`` (a compiled scene, or
+    anything with ``quadrics`` (U, 4, 4)): min_u |Q_u(x)| / |grad Q_u(x)|."""
+    Qs = np.asarray(tape.quadrics)  # (U, 4, 4)
     out = np.empty(len(points))
     for s in range(0, len(points), chunk):
         x = points[s:s + chunk]
@@ -181,19 +200,137 @@ def _powerfit(x, y):
     return a, b
 
 
+def manifold_levels(manifold3d, shape, bound, segments, count, repeats, tape, rng, label) -> dict:
+    """Build and sample ``shape`` with manifold3d at each tessellation level."""
+    diag = diagonal(bound)
+    rec = {"levels": []}
+    for n in segments:
+        try:
+            tr = Translator(manifold3d, n, bound)
+            tb = tsamp = float("inf")
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                mesh = tr.build(shape).to_mesh()
+                t1 = time.perf_counter()
+                pts, ntri = sample_mesh(mesh, count, rng)
+                t2 = time.perf_counter()
+                tb, tsamp = min(tb, t1 - t0), min(tsamp, t2 - t1)
+        except Unsupported as e:
+            rec["unsupported"] = str(e)
+            break
+        err = surface_error(tape, pts)
+        lvl = {"segments": n, "triangles": ntri, "build_s": tb, "sample_s": tsamp, "total_s": tb + tsamp,
+               "max_rel_error": float(err.max() / diag), "rms_rel_error": float(np.sqrt(np.mean(err ** 2)) / diag)}
+        rec["levels"].append(lvl)
+        print(f"{label} n={n}: {ntri} triangles, build {1e3 * tb:.1f} ms, sampling {1e3 * tsamp:.1f} ms, "
+              f"max error {lvl['max_rel_error']:.2e} of the diagonal", flush=True)
+    rec.update(equal_accuracy(rec["levels"]))
+    return rec
+
+
+def ours(ctx, scene, radius, repeats, budget=20.0) -> dict:
+    ts = time_sampling(scene, radius, ctx, repeats=repeats, budget=budget)
+    s = ts["samples"]
+    tape = s.tape
+    diag = diagonal(tape.bound)
+    err = surface_error(tape, s.positions) if len(s) else np.zeros(1)
+    st = s.stats
+    return {"samples": len(s), "ours_s": ts["seconds"], "ours_cpu_s": ts["cpu_s"], "ours_first_run_s": ts["first_s"],
+            "ours_compile_s": st.get("compile_s"), "ours_subdivide_s": st.get("subdivide_s"),
+            "ours_finish_s": st.get("finish_s"), "ours_unresolved": st.get("unresolved"),
+            "ours_leaf_distances_per_query": st.get("leaf_distances_per_query"),
+            "ours_max_rel_error": float(err.max() / diag), "ours_rms_rel_error": float(np.sqrt(np.mean(err ** 2)) / diag),
+            "quadrics": int(tape.n_quadrics), "diagonal": diag, "radius": radius, "_tape": tape}
+
+
+def run_openscad(exe, scad, ext, timeout=900.0) -> dict:
+    """Wall time of ``openscad -o part.EXT part.scad`` in a temporary directory."""
+    with tempfile.TemporaryDirectory(prefix="clcsg-bench-") as d:
+        out = os.path.join(d, os.path.splitext(os.path.basename(scad))[0] + "." + ext)
+        t0 = time.perf_counter()
+        try:
+            p = subprocess.run([exe, "-o", out, os.path.abspath(scad)], cwd=d, capture_output=True, text=True,
+                               timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return {"seconds": None, "error": f"timed out after {timeout:.0f} s"}
+        wall = time.perf_counter() - t0
+        rec = {"seconds": wall, "returncode": p.returncode}
+        if p.returncode != 0 or not os.path.exists(out):
+            rec["error"] = " ".join((p.stderr or "").split())[-300:]
+            return rec
+        rec["bytes"] = os.path.getsize(out)
+        if ext == "stl":
+            with open(out, "rb") as f:
+                data = f.read()
+            rec["facets"] = data.count(b"facet normal") if data[:5] == b"solid" else \
+                int.from_bytes(data[80:84], "little")
+    return rec
+
+
+def openscad_rows(ctx, names, repeats) -> dict:
+    exe = shutil.which("openscad")
+    if exe is None:
+        return {"available": False, "reason": "openscad is not on PATH", "parts": []}
+    try:
+        version = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=60)
+        version = (version.stdout + version.stderr).strip()
+    except Exception as e:  # noqa: BLE001
+        version = f"unknown ({type(e).__name__})"
+    parts = []
+    for name in names:
+        scad, csg = zoo.example_path(name, "scad"), zoo.example_path(name, "csg")
+        if not (os.path.exists(scad) and os.path.exists(csg)):
+            parts.append({"part": name, "skipped": f"{scad} or {csg} is missing"})
+            continue
+        stl = run_openscad(exe, scad, "stl")
+        export = run_openscad(exe, scad, "csg")
+        scene = clcsg.load(csg)
+        diag = diagonal(scene.compile("tree").bound)
+        o = ours(ctx, scene, zoo.PART_RADIUS * diag, repeats)
+        o.pop("_tape")
+        rec = {"part": name, "openscad_stl_s": stl.get("seconds"), "openscad_stl": stl,
+               "openscad_csg_export_s": export.get("seconds"), "openscad_csg_export": export, **o}
+        if stl.get("seconds"):
+            rec["ours_over_openscad"] = o["ours_s"] / stl["seconds"]
+            if export.get("seconds"):
+                rec["export_plus_ours_over_openscad"] = (export["seconds"] + o["ours_s"]) / stl["seconds"]
+        parts.append(rec)
+        print(f"openscad {name}: -o part.stl {fmt(stl.get('seconds'), '.2f')} s, -o part.csg "
+              f"{fmt(export.get('seconds'), '.2f')} s; clcsg {o['ours_s']:.3f} s at r = 1% of the diagonal "
+              f"({o['samples']} samples): {fmt(rec.get('ours_over_openscad'), '.3f')}x", flush=True)
+    return {"available": True, "executable": exe, "version": version, "parts": parts}
+
+
+def sponge_row(ctx, manifold3d, repeats) -> dict:
+    path = zoo.example_path(zoo.SPONGE, "csg")
+    if not os.path.exists(path):
+        return {"skipped": f"{path} is missing"}
+    scene = clcsg.load(path)
+    diag = diagonal(scene.compile("tree").bound)
+    o = ours(ctx, scene, zoo.PART_RADIUS * diag, repeats)
+    tape = o.pop("_tape")
+    rec = {"model": zoo.SPONGE, **o}
+    if manifold3d is not None:
+        lv = manifold_levels(manifold3d, scene.shape, tape.bound, [16], o["samples"], max(repeats, 2), tape,
+                             np.random.default_rng(2), "menger3 manifold3d")
+        rec.update(lv)
+        if rec.get("manifold_s_at_target"):
+            rec["ours_over_manifold"] = o["ours_s"] / rec["manifold_s_at_target"]
+    print(f"sponge: clcsg {o['ours_s']:.2f} s ({o['samples']} samples), manifold3d "
+          f"{fmt(rec.get('manifold_s_at_target'), '.2f')} s: {fmt(rec.get('ours_over_manifold'), '.2f')}x", flush=True)
+    return rec
+
+
 def run(quick=False, device=None):
+    warnings.simplefilter("ignore")
+    ctx = get_context(device)
+    load = Load()
     try:
         import manifold3d
     except Exception as e:  # noqa: BLE001 - any import failure means "not available"
-        msg = f"manifold3d is not available ({type(e).__name__}: {e}); install it with pip install 'clcsg[bench]'"
-        print(msg)
-        ctx = get_context(device)
-        path = write("peers", {"environment": environment(ctx), "available": False, "message": msg})
-        print(f"written to {path}")
-        return None
-    warnings.simplefilter("ignore")
-    ctx = get_context(device)
-    load0 = os.getloadavg()[0]
+        manifold3d = None
+        manifold_msg = f"manifold3d is not available ({type(e).__name__}: {e}); install it with pip install 'clcsg[bench]'"
+        print(manifold_msg)
     segments = QUICK_SEGMENTS if quick else SEGMENTS
     repeats = 1 if quick else 3
     models = zoo.MODELS
@@ -201,52 +338,30 @@ def run(quick=False, device=None):
         models = [m for m in models if m.name in ("lens", "flange")]
     rng = np.random.default_rng(1)
     results = []
-    for m in models:
-        shape = m.build()
-        dnf = clcsg.Scene(shape).normalize()
-        diag = float(np.linalg.norm(dnf.bound[1] - dnf.bound[0]))
-        radius = diag / 150
-        clcsg.sample(shape, diag / 20, device=ctx, progress=False)
-        best = float("inf")
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            s = clcsg.sample(shape, radius, device=ctx, progress=False)
-            best = min(best, time.perf_counter() - t0)
-        count = len(s)
-        ours_err = surface_error(dnf, s.positions)
-        rec = {"model": m.name, "quadrics": dnf.n_quadrics, "diagonal": diag, "samples": count,
-               "ours_s": best, "ours_max_rel_error": float(ours_err.max() / diag),
-               "ours_rms_rel_error": float(np.sqrt(np.mean(ours_err ** 2)) / diag), "levels": []}
-        for n in segments:
-            try:
-                tr = Translator(manifold3d, n, dnf.bound)
-                tb = tsamp = float("inf")
-                for _ in range(repeats):
-                    t0 = time.perf_counter()
-                    mesh = tr.build(shape).to_mesh()
-                    t1 = time.perf_counter()
-                    pts, ntri = sample_mesh(mesh, count, rng)
-                    t2 = time.perf_counter()
-                    tb, tsamp = min(tb, t1 - t0), min(tsamp, t2 - t1)
-            except Unsupported as e:
-                rec["unsupported"] = str(e)
-                break
-            err = surface_error(dnf, pts)
-            lvl = {"segments": n, "triangles": ntri, "build_s": tb, "sample_s": tsamp, "total_s": tb + tsamp,
-                   "max_rel_error": float(err.max() / diag), "rms_rel_error": float(np.sqrt(np.mean(err ** 2)) / diag)}
-            rec["levels"].append(lvl)
-            print(f"{m.name} n={n}: {ntri} triangles, build {1e3 * tb:.1f} ms, sampling {1e3 * tsamp:.1f} ms, "
-                  f"max error {lvl['max_rel_error']:.2e} of the diagonal", flush=True)
-        rec.update(equal_accuracy(rec["levels"]))
-        if rec.get("manifold_s_at_target"):
-            rec["ours_over_manifold"] = best / rec["manifold_s_at_target"]
-        results.append(rec)
-    env = environment(ctx)
-    env["manifold3d"] = getattr(manifold3d, "__version__", None) or _dist_version("manifold3d")
-    env["loadavg_start"] = round(load0, 2)
-    env["loadavg_end"] = round(os.getloadavg()[0], 2)
-    payload = {"environment": env, "available": True, "quick": bool(quick), "method": " ".join(__doc__.split()),
-               "target_rel_error": TARGET, "segments": segments, "models": results}
+    if manifold3d is not None:
+        for m in models:
+            shape = m.build()
+            scene = clcsg.Scene(shape, source=m.name)
+            diag = diagonal(scene.compile("tree").bound)
+            o = ours(ctx, scene, diag * zoo.SIZES["medium"], repeats)
+            tape = o.pop("_tape")
+            rec = {"model": m.name, **o}
+            rec.update(manifold_levels(manifold3d, shape, tape.bound, segments, o["samples"], repeats, tape, rng,
+                                       m.name))
+            if rec.get("manifold_s_at_target"):
+                rec["ours_over_manifold"] = o["ours_s"] / rec["manifold_s_at_target"]
+            results.append(rec)
+    sponge = sponge_row(ctx, manifold3d, 1 if quick else 2)
+    openscad = openscad_rows(ctx, ("l_bracket", "project_box") if quick else zoo.EVERYDAY, repeats)
+    env = load.into(environment(ctx))
+    env["manifold3d"] = None if manifold3d is None else (getattr(manifold3d, "__version__", None)
+                                                          or _dist_version("manifold3d"))
+    env["openscad"] = openscad.get("version")
+    payload = {"environment": env, "available": manifold3d is not None, "quick": bool(quick),
+               "method": " ".join(__doc__.split()), "target_rel_error": TARGET, "segments": segments,
+               "models": results, "sponge": sponge, "openscad": openscad}
+    if manifold3d is None:
+        payload["message"] = manifold_msg
     path = write("peers", payload)
     print()
     print(table(payload))
@@ -303,4 +418,29 @@ def table(payload) -> str:
                      f"{'-' if nt is None else f'{nt:.0f}'} | {'-' if mt is None else f'{1e3 * mt:.1f}'} | "
                      f"{r.get('target_how', '-')}{' (' + r['unsupported'] + ')' if r.get('unsupported') else ''} | "
                      f"{'-' if ratio is None else f'{ratio:.2f}x'} |")
+    sp = payload.get("sponge") or {}
+    if sp and not sp.get("skipped"):
+        lines += ["", "The level-3 Menger sponge (220 boxes), clcsg at r = 1% of the diagonal vs manifold3d:", "",
+                  "| samples | clcsg (s) | clcsg unresolved | manifold3d build + sampling (s) | triangles | "
+                  "manifold max error | clcsg / manifold |", "|---|---|---|---|---|---|---|"]
+        lv = (sp.get("levels") or [{}])[0]
+        lines.append(f"| {sp['samples']:,} | {sp['ours_s']:.2f} | {sp.get('ours_unresolved', 0):,} | "
+                     f"{fmt(sp.get('manifold_s_at_target'), '.2f')} | {fmt(lv.get('triangles'), ',')} | "
+                     f"{fmt(lv.get('max_rel_error'), '.1e')} | {fmt(sp.get('ours_over_manifold'), '.2f', 1, 'x')} |")
+    osc = payload.get("openscad") or {}
+    if not osc.get("available", False):
+        lines += ["", f"OpenSCAD: skipped ({osc.get('reason', 'not run')})"]
+    else:
+        lines += ["", f"OpenSCAD ({osc.get('version')}): openscad -o part.stl part.scad vs clcsg sampling the "
+                  f"exported part.csg at r = 1% of the diagonal", "",
+                  "| part | quadrics | openscad -o .stl (s) | facets | openscad -o .csg (s) | clcsg samples | "
+                  "clcsg (s) | clcsg / openscad | (export + clcsg) / openscad |", "|---|---|---|---|---|---|---|---|---|"]
+        for r in osc.get("parts", []):
+            if r.get("skipped"):
+                lines.append(f"| {r['part']} | skipped: {r['skipped']} |||||||")
+                continue
+            lines.append(f"| {r['part']} | {r['quadrics']} | {fmt(r['openscad_stl_s'], '.2f')} | "
+                         f"{fmt(r['openscad_stl'].get('facets'), ',')} | {fmt(r['openscad_csg_export_s'], '.2f')} | "
+                         f"{r['samples']:,} | {r['ours_s']:.3f} | {fmt(r.get('ours_over_openscad'), '.3f', 1, 'x')} | "
+                         f"{fmt(r.get('export_plus_ours_over_openscad'), '.3f', 1, 'x')} |")
     return "\n".join(lines)

@@ -2,20 +2,21 @@
 
 The paper's numbers are for one 4.8 GHz core (C++, single thread).  Ours run on the selected
 OpenCL device; dividing by its compute units gives a per-core figure for PoCL's CPU device.
-Times are the best of several runs of the whole ``clcsg.sample`` call after a warm-up run
-(program build excluded), normalization and host-side packing included.
+Times are the best of several runs of the whole ``clcsg.sample`` call (tree shape) after a
+warm-up run that builds the kernels (program build excluded), tape compilation and host-side
+packing included.  Beside them: distance queries, leaf distances per query and unresolved
+cells.
 """
 
 from __future__ import annotations
 
-import math
 import warnings
 
 import clcsg
 from clcsg.cl.device import get_context
 from clcsg.model.solids import _make
 
-from .common import best_of, environment, write
+from .common import Load, best_of, environment, write
 
 #: paper Table 1, samples per second on one core: (low, high)
 PAPER = {
@@ -44,6 +45,7 @@ def scenes():
 
 def run(quick=False, device=None):
     ctx = get_context(device)
+    load = Load()
     radii = [0.02] if quick else [0.04, 0.01, 0.005]
     rows = []
     warnings.simplefilter("ignore")
@@ -55,18 +57,24 @@ def run(quick=False, device=None):
             lo, hi = PAPER[row]
             rows.append({
                 "scene": name, "paper_row": row, "radius": r, "samples": len(s),
-                "quadrics": s.stats["dnf_unique_quadrics"], "distance_queries": s.stats["distance_queries"],
+                "quadrics": s.stats["tape_quadrics"], "tape_instructions": s.stats["tape_instructions"],
+                "distance_queries": s.stats["distance_queries"],
+                "leaf_distances_per_query": s.stats["leaf_distances_per_query"], "unresolved": s.stats["unresolved"],
+                "compile_s": s.stats["compile_s"], "subdivide_s": s.stats["subdivide_s"],
+                "finish_s": s.stats["finish_s"],
                 "seconds": t, "samples_per_s": rate, "samples_per_s_per_cu": rate / ctx.info.compute_units,
                 "paper_samples_per_s_core": [lo, hi],
                 "ratio_to_paper_low": rate / ctx.info.compute_units / lo,
             })
-    payload = {"environment": environment(ctx), "rows": rows}
+    payload = {"environment": load.into(environment(ctx)), "quick": bool(quick), "method": " ".join(__doc__.split()),
+               "rows": rows}
     path = write("sampler", payload)
-    lines = ["| scene | r | samples | queries | time (ms) | samples/s/CU | paper (1 core) | ratio |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| scene | r | samples | queries | leaf dist./query | time (ms) | samples/s/CU | paper (1 core) | ratio |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lo, hi = r["paper_samples_per_s_core"]
         lines.append(f"| {r['scene']} | {r['radius']} | {r['samples']} | {r['distance_queries']} | "
+                     f"{r['leaf_distances_per_query']:.2f} | "
                      f"{1e3 * r['seconds']:.1f} | {r['samples_per_s_per_cu'] / 1e6:.2f} M | "
                      f"{lo / 1e6:g}-{hi / 1e6:g} M | {r['ratio_to_paper_low']:.2f} |")
     print("\n".join(lines))

@@ -4,7 +4,9 @@
 ``python -m bench.zoo`` (re)writes ``examples/zoo/<name>.json`` and checks each model's
 unique quadric count (``clcsg.Scene(shape).normalize().n_quadrics``).  The benchmarks build
 the shapes from these functions directly; the JSON files are the same scenes for
-``clcsg info`` / ``clcsg render``.
+``clcsg info`` / ``clcsg render``.  This module also holds what several benchmarks share about
+the models: the paper's Table 2 rows (``PAPER_TABLE2``), the splat sizes (``SIZES``) and the
+everyday OpenSCAD parts and the Menger sponge of ``examples/`` (``EVERYDAY``, ``SPONGE``).
 
 Only primitives that manifold3d can tessellate are used (boxes, slabs, half-spaces, finite
 and infinite cylinders, cone frusta, spheres, ellipsoids), so ``bench/peers.py`` can build the
@@ -178,6 +180,55 @@ MODELS = [
     Model("bracket", bracket, 31, (-0.9, -1.0, 0.8), "L bracket with fillet, ribs, holes and a slot"),
     Model("gear", gear, 80, (0.5, -0.9, 1.1), "spur gear with 24 teeth, keyway and lightening holes"),
 ]
+
+
+#: paper Table 2 (Trettner & Kobbelt 2021), one row per zoo model (same order, same quadric
+#: count): size -> (samples, distance queries, clip indices, sampling ms on one 4.8 GHz core,
+#: render ms on an RTX 2080 Ti), and the ray tracing ms (one per model)
+PAPER_TABLE2 = {
+    "lens": ({"large": (5454, 22372, 2, 1.51, 0.34), "medium": (23452, 47336, 2, 3.39, 0.23),
+              "small": (249014, 100398, 2, 8.51, 0.27)}, 0.36),
+    "drilled_die": ({"large": (8112, 103296, 52, 7.63, 0.27), "medium": (35904, 215040, 23, 16.45, 0.18),
+                     "small": (329856, 576048, 17, 66.87, 0.26)}, 1.14),
+    "steinmetz": ({"large": (9465, 52578, 52, 4.38, 0.31), "medium": (27882, 103908, 31, 8.71, 0.28),
+                   "small": (205075, 254592, 25, 23.47, 0.26)}, 0.87),
+    "flange": ({"large": (7134, 30802, 78, 6.26, 0.45), "medium": (31940, 85744, 37, 18.01, 0.39),
+                "small": (104972, 171958, 31, 37.91, 0.33)}, 0.72),
+    "bracket": ({"large": (28432, 196298, 51, 36.63, 0.96), "medium": (91895, 325705, 34, 62.23, 0.87),
+                 "small": (184533, 415847, 29, 83.36, 0.69)}, 4.43),
+    "gear": ({"large": (10176, 194024, 299, 94.47, 0.32), "medium": (141200, 558582, 244, 292.35, 0.34),
+              "small": (655727, 1182464, 236, 623.92, 0.47)}, 9.15),
+}
+
+#: splat radius = bound diagonal x this (the paper's three sizes, relative to the model)
+SIZES = {"large": 1 / 50, "medium": 1 / 150, "small": 1 / 500}
+
+EXAMPLES_DIR = os.path.dirname(ZOO_DIR)
+#: everyday OpenSCAD parts in examples/ (NAME.scad and its export NAME.csg)
+EVERYDAY = ("pipe_flange", "rook", "project_box", "l_bracket", "plate_12_holes")
+#: the level-3 Menger sponge (examples/menger3.csg / .scad)
+SPONGE = "menger3"
+#: radius of the everyday parts and the sponge, relative to the bound's diagonal
+PART_RADIUS = 0.01
+
+
+def paper_row(name: str, size: str) -> dict:
+    """The paper's Table 2 values of zoo model ``name`` at ``size``."""
+    sizes, rt = PAPER_TABLE2[name]
+    s, q, clip, ms, render_ms = sizes[size]
+    return {"samples": s, "distance_queries": q, "clip_indices": clip, "sampling_ms": ms, "render_ms": render_ms,
+            "raytrace_ms": rt, "raytrace_over_splat": rt / render_ms}
+
+
+def example_path(name: str, ext: str = "csg") -> str:
+    return os.path.join(EXAMPLES_DIR, f"{name}.{ext}")
+
+
+def model(name: str) -> Model:
+    for m in MODELS:
+        if m.name == name:
+            return m
+    raise KeyError(name)
 
 
 def n_quadrics(shape) -> int:

@@ -1,7 +1,7 @@
 /* Microbenchmarks of the paper's Table 1 operations (python -m bench micro).
  *
  * The operations are the package's own device functions: this file includes
- * clcsg/kernels/sampler.cl (and through it quadric.h), so what is timed is exactly what the
+ * cl/include/quadric.h and sampling/heightfield.h, so what is timed is exactly what the
  * sampler and the renderers run.  Only the pointwise heightfield distortion, which the
  * package never needs by itself (it bounds distortion over rectangles), is written here.
  *
@@ -18,10 +18,11 @@
  * subtracted.  Non-finite results (an undefined heightfield, a distortion of infinity) count
  * as 0 so the sums stay finite; the baseline does the same test.
  *
- * Build options: -DCLCSG_DOUBLE (real = double), -DDEPENDENT=0/1, -DMASK_WORDS=1 (needed by
- * sampler.cl).
+ * Build options: programs.build_options({"DEPENDENT": 0 or 1}, real) (-DCLCSG_DOUBLE for
+ * double and the shared constants); include dirs cl/include and sampling.
  */
-#include "sampler.cl"
+#include "quadric.h"
+#include "heightfield.h"
 
 #ifndef DEPENDENT
 #define DEPENDENT 0
