@@ -97,7 +97,7 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     real3 = cl.cltypes.double3 if real == np.float64 else cl.cltypes.float3
     blo = np.array([(lo[0], lo[1], lo[2], 0)], dtype=real3)[0]
     bhi = np.array([(hi[0], hi[1], hi[2], 0)], dtype=real3)[0]
-    tiles = cl.Buffer(context.ctx, mf.READ_WRITE, ntx * nty * 8)
+    tiles = upload(context, np.zeros(2 * ntx * nty, dtype=np.int32), writable=True)
     counters = np.zeros(3, dtype=np.uint32)
     cap = max(ntx * nty * min(n + 1, 64), 4 * (n + 1))
     while True:
