@@ -23,7 +23,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 import clcsg
-from clcsg.compile import bounds
 from clcsg.compile.bounds import literals_box, primitive_box, quadric_regions, shape_bound, tree_bounds, unique_quadrics
 from clcsg.errors import SceneError, UnboundedError
 from clcsg.io.openscad import parse_csg
@@ -119,7 +118,19 @@ def surface_points(shape, rng, per_primitive=3000):
     return np.vstack(pts) if pts else np.zeros((0, 3))
 
 
-def measured_extent(shape, bound, rng, n_random=20_000, per_primitive=1000, rounds=4):
+def _union_operands(shape):
+    """The operands of a union at the top of ``shape`` (under its transforms), or [shape]."""
+    m = np.eye(4)
+    node = shape
+    while isinstance(node, csg.Transformed):
+        m = m @ node.matrix
+        node = node.operand
+    if isinstance(node, csg.Union) and len(node.operands) > 1:
+        return [csg.Transformed(c, m) for c in node.operands]
+    return [shape]
+
+
+def measured_extent(shape, bound, rng, n_random=20_000, per_primitive=1000, rounds=5):
     """(inside points, lo, hi) of the solid measured from points inside it; None if none is.
 
     Uniform points in ``bound`` and nudged points on every primitive surface first; then each
@@ -127,27 +138,46 @@ def measured_extent(shape, bound, rng, n_random=20_000, per_primitive=1000, roun
     the size), which walks the extremes out to where the solid really ends.
     """
     lo, hi = np.asarray(bound[0], dtype=float), np.asarray(bound[1], dtype=float)
+    parts = _union_operands(shape)
+    if len(parts) > 1:
+        # a union's extent is the union of its operands' extents: measured one by one, a tiny
+        # operand far from a big one is not missed
+        found = []
+        for part in parts:
+            pb, empty = shape_bound(part)
+            if not empty:
+                m = measured_extent(part, pb, rng, n_random, per_primitive, rounds)
+                if m is not None:
+                    found.append(m[0])
+        if not found:
+            return None
+        inside = np.vstack(found)
+        return inside, inside.min(axis=0), inside.max(axis=0)
     x = np.vstack([rng.uniform(lo, hi, (n_random, 3)), surface_points(shape, rng, per_primitive)])
     inside = x[clcsg.contains(shape, x)]
     if not len(inside):
         return None
     size = float(np.max(hi - lo))
-    for sigma in [0.1, 0.03, 0.01, 0.003][:rounds]:
-        ext = np.concatenate([inside.argmin(axis=0), inside.argmax(axis=0)])
-        y = (inside[ext][:, None, :] + rng.normal(scale=sigma * size, size=(len(ext), 400, 3))).reshape(-1, 3)
+    for sigma in [0.1, 0.05, 0.02, 0.01, 0.003][:rounds]:
+        # the 4 farthest points on each side, as seeds
+        top = min(4, len(inside))
+        order = np.argsort(inside, axis=0)
+        ext = np.concatenate([order[:top].ravel(), order[-top:].ravel()])
+        y = (inside[ext][:, None, :] + rng.normal(scale=sigma * size, size=(len(ext), 100, 3))).reshape(-1, 3)
         inside = np.vstack([inside, y[clcsg.contains(shape, y)]])
     return inside, inside.min(axis=0), inside.max(axis=0)
 
 
-def bound_ratio(shape, bound, rng):
+def bound_ratio(shape, bound, rng, effort: int = 1):
     """Per-axis ratio of the bound's size to the measured size of the solid (plus
     :data:`ALLOWANCE`), after checking that the bound holds every point of the solid found
     in the scene box, on the primitive surfaces and near the extremes.  None if no point of
-    the solid is found."""
+    the solid is found.  A ratio past :data:`MAX_RATIO` is measured again with ten times the
+    points (thin parts of a solid are easy to miss) before it is reported."""
     box = 1.05 * HALF_EXTENT
     x = np.vstack([rng.uniform(-box, box, (20_000, 3)), surface_points(shape, rng, 300)])
     outer = x[clcsg.contains(shape, x)]
-    m = measured_extent(shape, bound, rng)
+    m = measured_extent(shape, bound, rng, n_random=20_000 * effort, per_primitive=1000 * effort)
     if m is None:
         assert not len(outer), ("points of the solid outside its bound", bound, outer[:3])
         return None
@@ -155,7 +185,10 @@ def bound_ratio(shape, bound, rng):
     pts = np.vstack([inside, outer])
     assert np.all(pts >= bound[0] - 1e-6) and np.all(pts <= bound[1] + 1e-6), (
         "points of the solid outside its bound", bound, pts.min(axis=0), pts.max(axis=0))
-    return (bound[1] - bound[0]) / np.maximum(hi - lo + ALLOWANCE, 1e-9)
+    ratio = (bound[1] - bound[0]) / np.maximum(hi - lo + ALLOWANCE, 1e-9)
+    if ratio.max() > MAX_RATIO and effort == 1:
+        return bound_ratio(shape, bound, rng, effort=10)
+    return ratio
 
 
 # -- primitive boxes ---------------------------------------------------------------------------------

@@ -13,6 +13,18 @@ A term's bound is the bounding box of the polytope cut out by all these supporti
 half-spaces (vertex enumeration: every triple of planes, kept where it satisfies all others).
 That polytope contains the term's solid, so the box is conservative; an empty polytope proves
 the term empty.  Unbounded polytopes are detected with a far box.
+
+On top of that (for the pipeline that works on the CSG tree instead of the DNF):
+
+* :func:`literals_box` / :func:`primitive_box`: exact boxes of one quadric literal cut by
+  half-spaces (candidate extreme points from the Fritz John conditions), so ellipsoids, finite
+  cylinders and cone frusta under any affine map, and primitives clipped to a box, get their
+  exact box, plus the box of every face;
+* :func:`tree_bounds` / :func:`shape_bound`: the bound of a CSG graph computed on the graph
+  (iterative bottom-up / top-down passes over (node, transform, polarity) instances, then a
+  conservative-distance refinement of the root box), and each primitive instance's box;
+* :func:`quadric_regions`: per quadric, the boxes where its surface can carry CSG surface, for
+  the resource guard (:func:`clcsg.sampling.guard.estimate_regions`).
 """
 
 from __future__ import annotations
@@ -247,7 +259,7 @@ def term_box(literals: list[tuple[Quadric, int]], user_bound=None):
 # Where a set of maximizers is not isolated (a cylinder's side along its axis, a face normal
 # to e_k) its end points have one more active constraint and are candidates of the next kind.
 # The candidates inside S (to a relative 1e-9) are the extreme points of every coordinate, so
-# the box of the feasible candidates is the exact box of S (padded by 1e-9 of the scene size
+# the box of the feasible candidates is the exact box of S (padded by 1e-9 of its size
 # against rounding).  The same candidates give the box of each *face* S ∩ {literal = 0}: the
 # candidates constructed on that literal, or lying on it.
 #
@@ -412,10 +424,13 @@ def _candidates(M, N, D):
     return X[finite], np.concatenate(on_q)[finite], np.concatenate(on_p)[finite]
 
 
-def _feasible(M, N, D, X, size):
-    """(inside, on the quadric (K,), on each plane (K, p)) to the relative tolerance."""
-    tol_p = _FEASIBLE * size
+def _feasible(M, N, D, X):
+    """(inside, on the quadric (K,), on each plane (K, p)) to a tolerance of 1e-9 relative to
+    each candidate's own size (and the plane's offset): no scene-wide size is needed, which a
+    polytope reaching far out would spoil."""
+    scale = 1.0 + np.abs(X).max(axis=1, initial=0.0)
     vp = X @ N.T - D if len(N) else np.zeros((len(X), 0))
+    tol_p = _FEASIBLE * (scale[:, None] + np.abs(D)[None, :])
     inside = np.all(vp <= tol_p, axis=1)
     on_p = np.abs(vp) <= tol_p
     if M is None:
@@ -423,7 +438,7 @@ def _feasible(M, N, D, X, size):
     xh = np.concatenate([X, np.ones((len(X), 1))], axis=1)
     vq = np.einsum("ni,ij,nj->n", xh, M, xh)
     grad = 2.0 * np.linalg.norm(X @ M[:3, :3] + M[3, :3], axis=1)
-    tol_q = _FEASIBLE * size * grad + 1e-12 * (1.0 + np.einsum("ni,ni->n", X, X))
+    tol_q = _FEASIBLE * scale * grad + 1e-12 * (1.0 + np.einsum("ni,ni->n", X, X))
     return inside & (vq <= tol_q), np.abs(vq) <= tol_q, on_p
 
 
@@ -440,10 +455,13 @@ def _slab_bounded(M, N, D) -> bool:
     return False
 
 
-def _box_of(X, mask, pad):
+def _box_of(X, mask):
+    """Box of the points X[mask], padded by 1e-9 of their size against rounding."""
     if not mask.any():
         return _empty_box()
-    return X[mask].min(axis=0) - pad, X[mask].max(axis=0) + pad
+    lo, hi = X[mask].min(axis=0), X[mask].max(axis=0)
+    pad = _FEASIBLE * (1.0 + float(np.abs(np.concatenate([lo, hi])).max()))
+    return lo - pad, hi + pad
 
 
 def _meet(a, b):
@@ -503,13 +521,7 @@ def literals_box(literals, region=None, faces: bool = False):
     # a polytope that reaches far out (a slab cut by the far box, the elliptic cylinder of a
     # cone around such a slab) proves nothing about compactness, and its size is not the
     # scene's
-    fin = np.abs(np.concatenate([lo, hi]))
-    finite = bool(np.all(fin < 1e-3 * FAR))
-    # the scale of the tolerances: the planes, and the polytope's box where it is meaningful
-    size = 1.0 + float(np.abs(D).max(initial=0.0))
-    if finite:
-        size = max(size, 1.0 + float(fin.max()))
-    pad = _FEASIBLE * size
+    finite = bool(np.all(np.abs(np.concatenate([lo, hi])) < 1e-3 * FAR))
     n_planes = len(owner)
     face = np.empty((n, 2, 3))
     face[:, 0], face[:, 1] = np.inf, -np.inf
@@ -517,12 +529,12 @@ def literals_box(literals, region=None, faces: bool = False):
         if not finite:
             return result((lo, hi))
         X, _, _ = _candidates(None, N, D)
-        inside, _, on_p = _feasible(None, N, D, X, size)
+        inside, _, on_p = _feasible(None, N, D, X)
         if not inside.any():
             return result((lo, hi))
-        box = _meet(_box_of(X, inside, pad), (lo, hi))
+        box = _meet(_box_of(X, inside), (lo, hi))
         for col in range(n_planes):
-            face[owner[col]] = _meet(_box_of(X, inside & on_p[:, col], pad), box)
+            face[owner[col]] = _meet(_box_of(X, inside & on_p[:, col]), box)
         return result(box, face)
     box = (lo, hi)
     single = len(quads) == 1
@@ -537,18 +549,18 @@ def literals_box(literals, region=None, faces: bool = False):
             bp = _split_literals(_box_literals((lo, hi)))
             NN, DD = np.vstack([N, bp[0]]), np.concatenate([D, bp[1]])
         X, con_q, con_p = _candidates(M, NN, DD)
-        inside, on_q, on_p = _feasible(M, NN, DD, X, size)
+        inside, on_q, on_p = _feasible(M, NN, DD, X)
         if not inside.any():
             continue
         exact_any = True
-        qbox = _box_of(X, inside, pad)
+        qbox = _box_of(X, inside)
         box = _meet(box, qbox)
         if single:
             on_q |= con_q
             on_p = on_p | con_p
-            face[j] = _meet(_box_of(X, inside & on_q, pad), box)
+            face[j] = _meet(_box_of(X, inside & on_q), box)
             for col in range(n_planes):
-                face[owner[col]] = _meet(_box_of(X, inside & on_p[:, col], pad), box)
+                face[owner[col]] = _meet(_box_of(X, inside & on_p[:, col]), box)
     if _is_empty(box):
         # the exact boxes of the parts do not meet
         return result(None)
