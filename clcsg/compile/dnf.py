@@ -7,7 +7,7 @@
 * intersection is distributed over union;
 * every quadric is stored once in canonical form K (unit norm, first non-zero coefficient
   positive) and the sign goes into the literal's polarity s, so coincident faces of different
-  solids are one and the same quadric whichever way they face (design note, rule 1);
+  solids are one and the same quadric whichever way they face;
 * terms holding K and not-K, terms whose literal boxes are disjoint and terms whose supporting
   polytope is empty are dropped; every remaining term gets an axis-aligned bound.
 

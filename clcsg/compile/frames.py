@@ -1,6 +1,6 @@
 """Quadric analysis in float64: principal frame and the heightfields of the sampling planes.
 
-Paper section 3.2 with the degenerate cases it skips (design note, section 1).  Write
+Paper section 3.2 with the degenerate cases it skips.  Write
 A = U diag(lambda) U^T (eigh) and take the center q as the min-norm least-squares solution of
 A q = b (pseudo-inverse; eigenvalues with |lambda| <= 1e-12 max|lambda| count as zero).  In
 local coordinates z = U^T (x - q):

@@ -4,7 +4,7 @@
 kind                       literals
 =========================  ==================================================================
 box                        six half-spaces (not three slabs: a face shared by two boxes is
-                           then one and the same quadric, see the design note)
+                           then one and the same quadric)
 cylinder                   infinite cylinder and two cap half-spaces
 cone                       double cone and two cap half-spaces (frustum; r1 or r2 may be 0);
                            r1 == r2 gives a cylinder

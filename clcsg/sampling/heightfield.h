@@ -98,7 +98,7 @@ inline real plane_height_clamped(const plane_frame *pf, real x, real y)
     return -R / (2 * pf->bk);
 }
 
-/* Exact ranges over a rectangle [x0,x1] x [y0,y1] of a plane (design note section 2): R is
+/* Exact ranges over a rectangle [x0,x1] x [y0,y1] of a plane: R is
  * separable, so its range is exact; |n_i| = |lam_i x + beta_i| and |n_j| are linear in one
  * coordinate each; |n_k| = sqrt(-lam_k R) on a two-sheet heightfield (lam_k t^2 = -R),
  * |beta_k| on a one-sheet one.  Ranges are (min, max). */
