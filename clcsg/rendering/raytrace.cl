@@ -18,8 +18,7 @@
  * shaded with shade.h from the quadric's normal, in the hit primitive's colour.
  */
 #include "tape.h"
-#include "primitives.h"
-#include "shade.h"
+#include "pixel.h"
 
 #ifndef TILE
 #define TILE 16
@@ -140,11 +139,9 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         t_cur = t_next;
     }
 
+    pixel_out out = {depth_out, id_out, prim_out, rgba_out};
     if (best_q < 0) {
-        depth_out[pix] = INFINITY;
-        id_out[pix] = -1;
-        prim_out[pix] = -1;
-        rgba_out[pix] = shade_background(view);
+        pixel_miss(out, view, pix);
         return;
     }
     /* refine the depth by solving again from the hit, Q(p0 + tau v) = 0, p0 = e + best v, and
@@ -158,11 +155,5 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         real d = (nr > 1 && fabs(tau[1]) < fabs(tau[0])) ? tau[1] : tau[0];
         if (fabs(d) < 1e-3 * best) best += d;
     }
-    real3 p = e + best * v;
-    int prim = primitive_at(owners, owner_list, prims, prim_lits, qs, best_q, p);
-    float4 color = prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
-    depth_out[pix] = (float)best;
-    id_out[pix] = best_q;
-    prim_out[pix] = prim;
-    rgba_out[pix] = shade(view, color, convert_float3(normalize(quadric_gradient(q, p))), convert_float3(v));
+    pixel_hit(out, view, pix, owners, owner_list, prims, prim_lits, qs, best_q, e + best * v, best, v);
 }

@@ -6,8 +6,7 @@
  * depth (distance along the unit view ray), the quadric and primitive ids and the colour of
  * the primitive whose boundary holds the hit (primitives.h), shaded with shade.h — the same
  * shading as the ray tracer.  EMPTY_KEY comes from clcsg/cl/constants.py. */
-#include "primitives.h"
-#include "shade.h"
+#include "pixel.h"
 
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
                       __global const owner_rec *owners, __global const int *owner_list,
@@ -20,11 +19,9 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     if (i >= view->height || j >= view->width) return;
     int pix = i * view->width + j;
     ulong key = framebuffer[pix];
+    pixel_out out = {depth_out, id_out, prim_out, rgba_out};
     if (key == EMPTY_KEY) {
-        depth_out[pix] = INFINITY;
-        id_out[pix] = -1;
-        prim_out[pix] = -1;
-        rgba_out[pix] = shade_background(view);
+        pixel_miss(out, view, pix);
         return;
     }
     uint idx = (uint)(key & 0xffffffffUL);
@@ -43,11 +40,5 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         t = tau[0];
         if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
     }
-    real3 p = o + t * v;
-    int prim = primitive_at(owners, owner_list, prims, prim_lits, quadrics, sp->quadric, p);
-    float4 color = prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
-    depth_out[pix] = (float)(tc + t);
-    id_out[pix] = sp->quadric;
-    prim_out[pix] = prim;
-    rgba_out[pix] = shade(view, color, convert_float3(normalize(quadric_gradient(q, p))), convert_float3(v));
+    pixel_hit(out, view, pix, owners, owner_list, prims, prim_lits, quadrics, sp->quadric, o + t * v, tc + t, v);
 }
