@@ -77,7 +77,7 @@ def shape_rows(ctx, scene, name, kind, sizes, repeats, budget, paper=None, try_d
     """(model info, rows) of one scene: every size x both shapes (the DNF as far as it fits;
     ``try_dnf`` False: the tree only, the DNF rows say so)."""
     warnings.simplefilter("ignore")
-    cu = ctx.info.compute_units
+
     t0 = time.perf_counter()
     tree = scene.compile("tree")
     info = {"model": name, "kind": kind, "bound": tree.bound.tolist(), "diagonal": diagonal(tree.bound),

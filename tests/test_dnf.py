@@ -23,7 +23,7 @@ from clcsg.compile import bounds as bounds_module
 from clcsg.compile import dnf as dnf_module
 from clcsg.compile.dnf import normalize
 from clcsg.model.quadric import Quadric
-from strategies import any_primitives, bounded_primitives, shapes
+from strategies import any_primitives, shapes
 
 EXAMPLES = int(os.environ.get("CLCSG_HYPOTHESIS_EXAMPLES", 30))
 SETTINGS = settings(

@@ -16,7 +16,6 @@ tests stay as regression tests.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import subprocess

@@ -1,4 +1,4 @@
-"""Bounds on the CSG tree (clcsg/compile/bounds.py: primitive_box, shape_bound, tree_bounds,
+"""Bounds on the CSG tree (clcsg/compile/bounds.py: shape_bound, tree_bounds; exact_boxes.py: primitive_box,
 quadric_regions), the guard's estimate from those regions (clcsg/sampling/guard.py:
 estimate_regions, check_estimate), the iterative ``contains`` and the random programs
 (clcsg/model/random_programs.py, tests/strategies.py: csg_programs).
@@ -23,7 +23,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 import clcsg
-from clcsg.compile.bounds import literals_box, primitive_box, quadric_regions, shape_bound, tree_bounds, unique_quadrics
+from clcsg.compile.bounds import shape_bound, tree_bounds
+from clcsg.compile.exact_boxes import literals_box, primitive_box
+from clcsg.compile.regions import quadric_regions, unique_quadrics
 from clcsg.errors import SceneError, UnboundedError
 from clcsg.io.openscad import parse_csg
 from clcsg.model import csg

@@ -37,33 +37,54 @@ def distances(tape_quadrics, q: int, points) -> np.ndarray:
     return Quadric(tape_quadrics[q]).distance(points)
 
 
-def evaluate(ops, quadrics, points, self_quadric: int = -1):
-    """(f-, f+): the tape over reals at ``points`` (N, 3) with quadric ``self_quadric``
-    substituted (both equal f when it is -1); a dict counts leaf distance evaluations."""
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n = len(p)
+def _run(ops, leaf, conj, disj, const):
+    """Run a tape over pairs (value with the substituted quadric on its - side, on its + side):
+    ``leaf(q, sign)`` gives a leaf's pair, ``conj`` / ``disj`` combine values for AND / OR and
+    ``const(a)`` is the pair of a constant row; returns the last row's pair."""
     regs: dict = {}
-    cache: dict = {}
     for op, out, a, b in np.asarray(ops):
         if op == OP_LEAF:
-            if a == self_quadric:
-                inf = np.full(n, np.inf)
-                regs[out] = (-b * inf, b * inf)
-            else:
-                if a not in cache:
-                    cache[a] = distances(quadrics, a, p)
-                v = b * cache[a]
-                regs[out] = (v, v)
-        elif op == OP_AND:
-            regs[out] = (np.maximum(regs[a][0], regs[b][0]), np.maximum(regs[a][1], regs[b][1]))
-        elif op == OP_OR:
-            regs[out] = (np.minimum(regs[a][0], regs[b][0]), np.minimum(regs[a][1], regs[b][1]))
+            regs[out] = leaf(a, b)
+        elif op == OP_AND or op == OP_OR:
+            f = conj if op == OP_AND else disj
+            regs[out] = (f(regs[a][0], regs[b][0]), f(regs[a][1], regs[b][1]))
         elif op == OP_COPY:
             regs[out] = regs[a]
         elif op == OP_CONST:
-            v = np.full(n, -np.inf if a else np.inf)
-            regs[out] = (v, v)
+            regs[out] = const(a)
     return regs[ops[-1][1]]
+
+
+def _cached(fn):
+    cache: dict = {}
+
+    def get(q):
+        if q not in cache:
+            cache[q] = fn(q)
+        return cache[q]
+
+    return get
+
+
+def evaluate(ops, quadrics, points, self_quadric: int = -1):
+    """(f-, f+): the tape over reals at ``points`` (N, 3), AND = max and OR = min of the leaves'
+    signed distances (eqs. 10-12), with quadric ``self_quadric`` substituted by -+inf on its two
+    sides (both equal f when it is -1)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    inf = np.full(len(p), np.inf)
+    dist = _cached(lambda q: distances(quadrics, q, p))
+
+    def leaf(q, sign):
+        if q == self_quadric:
+            return (-sign * inf, sign * inf)
+        v = sign * dist(q)
+        return (v, v)
+
+    def const(a):
+        v = -inf if a else inf
+        return (v, v)
+
+    return _run(ops, leaf, np.maximum, np.minimum, const)
 
 
 def surface_distance(ops, quadrics, points, q: int) -> np.ndarray:
@@ -77,27 +98,19 @@ def member(ops, quadrics, points, self_quadric: int = -1):
     substituted."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = len(p)
-    regs: dict = {}
-    cache: dict = {}
-    for op, out, a, b in np.asarray(ops):
-        if op == OP_LEAF:
-            if a == self_quadric:
-                regs[out] = (np.full(n, b > 0), np.full(n, b < 0))
-            else:
-                if a not in cache:
-                    cache[a] = _values(quadrics[a], p)
-                v = b * cache[a] <= 0.0
-                regs[out] = (v, v)
-        elif op == OP_AND:
-            regs[out] = (regs[a][0] & regs[b][0], regs[a][1] & regs[b][1])
-        elif op == OP_OR:
-            regs[out] = (regs[a][0] | regs[b][0], regs[a][1] | regs[b][1])
-        elif op == OP_COPY:
-            regs[out] = regs[a]
-        elif op == OP_CONST:
-            v = np.full(n, bool(a))
-            regs[out] = (v, v)
-    return regs[ops[-1][1]]
+    value = _cached(lambda q: _values(quadrics[q], p))
+
+    def leaf(q, sign):
+        if q == self_quadric:
+            return (np.full(n, sign > 0), np.full(n, sign < 0))
+        v = sign * value(q) <= 0.0
+        return (v, v)
+
+    def const(a):
+        v = np.full(n, bool(a))
+        return (v, v)
+
+    return _run(ops, leaf, np.logical_and, np.logical_or, const)
 
 
 def contains(ops, quadrics, points) -> np.ndarray:

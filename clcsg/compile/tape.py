@@ -252,7 +252,7 @@ def _world_literals(node: Primitive, m, inv, table: QuadricTable, source: str):
 def instances_of(shape: Shape, table: QuadricTable, source: str = "scene") -> list[Instance]:
     """The primitive instances of ``shape`` in tree order (iterative depth-first walk; a shared
     sub-graph under the same transform is walked once)."""
-    from .bounds import term_box
+    from .term_bounds import term_box
 
     inv = _inverse_cache()
     out: list[Instance] = []
@@ -321,20 +321,29 @@ def _pair(b: _Builder, memo: dict, key) -> None:
         b.complement[other] = memo[key]
 
 
-def _needs(b: _Builder, root: int) -> dict:
-    """Sethi-Ullman register estimates of every node reachable from ``root`` (iterative)."""
-    need: dict = {}
+def _postorder(b: _Builder, root: int) -> list[int]:
+    """Every node reachable from ``root`` once, each after its operands (iterative)."""
+    order: list[int] = []
+    seen: set = set()
     stack = [(root, False)]
     while stack:
         i, done = stack.pop()
-        if i in need:
-            continue
+        if done:
+            order.append(i)
+        elif i not in seen:
+            seen.add(i)
+            stack.append((i, True))
+            if b.kind[i] not in (_LEAF, _CONST):
+                stack.extend((c, False) for c in b.args[i] if c not in seen)
+    return order
+
+
+def _needs(b: _Builder, root: int) -> dict:
+    """Sethi-Ullman register estimates of every node reachable from ``root``."""
+    need: dict = {}
+    for i in _postorder(b, root):
         if b.kind[i] in (_LEAF, _CONST):
             need[i] = 1
-            continue
-        if not done:
-            stack.append((i, True))
-            stack.extend((c, False) for c in b.args[i] if c not in need)
             continue
         ns = sorted((need[c] for c in b.args[i]), reverse=True)
         need[i] = max(ns[0], 1 + max(ns[1:], default=0))
@@ -419,19 +428,11 @@ def _depth_and_terms(b: _Builder, root: int) -> tuple[int, float]:
     (float; inf past 1e300), both without building anything."""
     depth: dict = {}
     terms: dict = {}
-    stack = [(root, False)]
-    while stack:
-        i, done = stack.pop()
-        if i in depth:
-            continue
+    for i in _postorder(b, root):
         kind = b.kind[i]
         if kind in (_LEAF, _CONST):
             depth[i] = 1
             terms[i] = 0.0 if i == _FALSE else 1.0
-            continue
-        if not done:
-            stack.append((i, True))
-            stack.extend((c, False) for c in b.args[i] if c not in depth)
             continue
         kids = b.args[i]
         depth[i] = 1 + max(depth[c] for c in kids)

@@ -87,6 +87,22 @@ def check_affine(m) -> np.ndarray:
     return m
 
 
+
+def ray_distance(f, g, lam_min, lam_max):
+    """Conservative signed distance from Q's value ``f``, gradient norm ``g`` = 2 |A x - b| and
+    the extreme eigenvalues of A at a point (eqs. 10, 11; arrays broadcast): inside (f < 0)
+    -t+ with t+ the smallest positive root of f + g t + lam_max t^2, outside t- with t- the
+    smallest positive root of f - g t + lam_min t^2, both as 2|f| / (g + sqrt(disc)), the small
+    root without cancellation; no real root gives +-inf (no surface on any ray)."""
+    inside = f < 0.0
+    lam = np.where(inside, lam_max, -lam_min)
+    af = np.abs(f)
+    disc = g * g + 4.0 * lam * af
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(disc >= 0.0, 2.0 * af / (g + np.sqrt(np.maximum(disc, 0.0))), np.inf)
+    t = np.where(af == 0.0, 0.0, t)
+    return np.where(inside, -t, t)
+
 class Quadric:
     """A quadric surface ``x^T Q x = 0`` with solid ``Q(x) <= 0``.
 
@@ -223,14 +239,7 @@ class Quadric:
         lam_min, lam_max = self.eigenvalue_range()
         f = self.value(x)
         g = 2.0 * np.linalg.norm(x @ self.A - self.b, axis=-1)
-        inside = f < 0.0
-        lam = np.where(inside, lam_max, -lam_min)
-        af = np.abs(f)
-        disc = g * g + 4.0 * lam * af
-        with np.errstate(invalid="ignore", divide="ignore"):
-            t = np.where(disc >= 0.0, 2.0 * af / (g + np.sqrt(np.maximum(disc, 0.0))), np.inf)
-        t = np.where(af == 0.0, 0.0, t)
-        return np.where(inside, -t, t)
+        return ray_distance(f, g, lam_min, lam_max)
 
     # -- algebra ------------------------------------------------------------------------------
     def complement(self) -> "Quadric":

@@ -15,6 +15,19 @@ typedef struct {
     __global uchar4 *rgba;
 } pixel_out;
 
+/* The kernels' output parameters, in this order (the drivers pass the buffers so). */
+#define PIXEL_OUTPUTS \
+    __global float *depth_out, __global int *id_out, __global int *prim_out, __global uchar4 *rgba_out
+#define PIXEL_OUT ((pixel_out){depth_out, id_out, prim_out, rgba_out})
+
+/* Row-major index of pixel (i, j) = (get_global_id(1), get_global_id(0)); -1 outside the view. */
+inline int pixel_index(__global const view_rec *view, int *i, int *j)
+{
+    *j = get_global_id(0);
+    *i = get_global_id(1);
+    return (*i < view->height && *j < view->width) ? *i * view->width + *j : -1;
+}
+
 inline void pixel_miss(pixel_out out, __global const view_rec *view, int pix)
 {
     out.depth[pix] = INFINITY;
@@ -23,12 +36,11 @@ inline void pixel_miss(pixel_out out, __global const view_rec *view, int pix)
     out.rgba[pix] = shade_background(view);
 }
 
-inline void pixel_hit(pixel_out out, __global const view_rec *view, int pix, __global const owner_rec *owners,
-                      __global const int *owner_list, __global const prim_rec *prims,
-                      __global const int2 *prim_lits, __global const quadric_rec *qs, int qid, real3 p,
+inline void pixel_hit(pixel_out out, __global const view_rec *view, int pix, PRIMITIVE_TABLE,
+                      __global const quadric_rec *qs, int qid, real3 p,
                       real depth, real3 v)
 {
-    int prim = primitive_at(owners, owner_list, prims, prim_lits, qs, qid, p);
+    int prim = primitive_at(PRIMITIVE_TABLE_ARGS, qs, qid, p);
     float4 color = prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
     quadric q = quadric_load(qs, qid);
     out.depth[pix] = (float)depth;

@@ -85,15 +85,12 @@ inline real2 ray_box(real3 e, real3 v, real3 lo, real3 hi)
 }
 
 __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, real3 blo, real3 bhi,
-                       __global const int2 *tiles, __global const owner_rec *owners,
-                       __global const int *owner_list, __global const prim_rec *prims,
-                       __global const int2 *prim_lits, __global const view_rec *view,
-                       __global float *depth_out, __global int *id_out, __global int *prim_out,
-                       __global uchar4 *rgba_out)
+                       __global const int2 *tiles, PRIMITIVE_TABLE, __global const view_rec *view,
+                       PIXEL_OUTPUTS)
 {
-    int j = get_global_id(0), i = get_global_id(1);
-    if (i >= view->height || j >= view->width) return;
-    int pix = i * view->width + j;
+    int i, j;
+    int pix = pixel_index(view, &i, &j);
+    if (pix < 0) return;
     int ntx = (view->width + TILE - 1) / TILE;
     int2 tt = tiles[(i / TILE) * ntx + j / TILE];
     __global const tape_op *tape = arena + tt.x;
@@ -139,7 +136,7 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         t_cur = t_next;
     }
 
-    pixel_out out = {depth_out, id_out, prim_out, rgba_out};
+    pixel_out out = PIXEL_OUT;
     if (best_q < 0) {
         pixel_miss(out, view, pix);
         return;
@@ -155,5 +152,5 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         real d = (nr > 1 && fabs(tau[1]) < fabs(tau[0])) ? tau[1] : tau[0];
         if (fabs(d) < 1e-3 * best) best += d;
     }
-    pixel_hit(out, view, pix, owners, owner_list, prims, prim_lits, qs, best_q, e + best * v, best, v);
+    pixel_hit(out, view, pix, PRIMITIVE_TABLE_ARGS, qs, best_q, e + best * v, best, v);
 }

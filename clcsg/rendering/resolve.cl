@@ -9,17 +9,14 @@
 #include "pixel.h"
 
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
-                      __global const owner_rec *owners, __global const int *owner_list,
-                      __global const prim_rec *prims, __global const int2 *prim_lits,
-                      __global const view_rec *view, __global const ulong *framebuffer,
-                      __global float *depth_out, __global int *id_out, __global int *prim_out,
-                      __global uchar4 *rgba_out)
+                      PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
+                      PIXEL_OUTPUTS)
 {
-    int j = get_global_id(0), i = get_global_id(1);
-    if (i >= view->height || j >= view->width) return;
-    int pix = i * view->width + j;
+    int i, j;
+    int pix = pixel_index(view, &i, &j);
+    if (pix < 0) return;
     ulong key = framebuffer[pix];
-    pixel_out out = {depth_out, id_out, prim_out, rgba_out};
+    pixel_out out = PIXEL_OUT;
     if (key == EMPTY_KEY) {
         pixel_miss(out, view, pix);
         return;
@@ -40,5 +37,5 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         t = tau[0];
         if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
     }
-    pixel_hit(out, view, pix, owners, owner_list, prims, prim_lits, quadrics, sp->quadric, o + t * v, tc + t, v);
+    pixel_hit(out, view, pix, PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, o + t * v, tc + t, v);
 }

@@ -15,8 +15,7 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
                      __global const task_rec *tasks, __global const raw_sample_rec *raw, int n,
                      __global const tape_op *arena, __global tape_op *clip, uint cap_clip,
                      __global volatile uint *counters,
-                     __global const owner_rec *owners, __global const int *owner_list,
-                     __global const prim_rec *prims, __global const int2 *prim_lits,
+                     PRIMITIVE_TABLE,
                      __global real *normals, __global int *signs, __global int *primitives,
                      __global int *clip_first, __global int *clip_count)
 {
@@ -63,5 +62,5 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
     normals[3 * gid + 1] = g.y;
     normals[3 * gid + 2] = g.z;
     signs[gid] = sign;
-    primitives[gid] = primitive_at(owners, owner_list, prims, prim_lits, qs, t.quadric, p);
+    primitives[gid] = primitive_at(PRIMITIVE_TABLE_ARGS, qs, t.quadric, p);
 }

@@ -2,7 +2,7 @@
 
 :func:`estimate` bounds the area of the CSG surface from the DNF alone (no device work) and
 turns it into a sample count and a memory size; :func:`estimate_regions` does the same from
-per-quadric regions computed on the CSG tree (:func:`clcsg.compile.bounds.quadric_regions`:
+per-quadric regions computed on the CSG tree (:func:`clcsg.compile.regions.quadric_regions`:
 the boxes of the faces of the primitive instances holding each quadric, within the instances'
 boxes and the scene bound).  :func:`check` (for a DNF or an :class:`Estimate`) and
 :func:`check_estimate` raise :class:`~clcsg.errors.LimitError` (exit code 5) when a limit is
@@ -226,7 +226,7 @@ def estimate(dnf, radius: float, real_itemsize: int = 8) -> Estimate:
     ``real_itemsize``: 8 for the fp64 path, 4 for float32 (device buffer sizes).
     """
     from ..model.quadric import Quadric
-    from ..compile.bounds import literal_box
+    from ..compile.term_bounds import literal_box
 
     r = float(radius)
     if not (math.isfinite(r) and r > 0):
@@ -300,7 +300,7 @@ def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: in
     """The :class:`Estimate` of sampling the surface at ``radius`` from per-quadric regions.
 
     ``quadric_matrices``: (U, 4, 4) the unique quadrics; ``regions``: U arrays (k_u, 2, 3), the
-    boxes where quadric u can carry CSG surface (:func:`clcsg.compile.bounds.quadric_regions`:
+    boxes where quadric u can carry CSG surface (:func:`clcsg.compile.regions.quadric_regions`:
     the faces of the primitive instances holding u, within their boxes and the scene bound).
     The area of u is bounded as in :func:`estimate`: per region box (intersected with the box
     of u's surface, dropped where the surface misses it) by the plane / convex / saddle rules,
@@ -309,7 +309,7 @@ def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: in
     (3 sampling planes x 2 sheets).
     """
     from ..model.quadric import Quadric
-    from ..compile.bounds import literal_box
+    from ..compile.term_bounds import literal_box
 
     r = float(radius)
     if not (math.isfinite(r) and r > 0):
@@ -463,8 +463,8 @@ def check_estimate(est: Estimate, info=None, *, max_samples=None, max_memory=Non
 def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
     """The :class:`Estimate` of sampling a compiled tape: the regions of its quadrics are the
     face boxes of the primitive instances holding them, within the scene bound
-    (:func:`clcsg.compile.bounds.quadric_regions`)."""
-    from ..compile.bounds import quadric_regions
+    (:func:`clcsg.compile.regions.quadric_regions`)."""
+    from ..compile.regions import quadric_regions
 
     if tape.empty:
         return _make_estimate(float(radius), 0.0, 0.0, 0, real_itemsize)

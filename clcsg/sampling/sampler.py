@@ -52,7 +52,6 @@ and re-runs the level; the finish pass does the same with the clip buffer.
 from __future__ import annotations
 
 import math
-import sys
 import time
 import warnings
 

@@ -4,12 +4,17 @@
 #define CLCSG_PRIMITIVES_H
 #include "quadric.h"
 
+/* The primitive table as kernel / function parameters, and the same names as arguments
+ * (clcsg/cl/records.py passes its buffers in this order). */
+#define PRIMITIVE_TABLE                                                                       \
+    __global const owner_rec *owners, __global const int *owner_list, __global const prim_rec *prims, \
+        __global const int2 *prim_lits
+#define PRIMITIVE_TABLE_ARGS owners, owner_list, prims, prim_lits
+
 /* The first primitive instance, in tree order, whose own boundary holds p on quadric q: it
  * has q as a literal and all its other literals hold at p.  Where rounding leaves none, the
  * first owner of q; -1 if q has none. */
-inline int primitive_at(__global const owner_rec *owners, __global const int *owner_list,
-                        __global const prim_rec *prims, __global const int2 *prim_lits,
-                        __global const quadric_rec *qs, int q, real3 p)
+inline int primitive_at(PRIMITIVE_TABLE, __global const quadric_rec *qs, int q, real3 p)
 {
     owner_rec o = owners[q];
     for (int k = 0; k < o.count; ++k) {
