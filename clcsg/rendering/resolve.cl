@@ -29,9 +29,9 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     real3 v = view_ray(view, i, j);
     real3 a = vload3(0, sp->pos) - e;
     real tc = dot(a, v);
-    real3 o = e + tc * v;
+    real3 o;
     real tau[2];
-    int nr = quadric_intersect(q, o, v, &tau[0], &tau[1]);
+    int nr = quadric_intersect_near(q, e, v, tc, &o, &tau[0], &tau[1]);
     real t = stored - tc; /* fallback: the stored depth (the roots vanished in rounding) */
     if (nr > 0) {
         t = tau[0];

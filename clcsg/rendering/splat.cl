@@ -255,9 +255,9 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             if (has_slab && !chord_meets_slab(&slab, a, v, tc, sqrt(m2))) continue;
 #endif
             cnt[PC_FRAGMENTS]++;
-            real3 o = e + tc * v;
+            real3 o;
             real tau[2];
-            int nr = quadric_intersect(q, o, v, &tau[0], &tau[1]);
+            int nr = quadric_intersect_near(q, e, v, tc, &o, &tau[0], &tau[1]);
             for (int k = 0; k < nr; ++k) { /* tau[0] <= tau[1]: nearer the eye first */
                 real3 w = w0 + tau[k] * v; /* p - s */
                 if (dot(w, w) > r * r) continue;

@@ -75,6 +75,15 @@ inline int quadric_intersect(quadric q, real3 o, real3 v, real *t1, real *t2)
     return 0;
 }
 
+/* The roots tau of Q(o + tau v) = 0 solved from o = e + tc v, the point of the ray e + t v
+ * nearest a sample s (tc = (s - e).v): the quadric's value is small there, so the roots are
+ * accurate even in float (the local ray-quadric solve of the splats).  Writes o. */
+inline int quadric_intersect_near(quadric q, real3 e, real3 v, real tc, real3 *o, real *t1, real *t2)
+{
+    *o = e + tc * v;
+    return quadric_intersect(q, *o, v, t1, t2);
+}
+
 /* Conservative signed distance d(p) (eqs. 10-12): no surface point within |d| of p,
  * d < 0 inside.  lam_min/lam_max are the extreme eigenvalues of A. */
 inline real quadric_distance(quadric q, real lam_min, real lam_max, real3 p)
