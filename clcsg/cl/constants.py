@@ -21,6 +21,10 @@ SPLAT_COUNTERS = (
     "clip_evaluations", "fragments_passed", "atomics",
 )
 
+#: rounding margin of pruning, bound and splat tests, in units of the precision's epsilon
+#: (REAL_EPS on the device, float64's on the host reference)
+ROUNDING_ULPS = 64
+
 #: the framebuffer word of a pixel no fragment reached (depth bits << 32 | index)
 EMPTY_KEY = 0xFFFFFFFFFFFFFFFF
 
@@ -37,5 +41,6 @@ def defines() -> dict:
     d = {"OP_LEAF": OP_LEAF, "OP_AND": OP_AND, "OP_OR": OP_OR, "OP_COPY": OP_COPY, "OP_CONST": OP_CONST}
     d.update(_slots("SC", "SAMPLER_COUNTERS", SAMPLER_COUNTERS))
     d.update(_slots("PC", "SPLAT_COUNTERS", SPLAT_COUNTERS))
+    d["ROUNDING_ULPS"] = ROUNDING_ULPS
     d["EMPTY_KEY"] = f"0x{EMPTY_KEY:016x}UL"
     return d

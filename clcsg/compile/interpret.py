@@ -19,12 +19,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..cl.constants import ROUNDING_ULPS
 from ..model.quadric import Quadric
 from .tape import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
 
 #: pruning's rounding margin, relative to the region's size and distance from the origin
-#: (64 units of float64 rounding, as in cl/include/tape.h)
-PRUNE_SLACK = 64 * np.finfo(np.float64).eps
+#: (the kernels' margin in float64)
+PRUNE_SLACK = ROUNDING_ULPS * np.finfo(np.float64).eps
 
 
 def _values(matrices, points):

@@ -21,7 +21,7 @@
 #include "pixel.h"
 
 #ifndef TILE
-#define TILE 16
+#error "TILE (the tile size in pixels) is set by the driver, clcsg/rendering/raytracer.py"
 #endif
 
 __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
@@ -101,7 +101,7 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     real best = INFINITY;
     int best_q = -1;
     /* the tile's tape is exact only inside the tile's region: the roots inside the bound */
-    real slack = 64 * REAL_EPS * (length(blo) + length(bhi) + length(e));
+    real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
     real2 seg = ray_box(e, v, blo - slack, bhi + slack);
     real t_cur = fmax(seg.x, (real)0);
     t_cur = t_cur > 0 ? t_cur * (1 - 4 * REAL_EPS) : 0; /* a root exactly at the entry is kept */

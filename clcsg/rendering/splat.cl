@@ -42,7 +42,7 @@
 #endif
 
 /* rounding slack for conservative tests, relative to the magnitudes involved */
-#define SLACK (64 * REAL_EPS)
+#define SLACK (ROUNDING_ULPS * REAL_EPS)
 
 typedef struct {
     int x0, y0, x1, y1; /* inclusive pixel range; empty if x0 > x1 or y0 > y1 */

@@ -128,7 +128,7 @@ inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, con
 {
     __global const real *c = qs[q].coef;
     real scale = fabs(g->rho) + length(g->c) + length(g->a0) + length(g->a1) + length(g->a2);
-    real slack = 64 * REAL_EPS * scale;
+    real slack = ROUNDING_ULPS * REAL_EPS * scale;
     if (c[0] == 0 && c[1] == 0 && c[2] == 0 && c[4] == 0 && c[5] == 0 && c[7] == 0) {
         /* a plane: sign Q(x) = g.x + w, |grad| = |g| */
         real3 gr = 2 * sign * (real3)(c[3], c[6], c[8]);
