@@ -43,19 +43,6 @@ class PrincipalFrame:
     beta: np.ndarray  # (3,) nonzero only on null axes
     gamma: float
 
-    def to_local(self, x) -> np.ndarray:
-        return (np.asarray(x, dtype=np.float64) - self.center) @ self.U
-
-    def to_world(self, z) -> np.ndarray:
-        return np.asarray(z, dtype=np.float64) @ self.U.T + self.center
-
-    def local_value(self, z) -> np.ndarray:
-        z = np.asarray(z, dtype=np.float64)
-        return (self.lam * z * z + 2.0 * self.beta * z).sum(-1) + self.gamma
-
-    @property
-    def null_axes(self) -> np.ndarray:
-        return np.flatnonzero(self.lam == 0.0)
 
 
 def principal_frame(q: Quadric) -> PrincipalFrame:

@@ -88,12 +88,6 @@ def evaluate(ops, quadrics, points, self_quadric: int = -1):
     return _run(ops, leaf, np.maximum, np.minimum, const)
 
 
-def surface_distance(ops, quadrics, points, q: int) -> np.ndarray:
-    """d_q(p) for points on quadric ``q`` (negative: on the CSG surface)."""
-    fm, fp = evaluate(ops, quadrics, points, q)
-    return np.minimum(np.maximum(fm, -fp), np.maximum(-fm, fp))
-
-
 def member(ops, quadrics, points, self_quadric: int = -1):
     """(m-, m+): membership (closed solid: K = 0 counts as inside) with ``self_quadric``
     substituted."""

@@ -79,9 +79,6 @@ class Primitive(Shape):
     def quadrics(self) -> tuple[Quadric, ...]:
         return self._quadrics
 
-    def colored(self, color) -> "Primitive":
-        return Primitive(self.kind, self.params, color)
-
     def __repr__(self) -> str:
         return f"{self.kind}({', '.join(f'{k}={_short(v)}' for k, v in self.params.items())})"
 

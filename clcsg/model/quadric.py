@@ -11,7 +11,6 @@ and its solid is the *inside* ``{x : Q(x) <= 0}``.  All point arguments are arra
 from __future__ import annotations
 
 import math
-from typing import Iterable
 
 import numpy as np
 
@@ -269,10 +268,6 @@ class Quadric:
 
     # -- constructors -------------------------------------------------------------------------
     @classmethod
-    def from_matrix(cls, matrix) -> "Quadric":
-        return cls(matrix)
-
-    @classmethod
     def half_space(cls, normal, offset=0.0) -> "Quadric":
         """Solid n . x <= offset (n is normalized first, offset scaled with it)."""
         n_raw = np.asarray(normal, dtype=np.float64).reshape(3)
@@ -368,7 +363,3 @@ def _positive(v, what) -> float:
     return v
 
 
-def stack_matrices(quadrics: Iterable[Quadric]) -> np.ndarray:
-    """(N, 4, 4) float64 array of the matrices."""
-    mats = [q.matrix for q in quadrics]
-    return np.array(mats, dtype=np.float64).reshape(-1, 4, 4)
