@@ -37,6 +37,15 @@ class SceneError(ClcsgError):
     exit_code = 3
 
 
+class ParameterError(SceneError, ValueError):
+    """A bad parameter of a primitive, quadric or operation built in Python (a negative
+    radius, a zero axis, a non-symmetric matrix); also a :class:`ValueError`."""
+
+
+class OperandError(SceneError, TypeError):
+    """Something that is not a CSG shape where one is needed; also a :class:`TypeError`."""
+
+
 class TransformError(SceneError):
     """A transform that is singular, non-affine or not finite."""
 

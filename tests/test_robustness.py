@@ -634,3 +634,35 @@ def test_renderer_has_no_capacity_limited_buffer(cl_context):
         img = render(s, cam, device=cl_context)
         assert img.stats["splats_drawn"] + img.stats["splats_offscreen"] + img.stats["splats_culled"] == len(s)
         assert (img.mask == ref.mask).mean() >= 0.99
+
+
+@pytest.mark.parametrize(
+    "build",
+    [
+        lambda: clcsg.sphere(-1.0),
+        lambda: clcsg.box((1, 0, 1)),
+        lambda: clcsg.cylinder(1.0, 0.5, axis=(0, 0, 0)),
+        lambda: clcsg.cone(1.0, 0.0, 0.0),
+        lambda: clcsg.quadric(np.arange(16.0).reshape(4, 4)),
+        lambda: clcsg.sphere(1.0).rotate((0, 0, 0), 30),
+        lambda: clcsg.sphere(1.0, color=(2, 0, 0)),
+        lambda: clcsg.intersection(),
+    ],
+    ids=["radius", "box-size", "axis", "cone-radii", "asymmetric", "rotation-axis", "color", "no-operands"],
+)
+def test_python_constructors_raise_the_package_error(build):
+    """Bad parameters in the Python API raise a ClcsgError (ParameterError, also a ValueError)
+    with a one-line message, like the file readers."""
+    from clcsg.errors import ParameterError
+
+    with pytest.raises(ParameterError) as info:
+        build()
+    assert isinstance(info.value, clcsg.ClcsgError) and isinstance(info.value, ValueError)
+    assert "\n" not in str(info.value) and str(info.value)
+
+
+def test_a_non_shape_operand_raises_the_package_error():
+    from clcsg.errors import OperandError
+
+    with pytest.raises(OperandError, match="Shape"):
+        clcsg.union(clcsg.sphere(1.0), "sphere")

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SceneError, UnboundedError
+from ..errors import ParameterError, SceneError, UnboundedError
 from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.quadric import COEFFICIENT_INDEX, Quadric
 
@@ -73,7 +73,7 @@ class QuadricTable:
         m = np.asarray(matrix, dtype=np.float64)
         norm = np.linalg.norm(m)
         if not (np.isfinite(norm) and norm > 0.0):
-            raise ValueError("not a finite non-zero quadric")
+            raise ParameterError("not a finite non-zero quadric")
         coef = np.array([m[i, j] for i, j in COEFFICIENT_INDEX]) / norm
         coef[np.abs(coef) < _ZERO] = 0.0
         nz = np.flatnonzero(coef)

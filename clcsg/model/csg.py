@@ -17,6 +17,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..errors import ParameterError, OperandError
+
 from .quadric import Quadric, affine, check_affine
 
 
@@ -91,7 +93,7 @@ class Operation(Shape):
         ops = tuple(operands)
         for o in ops:
             if not isinstance(o, Shape):
-                raise TypeError(f"CSG operand must be a Shape, got {type(o).__name__}")
+                raise OperandError(f"CSG operand must be a Shape, got {type(o).__name__}")
         self.operands = ops
 
     def children(self):
@@ -111,7 +113,7 @@ class Intersection(Operation):
     def __init__(self, operands):
         super().__init__(operands)
         if not self.operands:
-            raise ValueError("intersection needs at least one operand")
+            raise ParameterError("intersection needs at least one operand")
 
 
 class Difference(Operation):
@@ -120,7 +122,7 @@ class Difference(Operation):
     def __init__(self, operands):
         super().__init__(operands)
         if not self.operands:
-            raise ValueError("difference needs at least one operand")
+            raise ParameterError("difference needs at least one operand")
 
 
 class Complement(Shape):
@@ -128,7 +130,7 @@ class Complement(Shape):
 
     def __init__(self, operand: Shape):
         if not isinstance(operand, Shape):
-            raise TypeError(f"CSG operand must be a Shape, got {type(operand).__name__}")
+            raise OperandError(f"CSG operand must be a Shape, got {type(operand).__name__}")
         self.operand = operand
 
     def children(self):
@@ -143,7 +145,7 @@ class Transformed(Shape):
 
     def __init__(self, operand: Shape, matrix):
         if not isinstance(operand, Shape):
-            raise TypeError(f"CSG operand must be a Shape, got {type(operand).__name__}")
+            raise OperandError(f"CSG operand must be a Shape, got {type(operand).__name__}")
         self.operand = operand
         m = check_affine(matrix)
         m.setflags(write=False)
@@ -185,7 +187,7 @@ def rotation_matrix(axis, degrees: float) -> np.ndarray:
     a = _vec3(axis, "rotation axis")
     n = np.linalg.norm(a)
     if n == 0.0:
-        raise ValueError("rotation axis must be non-zero")
+        raise ParameterError("rotation axis must be non-zero")
     x, y, z = a / n
     t = math.radians(float(degrees))
     c, s = math.cos(t), math.sin(t)
@@ -211,7 +213,7 @@ def _vec3(v, what) -> np.ndarray:
     if a.shape == ():
         a = np.full(3, float(a))
     if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{what} must be 3 finite numbers, got {np.asarray(v).tolist()}")
+        raise ParameterError(f"{what} must be 3 finite numbers, got {np.asarray(v).tolist()}")
     return a
 
 
@@ -225,7 +227,7 @@ def _color(color):
     if len(c) == 3:
         c.append(1.0)
     if len(c) != 4 or not all(0.0 <= x <= 1.0 for x in c):
-        raise ValueError(f"color must be 3 or 4 numbers in [0, 1], got {list(color)}")
+        raise ParameterError(f"color must be 3 or 4 numbers in [0, 1], got {list(color)}")
     return tuple(c)
 
 
@@ -272,7 +274,7 @@ def _contains(shape: Shape, x: np.ndarray) -> np.ndarray:
             return [(node.operand, f)]
         if isinstance(node, Primitive):
             return []
-        raise TypeError(f"not a CSG node: {type(node).__name__}")
+        raise OperandError(f"not a CSG node: {type(node).__name__}")
 
     # pass 1: how many parents use each (node, frame)
     uses: dict = {}

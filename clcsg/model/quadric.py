@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from ..errors import TransformError
+from ..errors import ParameterError, TransformError
 
 #: Order of the 10 unique coefficients of the symmetric matrix (upper triangle, row-major).
 #: The kernels use the same order (``clcsg/kernels/layout.h``).
@@ -27,7 +27,7 @@ _ZERO = 1e-13
 def _as_points(x) -> np.ndarray:
     x = np.asarray(x, dtype=np.float64)
     if x.shape[-1] != 3:
-        raise ValueError(f"points must have shape (..., 3), got {x.shape}")
+        raise ParameterError(f"points must have shape (..., 3), got {x.shape}")
     return x
 
 
@@ -35,7 +35,7 @@ def _unit(v, what="axis") -> np.ndarray:
     v = np.asarray(v, dtype=np.float64).reshape(3)
     n = np.linalg.norm(v)
     if not np.isfinite(n) or n == 0.0:
-        raise ValueError(f"{what} must be a finite non-zero 3-vector, got {v.tolist()}")
+        raise ParameterError(f"{what} must be a finite non-zero 3-vector, got {v.tolist()}")
     return v / n
 
 
@@ -114,9 +114,9 @@ class Quadric:
     def __init__(self, matrix):
         m = np.array(matrix, dtype=np.float64)
         if m.shape != (4, 4):
-            raise ValueError(f"a quadric is a 4x4 matrix, got shape {m.shape}")
+            raise ParameterError(f"a quadric is a 4x4 matrix, got shape {m.shape}")
         if not np.all(np.isfinite(m)):
-            raise ValueError("quadric matrix has NaN or infinite entries")
+            raise ParameterError("quadric matrix has NaN or infinite entries")
         m = 0.5 * (m + m.T)
         m.setflags(write=False)
         self.matrix = m
@@ -258,7 +258,7 @@ class Quadric:
         m = self.matrix
         norm = np.linalg.norm(m)
         if norm == 0.0:
-            raise ValueError("the zero matrix is not a quadric")
+            raise ParameterError("the zero matrix is not a quadric")
         k = m / norm
         k = np.where(np.abs(k) < _ZERO, 0.0, k)
         coef = [k[i, j] for i, j in COEFFICIENT_INDEX]
@@ -284,7 +284,7 @@ class Quadric:
         n = _unit(normal, "slab normal")
         lo, hi = float(lo), float(hi)
         if not hi > lo:
-            raise ValueError(f"slab needs lo < hi, got {lo}, {hi}")
+            raise ParameterError(f"slab needs lo < hi, got {lo}, {hi}")
         m = np.zeros((4, 4))
         m[:3, :3] = np.outer(n, n)
         m[:3, 3] = m[3, :3] = -0.5 * (lo + hi) * n
@@ -359,7 +359,7 @@ class Quadric:
 def _positive(v, what) -> float:
     v = float(v)
     if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f"{what} must be a positive finite number, got {v}")
+        raise ParameterError(f"{what} must be a positive finite number, got {v}")
     return v
 
 

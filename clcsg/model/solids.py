@@ -29,6 +29,8 @@ import inspect
 
 import numpy as np
 
+from ..errors import ParameterError
+
 from .csg import Primitive
 from .csg import _vec3 as _v3
 from .quadric import Quadric, frame_z_to
@@ -37,14 +39,14 @@ from .quadric import Quadric, frame_z_to
 def _pos(v, what, allow_zero=False):
     v = float(v)
     if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValueError(f"{what} must be a {'non-negative' if allow_zero else 'positive'} finite number, got {v}")
+        raise ParameterError(f"{what} must be a {'non-negative' if allow_zero else 'positive'} finite number, got {v}")
     return v
 
 
 def _box(size=1.0, center=(0, 0, 0)):
     s = _v3(size, "box size")
     if np.any(s <= 0):
-        raise ValueError(f"box size must be positive, got {s.tolist()}")
+        raise ParameterError(f"box size must be positive, got {s.tolist()}")
     c = _v3(center, "box center")
     out = []
     for k in range(3):
@@ -74,7 +76,7 @@ def _cone(height=1.0, r1=1.0, r2=0.0, center=(0, 0, 0), axis=(0, 0, 1)):
     r2 = _pos(r2, "cone r2", allow_zero=True)
     h = _pos(height, "cone height")
     if r1 == 0 and r2 == 0:
-        raise ValueError("cone needs r1 > 0 or r2 > 0")
+        raise ParameterError("cone needs r1 > 0 or r2 > 0")
     if r1 == r2:
         return _cylinder(h, r1, center, axis)
     w = frame_z_to(axis)[:, 2]
@@ -106,11 +108,11 @@ def _quadric(matrix):
     if m.shape == (10,):
         return [Quadric.from_coefficients(m)]
     if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise ValueError("quadric matrix must be 4x4 finite numbers (or 10 coefficients)")
+        raise ParameterError("quadric matrix must be 4x4 finite numbers (or 10 coefficients)")
     if not np.allclose(m, m.T, rtol=0, atol=1e-12 * max(1.0, np.abs(m).max())):
-        raise ValueError("quadric matrix must be symmetric")
+        raise ParameterError("quadric matrix must be symmetric")
     if np.abs(m).max() == 0:
-        raise ValueError("quadric matrix must not be zero")
+        raise ParameterError("quadric matrix must not be zero")
     return [Quadric(m)]
 
 
@@ -151,14 +153,14 @@ def parameters(kind: str) -> dict:
 def literals(kind: str, params: dict) -> list[Quadric]:
     """Expand a primitive into the quadrics whose insides intersect to the solid."""
     if kind not in KINDS:
-        raise ValueError(f"unknown primitive kind {kind!r}; known: {', '.join(sorted(KINDS))}")
+        raise ParameterError(f"unknown primitive kind {kind!r}; known: {', '.join(sorted(KINDS))}")
     known = parameters(kind)
     unknown = set(params) - set(known)
     if unknown:
-        raise ValueError(f"{kind} has no parameter {sorted(unknown)[0]!r}; it takes {', '.join(known)}")
+        raise ParameterError(f"{kind} has no parameter {sorted(unknown)[0]!r}; it takes {', '.join(known)}")
     missing = [k for k, d in known.items() if d is inspect.Parameter.empty and k not in params]
     if missing:
-        raise ValueError(f"{kind} needs parameter {missing[0]!r}")
+        raise ParameterError(f"{kind} needs parameter {missing[0]!r}")
     return KINDS[kind](**params)
 
 
