@@ -81,7 +81,7 @@ def test_tape_header_matches_reference(name, cl_context):
     """tape_eval / tape_member at random points and tape_prune over random regions (balls and
     oriented boxes, with and without substitution) give what the numpy reference gives,
     pruned rows included, and every pruned tape agrees with the original inside its region."""
-    from clcsg.cl.records import upload
+    from clcsg.cl.memory import upload
     from clcsg.compile import interpret
 
     real = real_dtype(cl_context)

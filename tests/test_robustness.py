@@ -666,3 +666,21 @@ def test_a_non_shape_operand_raises_the_package_error():
 
     with pytest.raises(OperandError, match="Shape"):
         clcsg.union(clcsg.sphere(1.0), "sphere")
+
+
+def test_a_buffer_past_the_device_limit_is_a_limit_error(cl_context):
+    """Every device buffer is checked against the device's max_mem_alloc_size and global memory
+    before it is created: a cell buffer past them (forced through ``capacity``) is refused with
+    a LimitError naming it, not a driver error."""
+    from clcsg.cl.memory import check_allocation, device_buffer
+    from clcsg.errors import LimitError
+
+    info = cl_context.info
+    too_many = info.max_mem_alloc // 8 + 1
+    with pytest.raises(LimitError, match="cell buffer"):
+        clcsg.sample(clcsg.sphere(1.0), 0.1, device=cl_context, capacity=(too_many, 64))
+    with pytest.raises(LimitError, match="framebuffer"):
+        device_buffer(cl_context, info.max_mem_alloc + 1, "framebuffer")
+    check_allocation(cl_context, info.max_mem_alloc, "largest")  # the limit itself is allowed
+    s = clcsg.sample(clcsg.sphere(1.0), 0.1, device=cl_context, capacity=(64, 64))
+    assert len(s) > 0

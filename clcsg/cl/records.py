@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .memory import upload
+
 from ..model.quadric import Quadric, affine
 
 TAPE_OP_DTYPE = np.dtype([("op", np.int32), ("out", np.int32), ("a", np.int32), ("b", np.int32)], align=True)
@@ -148,15 +150,3 @@ class SceneBuffers:
     def colour_args(self):
         """The buffers of ``primitive_at`` (cl/include/primitives.h), in its argument order."""
         return (self.owners, self.owner_list, self.prims, self.prim_literals)
-
-
-def upload(context, array, writable=False):
-    """A device buffer initialized from ``array`` (a one-element dummy if it is empty: zero-size
-    buffers are not allowed)."""
-    import pyopencl as cl
-
-    mf = cl.mem_flags
-    a = np.ascontiguousarray(array)
-    data = a if a.size else np.zeros(1, dtype=a.dtype)
-    flags = (mf.READ_WRITE if writable else mf.READ_ONLY) | mf.COPY_HOST_PTR
-    return cl.Buffer(context.ctx, flags, hostbuf=data)

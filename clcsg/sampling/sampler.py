@@ -60,10 +60,11 @@ import numpy as np
 from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build
-from ..cl.records import (SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype, upload)
+from ..cl.memory import check_allocation, device_buffer, upload
+from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype
 from ..compile.frames import principal_frame
 from ..compile.tape import OP_LEAF
-from ..errors import LimitError, UsageError
+from ..errors import UsageError
 from ..model.quadric import Quadric
 from ..model.scene import as_scene
 from .samples import Samples
@@ -318,17 +319,6 @@ def _grow(cap, needed):
     return int(max(2 * cap, needed + needed // 2))
 
 
-def check_allocation(ctx, nbytes: int, what: str) -> None:
-    """Refuse a buffer the device cannot allocate, with the guard's error (never a driver
-    error): its max_mem_alloc_size and global memory."""
-    info = ctx.info
-    if nbytes > info.max_mem_alloc or nbytes > info.global_mem:
-        raise LimitError(
-            f"the sampler needs a {what} buffer of {nbytes / 2**20:.1f} MiB, more than {info.describe()} can "
-            f"allocate ({info.max_mem_alloc / 2**20:.0f} MiB per buffer); use a larger radius"
-        )
-
-
 class _Subdivision:
     """The level loop: buffers, the overflow protocol, per-level statistics."""
 
@@ -354,10 +344,7 @@ class _Subdivision:
         self.grown = {"cells": 0, "samples": 0, "arena": 0}
 
     def _buffer(self, nbytes, what):
-        import pyopencl as cl
-
-        check_allocation(self.ctx, nbytes, what)
-        return cl.Buffer(self.ctx.ctx, cl.mem_flags.READ_WRITE, max(int(nbytes), 16))
+        return device_buffer(self.ctx, nbytes, what)
 
     def _grown_copy(self, old, used_bytes, new_bytes, what):
         """A larger buffer holding the first ``used_bytes`` of ``old``, made from host memory (a

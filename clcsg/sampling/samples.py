@@ -6,7 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cl.records import PackedScene, SceneBuffers, pack, sample_dtype, tape_rows, upload
+from ..cl.memory import upload
+from ..cl.records import PackedScene, SceneBuffers, pack, sample_dtype, tape_rows
 
 
 @dataclass
