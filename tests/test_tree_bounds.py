@@ -516,3 +516,25 @@ def test_check_estimate_and_check():
         guard.estimate_regions(np.zeros((0, 4, 4)), [], 0.0)
     empty = guard.estimate_regions(np.zeros((0, 4, 4)), [], 0.1)
     assert empty.samples == 0 and empty.area == 0
+
+
+def test_guard_refuses_only_what_really_does_not_fit(cl_context):
+    """A program whose estimate (an upper bound of the area) is far above its real sample
+    count: under a limit between the two the run goes ahead (a probe at a larger radius
+    measures the real count first); under a limit below the real count it is refused, with
+    the measured count in the message."""
+    from clcsg.errors import LimitError
+    from clcsg.sampling import guard
+
+    prog = random_program(np.random.default_rng(27))
+    tape = clcsg.Scene(prog.shape).compile()
+    r = 0.002 * float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+    est = guard.estimate_tape(tape, r)
+    s = clcsg.sample(prog.shape, r, device=cl_context)
+    assert est.samples > 4 * len(s), (est.samples, len(s))
+    between = int(2 * len(s))
+    assert est.samples > between
+    ok = clcsg.sample(prog.shape, r, device=cl_context, max_samples=between)
+    assert len(ok) == len(s)
+    with pytest.raises(LimitError, match="measured by sampling at radius"):
+        clcsg.sample(prog.shape, r, device=cl_context, max_samples=int(0.5 * len(s)))

@@ -215,10 +215,54 @@ def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=Non
 
 
 def _combine3(op, x, y):
-    if op == OP_AND:
-        if x == _F or y == _F:
-            return _F
-        return _T if x == _T and y == _T else _LIVE
-    if x == _T or y == _T:
-        return _T
-    return _F if x == _F and y == _F else _LIVE
+    """Three-valued AND / OR of states in {F, T, LIVE} (arrays or scalars)."""
+    absorb, neutral = (_F, _T) if op == OP_AND else (_T, _F)
+    x, y = np.asarray(x), np.asarray(y)
+    out = np.where((x == absorb) | (y == absorb), absorb, np.where((x == neutral) & (y == neutral), neutral, _LIVE))
+    return out if out.ndim else int(out)
+
+
+def leaf_states_over_boxes(matrix, sign: int, lo, hi) -> np.ndarray:
+    """:func:`leaf_over_region` for many axis-aligned boxes [lo, hi] (N, 3) at once (rho = 0)."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    c, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    scale = np.linalg.norm(c, axis=1) + half.sum(axis=1)
+    slack = PRUNE_SLACK * scale
+    m = np.asarray(matrix, dtype=np.float64)
+    if not np.any(m[:3, :3]):
+        g = 2.0 * sign * m[:3, 3]
+        v = c @ g + sign * m[3, 3]
+        spread = half @ np.abs(g) + slack * np.linalg.norm(g)
+    else:
+        v = sign * Quadric(m).distance(c)
+        spread = np.linalg.norm(half, axis=1) + slack
+    return np.where(v > spread, _F, np.where(v < -spread, _T, _LIVE))
+
+
+def surface_in_boxes(ops, quadrics, lo, hi, box_quadric) -> np.ndarray:
+    """Mask of the boxes [lo, hi] (N, 3) in which quadric ``box_quadric[i]`` may carry CSG
+    surface: False where pruning over the box decides that the two substituted sides of the
+    tape are the same constant (:func:`prune`'s ``decided`` = +1), for all boxes at once."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    own = np.asarray(box_quadric)
+    n = len(lo)
+    leaf_state: dict = {}
+    sides: dict = {}
+    for op, out, a, b in np.asarray(ops):
+        if op == OP_LEAF:
+            key = (a, b)
+            if key not in leaf_state:
+                leaf_state[key] = leaf_states_over_boxes(quadrics[a], b, lo, hi)
+            st = leaf_state[key]
+            mine = own == a
+            sides[out] = (np.where(mine, _T if b > 0 else _F, st), np.where(mine, _F if b > 0 else _T, st))
+        elif op in (OP_AND, OP_OR):
+            sa, sb = sides[a], sides[b]
+            sides[out] = (_combine3(op, sa[0], sb[0]), _combine3(op, sa[1], sb[1]))
+        elif op == OP_COPY:
+            sides[out] = sides[a]
+        elif op == OP_CONST:
+            v = np.full(n, _T if a else _F)
+            sides[out] = (v, v)
+    neg, pos = sides[int(np.asarray(ops)[-1][1])]
+    return ~((neg != _LIVE) & (neg == pos))

@@ -54,7 +54,7 @@ counts per sample are in :data:`DEVICE_BYTES_PER_SAMPLE` / :data:`HOST_BYTES_PER
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -110,6 +110,7 @@ class Estimate:
     tasks: int = 0
     real_itemsize: int = 8
     quadric_areas: tuple = field(default=(), repr=False)  # per unique quadric
+    measured_at: float | None = None  # radius of the probe run this estimate was scaled to
 
     @property
     def finite(self) -> bool:
@@ -421,11 +422,9 @@ def check(dnf, radius: float, info=None, *, max_samples=None, max_memory=None, s
     return check_estimate(est, info, max_samples=max_samples, max_memory=max_memory, source=source)
 
 
-def check_estimate(est: Estimate, info=None, *, max_samples=None, max_memory=None,
-                   source: str = "scene") -> Estimate:
-    """Raise :class:`LimitError` if the estimate ``est`` passes a limit (see :func:`check` for
-    ``info``, ``max_samples``, ``max_memory``); returns ``est``.  The message names ``source``,
-    the estimate and the radius that would fit."""
+def _limits(est: Estimate, info, max_samples, max_memory):
+    """(sample limit, past the hard limit?, max_memory or None, memory cap, largest allocation,
+    the largest sample count every limit allows)."""
     ms = _limit_value(max_samples, "max_samples")
     mm = _limit_value(max_memory, "max_memory")
     ms = DEFAULT_MAX_SAMPLES if ms is None else ms
@@ -433,18 +432,33 @@ def check_estimate(est: Estimate, info=None, *, max_samples=None, max_memory=Non
     ms = min(ms, HARD_MAX_SAMPLES)
     default_mem, max_alloc = memory_limit(info)
     mem_cap = default_mem if mm is None else mm
-    where = "" if info is None else f" on {info.describe()}"
-    # the largest sample count every limit allows, and the radius that gives it
     allowed = min(ms, mem_cap / DEVICE_BYTES_PER_SAMPLE[est.real_itemsize],
                   max_alloc / est.largest_buffer * est.samples if est.largest_buffer > 0 else math.inf)
+    return ms, hard, mm, mem_cap, max_alloc, allowed
+
+
+def allowed_samples(est: Estimate, info=None, *, max_samples=None, max_memory=None) -> float:
+    """The largest sample count that every limit allows."""
+    return _limits(est, info, max_samples, max_memory)[-1]
+
+
+def check_estimate(est: Estimate, info=None, *, max_samples=None, max_memory=None,
+                   source: str = "scene") -> Estimate:
+    """Raise :class:`LimitError` if the estimate ``est`` passes a limit (see :func:`check` for
+    ``info``, ``max_samples``, ``max_memory``); returns ``est``.  The message names ``source``,
+    the estimate and the radius that would fit."""
+    ms, hard, mm, mem_cap, max_alloc, allowed = _limits(est, info, max_samples, max_memory)
+    where = "" if info is None else f" on {info.describe()}"
     fit = _round_up(est.radius_for(allowed))
     how = (f"use a larger --radius (about {fit:.3g} fits)" if math.isfinite(fit)
            else f"no radius fits (the estimate never falls below {_count(TASK_SAMPLES * est.tasks)} samples)")
     if not est.finite:
         raise LimitError(f"{source}: radius {est.radius:.6g} is too small for a surface of area up to "
                          f"{est.area:.4g}: the sample count overflows; {how}")
+    basis = (f"measured by sampling at radius {est.measured_at:.3g}" if est.measured_at
+             else f"surface area <= {est.area:.4g}")
     head = (f"{source}: sampling at radius {est.radius:.6g} needs about {_count(est.samples)} samples "
-            f"(surface area <= {est.area:.4g}, about {_size(est.device_bytes)} of device memory)")
+            f"({basis}, about {_size(est.device_bytes)} of device memory)")
     if est.samples > ms:
         if hard:
             raise LimitError(f"{head}, past the {_count(ms)} samples the 32-bit kernels can index; {how}")
@@ -460,16 +474,84 @@ def check_estimate(est: Estimate, info=None, *, max_samples=None, max_memory=Non
     return est
 
 
+#: levels of octree refinement of the quadrics' regions by tape pruning, the most boxes the
+#: refinement may hold at once, and the estimate past which it is worth its time (50-250 ms)
+REFINE_LEVELS = 3
+REFINE_BOXES = 20_000
+REFINE_FROM = 1e6
+
+#: a refusal is checked by sampling at a radius whose estimate is this many samples ...
+PROBE_SAMPLES = 2e5
+#: ... and extrapolating the real count as (probe radius / radius)^2 times this margin; only
+#: estimates at most PROBE_MAX_OVER times the limit are probed (the area bound is seldom
+#: looser than 20x)
+PROBE_MARGIN = 1.5
+PROBE_MAX_OVER = 30.0
+
+
+def refine_regions(tape, regions, levels: int = REFINE_LEVELS, max_boxes: int = REFINE_BOXES) -> list:
+    """The regions with the boxes dropped where quadric u carries no CSG surface: the tape,
+    pruned over the box with u substituted, gives the same constant on u's two sides
+    (:func:`clcsg.compile.interpret.surface_in_boxes`).  Kept boxes are split in 8 and tested
+    again, ``levels`` times (while the boxes number at most ``max_boxes``), so the regions
+    follow the CSG surface instead of the primitives' boxes."""
+    from ..compile.interpret import surface_in_boxes
+
+    boxes = [np.asarray(r, dtype=np.float64).reshape(-1, 2, 3) for r in regions]
+    q = np.concatenate([np.full(len(b), u) for u, b in enumerate(boxes)]) if boxes else np.zeros(0, int)
+    if not len(q):
+        return boxes
+    lo = np.concatenate([b[:, 0] for b in boxes])
+    hi = np.concatenate([b[:, 1] for b in boxes])
+    corners = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], dtype=np.float64)
+    for level in range(levels + 1):
+        keep = surface_in_boxes(tape.ops, tape.quadrics, lo, hi, q)
+        lo, hi, q = lo[keep], hi[keep], q[keep]
+        if level == levels or 8 * len(q) > max_boxes:
+            break
+        half = 0.5 * (hi - lo)
+        lo = (lo[:, None, :] + corners[None] * half[:, None, :]).reshape(-1, 3)
+        hi = lo + np.repeat(half, 8, axis=0)
+        q = np.repeat(q, 8)
+    return [np.stack([lo[q == u], hi[q == u]], axis=1) for u in range(len(boxes))]
+
+
 def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
     """The :class:`Estimate` of sampling a compiled tape: the regions of its quadrics are the
     face boxes of the primitive instances holding them, within the scene bound
-    (:func:`clcsg.compile.regions.quadric_regions`)."""
+    (:func:`clcsg.compile.regions.quadric_regions`), refined by tape pruning
+    (:func:`refine_regions`) when the first estimate is past :data:`REFINE_FROM` samples."""
     from ..compile.regions import quadric_regions
 
     if tape.empty:
         return _make_estimate(float(radius), 0.0, 0.0, 0, real_itemsize)
     regions = quadric_regions(tape.quadrics, tape.instances, tape.bound)
-    return estimate_regions(tape.quadrics, regions, radius, real_itemsize)
+    est = estimate_regions(tape.quadrics, regions, radius, real_itemsize)
+    if est.finite and est.samples > REFINE_FROM:
+        est = estimate_regions(tape.quadrics, refine_regions(tape, regions), radius, real_itemsize)
+    return est
+
+
+def probe_radius(est: Estimate, allowed: float) -> float | None:
+    """The radius at which a probe run checks a refusal of ``est`` under a limit of
+    ``allowed`` samples (None: no probe; the estimate is not finite, already small, or so far
+    past the limit that no looseness of the area bound explains it)."""
+    if not est.finite or est.samples <= PROBE_SAMPLES or est.samples > PROBE_MAX_OVER * allowed:
+        return None
+    return est.radius_for(PROBE_SAMPLES)
+
+
+def measured(est: Estimate, probe_samples: int, probe_radius: float) -> Estimate:
+    """``est`` rescaled to a probe's real sample count: samples grow as 1 / r^2, so the run
+    at ``est.radius`` is expected to give probe_samples (probe_radius / radius)^2, times
+    :data:`PROBE_MARGIN`; the area and edge terms are scaled alike, and ``measured_at``
+    records the probe."""
+    fixed = TASK_SAMPLES * est.tasks
+    want = PROBE_MARGIN * probe_samples * (probe_radius / est.radius) ** 2
+    k = max(want - fixed, 0.0) / max(est.samples - fixed, 1e-300)
+    out = _make_estimate(est.radius, est.area * k, est.edges * k, est.tasks, est.real_itemsize,
+                         tuple(a * k for a in est.quadric_areas))
+    return replace(out, measured_at=float(probe_radius))
 
 
 def check_tape(tape, radius: float, info=None, *, max_samples=None, max_memory=None, source: str = "scene",

@@ -64,7 +64,7 @@ from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype
 from ..compile.frames import principal_frame
 from ..compile.tape import OP_LEAF
-from ..errors import UsageError
+from ..errors import LimitError, UsageError
 from ..model.quadric import Quadric
 from ..model.scene import as_scene
 from .samples import Samples
@@ -253,8 +253,20 @@ def sample(
     real = np.dtype(_device.real_dtype(ctx))
     from . import guard
 
-    est = guard.check_tape(tape, radius, ctx.info, max_samples=max_samples, max_memory=max_memory,
-                           source=sc.source, real_itemsize=real.itemsize)
+    limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
+    est = guard.estimate_tape(tape, radius, real.itemsize)
+    try:
+        guard.check_estimate(est, ctx.info, **limits)
+    except LimitError:
+        # the estimate bounds the area from above: before refusing, measure (a run whose
+        # estimate is small) and refuse only if the extrapolated real count does not fit
+        r_probe = guard.probe_radius(est, guard.allowed_samples(est, ctx.info, max_samples=max_samples,
+                                                                 max_memory=max_memory))
+        if r_probe is None or not r_probe > radius:
+            raise
+        probe = sample(sc, r_probe, ctx, normal_form=normal_form, term_limit=term_limit, distortion=distortion,
+                       progress=False, max_samples=max(4 * guard.PROBE_SAMPLES, 1e6))
+        est = guard.check_estimate(guard.measured(est, len(probe), r_probe), ctx.info, **limits)
     t1 = time.perf_counter()
     packed = pack(tape, real)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
