@@ -12,7 +12,6 @@ from clcsg.errors import UsageError
 from clcsg.model.quadric import Quadric
 from clcsg import raytrace
 
-import oracle
 import tree_oracle as T
 from image_check import compare
 
@@ -189,47 +188,3 @@ def test_float_precision_close_to_double(cl_context):
     assert (img.mask != ref.mask).mean() < 0.01
     both = img.mask & ref.mask
     assert np.median(np.abs(img.depth[both] - ref.depth[both]) / ref.depth[both]) < 1e-5
-
-
-# -- the oracle's own surface points (used by the sampler's coverage tests) ---------------------
-
-
-def test_oracle_surface_points_are_on_the_csg_surface():
-    dnf = clcsg.Scene(SCENES["box_minus_3_cylinders"]).normalize()
-    sp = oracle.surface_points(dnf, n_dirs=8, res=40)
-    assert len(sp) > 1000
-    vals = dnf.values(sp.points)[np.arange(len(sp)), sp.quadrics]
-    assert np.abs(vals).max() < 1e-12
-    assert np.allclose(np.linalg.norm(sp.normals, axis=1), 1.0)
-    # in the closed solid, and a step along the outward normal leaves it
-    assert dnf.contains(sp.points - 1e-6 * sp.normals).mean() > 0.999
-    assert not dnf.contains(sp.points + 1e-6 * sp.normals).any()
-    # every face of the part is found: 6 planes and 3 cylinders
-    assert len(np.unique(sp.quadrics)) == 9
-    # first-only points are what an orthographic view sees: a subset
-    first = oracle.surface_points(dnf, n_dirs=8, res=40, first_only=True)
-    assert 0 < len(first) < len(sp)
-
-
-def test_oracle_surface_points_skip_shared_faces_and_cover():
-    dnf = clcsg.Scene(SCENES["touching_boxes"]).normalize()
-    sp = oracle.surface_points(dnf, n_dirs=12, res=48)
-    assert not np.any(np.abs(sp.points[:, 0] - 0.5) < 1e-9)  # the shared face x = 0.5 is interior
-    sph = clcsg.Scene(clcsg.sphere(1.0)).normalize()
-    pts = oracle.surface_points(sph, n_dirs=16, res=48).points
-    # dense: every direction has a point within a few grid spacings
-    dirs = oracle.fibonacci_sphere(500)
-    gap = np.arccos(np.clip((dirs @ (pts / np.linalg.norm(pts, axis=1, keepdims=True)).T).max(axis=1), -1, 1))
-    assert gap.max() < 2 * 2.0 / 48 * 1.01 * np.sqrt(3)
-
-
-def test_oracle_cast_simple_cases():
-    q = Quadric.sphere((0, 0, 5), 1.0).matrix
-    hits = oracle.cast(([q], [((0, 1),)]), np.zeros((3, 3)), [[0, 0, 1], [0, 0, -1], [0, 1, 5]])
-    assert hits.depth[0] == pytest.approx(4.0) and hits.quadric[0] == 0 and hits.term[0] == 0
-    assert np.allclose(hits.normal[0], [0, 0, -1]) and hits.sign[0] == 1
-    assert np.isinf(hits.depth[1]) and hits.quadric[1] == -1 and np.isnan(hits.point[1]).all()
-    # complemented sphere (a big solid with a spherical cavity): from inside the cavity the
-    # wall is hit and the outward normal of the solid points into the cavity
-    hits = oracle.cast(([q], [((0, -1),)]), [[0, 0, 5]], [[1, 0, 0]])
-    assert hits.depth[0] == pytest.approx(1.0) and np.allclose(hits.normal[0], [-1, 0, 0])
