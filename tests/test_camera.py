@@ -1,4 +1,4 @@
-"""The camera contract (clcsg/camera.py): pixel (i, j) is the ray through ((j + .5)/W, (i + .5)/H)."""
+"""The camera contract (clcsg/rendering/camera.py): pixel (i, j) is the ray through ((j + .5)/W, (i + .5)/H)."""
 
 import math
 

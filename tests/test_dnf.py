@@ -1,4 +1,4 @@
-"""DNF normalization (clcsg/host/dnf.py, paper section 5): the normal form holds exactly the
+"""DNF normalization (clcsg/compile/dnf.py, paper section 5): the normal form holds exactly the
 points of the CSG graph, pruning loses nothing, identical quadrics are stored once, term bounds
 hold their terms, runaway distribution and unbounded terms are reported.
 

@@ -8,7 +8,7 @@ job is opt-in: ``.ci/run`` installs the Debian package and runs
 
     CLCSG_OCLGRIND=1 pytest tests/test_oclgrind.py
 
-A plain ``pytest`` skips this file at once (and never selects Oclgrind: see clcsg/host/device.py).
+A plain ``pytest`` skips this file at once (and never selects Oclgrind: see clcsg/cl/device.py).
 
 How the simulator is reached.  pyopencl's wheel has its own ICD loader (ocl-icd), which reads
 ``/etc/OpenCL/vendors/*.icd`` and the wheel's own ``pyopencl/.libs`` (PoCL).  Debian's

@@ -346,7 +346,7 @@ def test_canonical_moves_the_sign_into_the_polarity(case):
 @given(case=quadric_cases(kinds=tuple(k for k in QUADRIC_KINDS if k != "raw")), m=affine_maps())
 def test_canonical_of_the_same_surface_built_two_ways(case, m):
     """Moving a quadric forth and back, or building it directly: canonical forms agree within
-    the DNF's identity tolerance (host/dnf.py SAME_QUADRIC = 1e-9)."""
+    the DNF's identity tolerance (compile/dnf.py SAME_QUADRIC = 1e-9)."""
     q = case.quadric
     back = q.transform(m).transform(np.linalg.inv(m))
     K, s = q.canonical()

@@ -1,4 +1,4 @@
-"""The exact ray tracer kernel (kernels/raytrace.cl) against the float64 numpy oracle."""
+"""The exact ray tracer kernel (clcsg/rendering/raytrace.cl) against the float64 numpy oracle."""
 
 import json
 import math

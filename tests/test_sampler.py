@@ -75,7 +75,7 @@ SCENES = {
         0.06,
     ),
     "cone_frustum": (clcsg.cone(2, 1, 0.3, axis=(1, 1, 0)) | clcsg.cone(1.5, 0, 0.8, center=(0, 0, 0.5)), 0.08),
-    # coincident geometry (design note, rules 1-3)
+    # coincident geometry: shared faces, flush tops, a face inside another solid
     "touching_boxes": (clcsg.box(1) | clcsg.box(1).translate((1, 0, 0)), 0.06),
     "flush_tops": (clcsg.box(1) | clcsg.box(1).translate((0.5, 0.5, 0)), 0.06),
     "shared_surface": (clcsg.sphere(1) & (clcsg.box(1.2).translate((0.3, 0, 0)) | clcsg.box(1.2).translate((-0.3, 0, 0))), 0.06),

@@ -251,12 +251,7 @@ def test_default_camera_and_float_precision(cl_context):
     img = render(S, device=cl_context, stats=False)
     assert img.rgba.shape == (480, 640, 4) and img.mask.any()
     cam = Camera.fit(S.tape, 64, 48)
-    try:
-        f = render(S, cam, device=cl_context, precision="float")
-    except Exception as e:  # pragma: no cover - depends on kernels/layout.h
-        if "redefinition" in str(e):
-            pytest.xfail("kernels/layout.h does not compile without CLCSG_DOUBLE (sample_rec defined twice)")
-        raise
+    f = render(S, cam, device=cl_context, precision="float")
     check(f, raytrace(S.tape, cam, device=cl_context), frac=0.995, rel=1e-4)
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import ParameterError, TransformError
 
 #: Order of the 10 unique coefficients of the symmetric matrix (upper triangle, row-major).
-#: The kernels use the same order (``clcsg/kernels/layout.h``).
+#: The kernels use the same order (``clcsg/cl/include/layout.h``).
 COEFFICIENT_INDEX = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
 
 #: Coefficients smaller than this (relative to the unit-norm matrix) are rounding noise.

@@ -2,7 +2,7 @@
  * tracer (raytrace.cl) and the splat resolve pass (resolve.cl), so both produce the same
  * pixels for the same hit.  Mirrored by view_dtype() in clcsg/rendering/view.py.
  *
- * Camera contract (clcsg/camera.py): the un-normalized direction of pixel (i, j), row 0 at the
+ * Camera contract (clcsg/rendering/camera.py): the un-normalized direction of pixel (i, j), row 0 at the
  * top, is d00 + j dx + i dy; the view ray is eye + t v with v = d / |d| and t the depth.  A point
  * p projects to continuous pixel coordinates x = W/2 + f (p - eye).right / z,
  * y = H/2 - f (p - eye).up / z with z = (p - eye).forward; pixel (i, j) covers
