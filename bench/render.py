@@ -7,7 +7,7 @@ solid's silhouette (a 96-pixel-wide exact ray tracing) spans ~90% of the image (
 150, tree shape).  Times are OpenCL profiling-event times of the kernels (best of several runs;
 counters off), so they exclude sampling, uploads and program builds: for the splats the splat
 pass plus the resolve/shading pass, for the ray tracer its per-tile pruning pass
-(``prune_seconds``) plus the tracing pass.  Beside them: the ray tracer's mean pruned tape
+(``prune_s``) plus the tracing pass.  Beside them: the ray tracer's mean pruned tape
 length per 16x16 tile (``tile_tape_mean``) and prune evaluations, the process CPU time of the
 whole calls (which other processes on a shared machine do not distort), and the overdraw
 (fragments per covered pixel, from a separate run with counters on) with surface-aligned
@@ -56,7 +56,7 @@ def time_render(fn, subject, cam, ctx, repeats, **kw):
         img = fn(subject, cam, device=ctx, **kw)
         best_cpu = min(best_cpu, time.process_time() - c0)
         runs += 1
-        t = img.stats["kernel_seconds"]
+        t = img.stats["kernel_s"]
         if t < best:
             best, stats = t, img.stats
         if time.perf_counter() - t0 > LONG_RUN:
@@ -68,7 +68,7 @@ def time_render(fn, subject, cam, ctx, repeats, **kw):
 
 
 def raytrace_record(t, st) -> dict:
-    return {"seconds": t, "prune_seconds": st.get("prune_seconds"), "tile_tape_mean": st.get("tile_tape_mean"),
+    return {"seconds": t, "prune_s": st.get("prune_s"), "tile_tape_mean": st.get("tile_tape_mean"),
             "tape_instructions": st.get("tape_instructions"), "prune_evaluations": st.get("prune_evaluations"),
             "covered_pixels": st.get("covered_pixels"), "cpu_seconds": st.get("cpu_seconds"), "runs": st.get("runs")}
 
@@ -94,7 +94,7 @@ def model_row(ctx, m, W, H, repeats, shapes_res=SHAPE_RES, gallery=False, dnf=Tr
             t, st = time_render(clcsg.render, s, cam, ctx, repeats, stats=False, **kw)
             counted = clcsg.render(s, cam, device=ctx, stats=True, **kw).stats
             key = f"{'sa' if sa else 'ball'}_{'bf' if bf else 'nobf'}"
-            row[key] = {"seconds": t, "splat_pass_s": st["splat_seconds"], "resolve_pass_s": st["resolve_seconds"],
+            row[key] = {"seconds": t, "splat_pass_s": st["splat_s"], "resolve_pass_s": st["resolve_s"],
                         "cpu_seconds": st["cpu_seconds"], "overdraw": counted.get("overdraw"),
                         "fragments": counted.get("fragments"), "covered_pixels": counted.get("covered_pixels"),
                         "splats_drawn": counted.get("splats_drawn"), "splats_culled": counted.get("splats_culled"),
@@ -142,9 +142,9 @@ def resolution_sweep(ctx, repeats) -> list[dict]:
             t_sp, st = time_render(clcsg.render, s, cam, ctx, repeats, stats=False)
             t_rt, st_rt = time_render(clcsg.raytrace, tree, cam, ctx, repeats)
             out.append({"model": m.name, "quadrics": tree.n_quadrics, "width": w, "height": h, "pixels": w * h,
-                        "samples": len(s), "splat_s": t_sp, "splat_pass_s": st["splat_seconds"],
-                        "resolve_pass_s": st["resolve_seconds"], "raytrace_s": t_rt,
-                        "raytrace_prune_s": st_rt["prune_seconds"], "tile_tape_mean": st_rt["tile_tape_mean"],
+                        "samples": len(s), "splat_s": t_sp, "splat_pass_s": st["splat_s"],
+                        "resolve_pass_s": st["resolve_s"], "raytrace_s": t_rt,
+                        "raytrace_prune_s": st_rt["prune_s"], "tile_tape_mean": st_rt["tile_tape_mean"],
                         "splat_cpu_s": st["cpu_seconds"], "raytrace_cpu_s": st_rt["cpu_seconds"]})
             print(f"sweep {m.name} {w}x{h}: splat {1e3 * t_sp:.1f} ms, ray tracer {1e3 * t_rt:.1f} ms", flush=True)
     return out
@@ -183,7 +183,7 @@ def table(payload) -> str:
         p, rt, sp = r["paper"], r["raytrace"], r["sa_bf"]
         lines.append(
             f"| {r['model']} | {r['quadrics']} | {r['samples']:,} | {1e3 * sp['seconds']:.1f} [{p['render_ms']}] | "
-            f"{1e3 * rt['seconds']:.1f} [{p['raytrace_ms']}] | {fmt(rt['prune_seconds'], '.1f', 1e3)} | "
+            f"{1e3 * rt['seconds']:.1f} [{p['raytrace_ms']}] | {fmt(rt['prune_s'], '.1f', 1e3)} | "
             f"{fmt(rt['tile_tape_mean'], '.1f')} / {r['tape_instructions']} | "
             f"{fmt(r['raytrace_over_splat'], '.2f', 1, 'x')} [{p['raytrace_over_splat']:.1f}x] | "
             f"{fmt(r['raytrace_over_splat_cpu'], '.2f', 1, 'x')} | {fmt(sp['overdraw'], '.2f')} / "

@@ -166,5 +166,5 @@ def test_render_row_pieces(cl_context):
     cam = common.fit_camera(tape.bound, 64, 36, zoo.model("lens").direction)
     t, st = render.time_render(clcsg.raytrace, tape, cam, cl_context, 1)
     rec = render.raytrace_record(t, st)
-    assert rec["seconds"] > 0 and rec["tile_tape_mean"] > 0 and rec["prune_seconds"] >= 0
+    assert rec["seconds"] > 0 and rec["tile_tape_mean"] > 0 and rec["prune_s"] >= 0
     assert rec["covered_pixels"] > 0

@@ -38,7 +38,7 @@ import warnings
 from ..errors import SceneError
 from ..model.scene import Scene
 
-__all__ = ["load_scad", "export_csg", "find_openscad", "DEFAULT_TIMEOUT"]
+__all__ = ["load_scad", "export_csg", "find_openscad", "parse_dependencies", "DEFAULT_TIMEOUT"]
 
 #: seconds OpenSCAD may take to export a model (``$CLCSG_OPENSCAD_TIMEOUT`` overrides it)
 DEFAULT_TIMEOUT = 120.0
@@ -86,8 +86,12 @@ def _timeout(timeout, source: str) -> float:
     return float(timeout)
 
 
-def export_csg(scad_path, csg_path, *, timeout: float | None = None, source: str | None = None) -> list[str]:
+def export_csg(scad_path, csg_path, *, timeout: float | None = None, source: str | None = None,
+               deps_path=None) -> list[str]:
     """Run ``openscad -o csg_path scad_path``; return OpenSCAD's warning lines.
+
+    With ``deps_path`` OpenSCAD also writes the files the program read (``-d deps_path``, a
+    Makefile rule: see :func:`parse_dependencies`).
 
     Raises a one-line :class:`SceneError` (prefixed with ``source``, default the ``.scad``
     path) if OpenSCAD is missing, cannot be run, times out, reports an ``ERROR:`` or writes
@@ -100,6 +104,8 @@ def export_csg(scad_path, csg_path, *, timeout: float | None = None, source: str
     scad = os.path.abspath(p)
     out = os.path.abspath(os.fspath(csg_path))  # OpenSCAD resolves a relative -o against the input's directory
     cmd = [exe, "-o", out, scad]
+    if deps_path is not None:
+        cmd[1:1] = ["-d", os.path.abspath(os.fspath(deps_path))]
     try:
         proc = subprocess.run(
             cmd,
@@ -132,23 +138,64 @@ def export_csg(scad_path, csg_path, *, timeout: float | None = None, source: str
     return [ln for ln in lines if ln.startswith(("WARNING:", "DEPRECATED:"))]
 
 
-def load_scad(path, *, timeout: float | None = None) -> Scene:
-    """Export an OpenSCAD program with the ``openscad`` binary and load the CSG tree."""
+def parse_dependencies(text: str, base_dir: str) -> list[str]:
+    """The prerequisites of the Makefile rule ``openscad -d`` writes (``out.csg: a.scad \\
+    b.scad ...``; a space in a name is ``\\ ``), as absolute paths (relative ones are taken
+    from ``base_dir``, OpenSCAD's working directory), without duplicates, in order."""
+    words, cur, escaped = [], [], False
+    _, _, body = text.partition(":")
+    for ch in body:
+        if escaped and ch not in "\r\n":
+            cur.append(ch)
+            escaped = False
+        elif ch == "\\" and not escaped:
+            escaped = True
+        elif ch.isspace():  # a line continuation (backslash, newline) separates words too
+            escaped = False
+            if cur:
+                words.append("".join(cur))
+                cur = []
+        else:
+            cur.append(ch)
+    if cur:
+        words.append("".join(cur))
+    out: list[str] = []
+    for w in words:
+        full = os.path.normpath(os.path.join(base_dir, w))
+        if full not in out:
+            out.append(full)
+    return out
+
+
+def load_scad(path, *, timeout: float | None = None, with_dependencies: bool = False):
+    """Export an OpenSCAD program with the ``openscad`` binary and load the CSG tree.
+
+    Returns the :class:`~clcsg.model.scene.Scene`; with ``with_dependencies`` the pair (scene,
+    the absolute paths of every file the program read: itself and what it ``include``s and
+    ``use``s, directly or not).
+    """
     from .openscad import OpenScadWarning, parse_csg
 
     p = os.fspath(path)
     if not os.path.isfile(p):
         raise SceneError(f"{p}: no such file" if not os.path.exists(p) else f"{p}: not a file")
     stem = os.path.splitext(os.path.basename(p))[0] or "model"
+    deps = [os.path.abspath(p)]
     with tempfile.TemporaryDirectory(prefix="clcsg-scad-") as tmp:
         csg = os.path.join(tmp, stem + ".csg")
-        notes = export_csg(p, csg, timeout=timeout, source=p)
+        mk = os.path.join(tmp, "deps.mk") if with_dependencies else None
+        notes = export_csg(p, csg, timeout=timeout, source=p, deps_path=mk)
         try:
             with open(csg, "rb") as f:
                 text = f.read().decode("utf-8", errors="replace")
+            if mk is not None and os.path.isfile(mk):
+                with open(mk, encoding="utf-8", errors="replace") as f:
+                    deps += [d for d in parse_dependencies(f.read(), os.path.dirname(os.path.abspath(p)))
+                             if d not in deps]
         except OSError as e:
             raise SceneError(f"{p}: cannot read OpenSCAD's export: {e.strerror or e}") from None
     for note in notes:
         warnings.warn(_one_line(f"{p}: OpenSCAD: {note}"), OpenScadWarning, stacklevel=2)
     scene = parse_csg(text, source=f"{p} (CSG export)")
-    return Scene(scene.shape, scene.bound, p)
+    scene = Scene(scene.shape, scene.bound, p)
+    return (scene, deps) if with_dependencies else scene

@@ -16,13 +16,25 @@ import numpy as np
 
 from ..cl.device import choose_real, context_of
 from ..cl.programs import build, event_seconds, kernel
-from ..cl.records import SceneBuffers, pack, upload
+from ..cl.memory import device_buffer, upload
+from ..cl.records import SceneBuffers, pack
 from ..errors import UsageError
 from .camera import Camera
 from .image import Image
 from .view import Shading, pack_view
 
 TILE = 16
+#: fixed work-group shape of the per-pixel kernels (raytrace, resolve): PoCL compiles a kernel
+#: variant per work-group size, so one chosen by the runtime per image size would cost a
+#: compilation (about half a second) at every new size, e.g. each time a viewer window resizes
+PIXEL_GROUP = (16, 4)
+
+
+def pixel_range(width: int, height: int) -> tuple[tuple[int, int], tuple[int, int]]:
+    """(global, local) sizes of a per-pixel kernel: the image rounded up to whole
+    :data:`PIXEL_GROUP` groups (the kernels skip the pixels outside it)."""
+    gx, gy = PIXEL_GROUP
+    return (-(-width // gx) * gx, -(-height // gy) * gy), PIXEL_GROUP
 
 
 def as_tape(obj, normal_form: str = "tree"):
@@ -47,7 +59,7 @@ def camera_or_fit(camera, bound) -> Camera:
 
 
 def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 1.0, 1.0),
-             precision: str = "auto", normal_form: str = "tree", **shading) -> Image:
+             precision: str = "auto", normal_form: str = "tree", aa: int = 1, **shading) -> Image:
     """Exact ray tracing of a CSG scene (the reference renderer).
 
     ``scene``: a Shape, Scene, scene file path, Tape or Samples (its tape is traced).
@@ -55,13 +67,17 @@ def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 
     640x480).  ``device``: None (default device), a spec string (``"cpu"``, ``"0:1"``) or a
     Context.  ``background``: RGBA/RGB in [0, 1].  ``precision``: ``"auto"`` (double where the
     device has fp64), ``"double"`` or ``"float"``.  ``normal_form``: ``"tree"`` or ``"dnf"``
-    (the same image either way).  Further keywords are :class:`~clcsg.rendering.view.Shading`
-    options (ambient, diffuse, specular, shininess, gamma, key).
+    (the same image either way).  ``aa``: N x N supersampling (see :func:`clcsg.render`).
+    Further keywords are :class:`~clcsg.rendering.view.Shading` options (ambient, diffuse,
+    specular, shininess, gamma, key).
     """
+    from .supersample import supersample
+
     tape = as_tape(scene, normal_form)
     cam = camera_or_fit(camera, tape.bound)
     shade = Shading().with_options(background=background, **shading)
-    return trace(context_of(device), tape, cam, shade, precision)
+    ctx = context_of(device)
+    return supersample(lambda c: trace(ctx, tape, c, shade, precision), cam, aa, shade.gamma)
 
 
 def trace(context, tape, camera, shading: Shading | None = None, precision="auto", origin=None) -> Image:
@@ -74,13 +90,12 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     scene = SceneBuffers(context, packed)
     W, H = camera.width, camera.height
     view_buf = upload(context, pack_view(camera, packed.origin, real, shading))
-    mf = cl.mem_flags
     q = context.queue
     depth = np.empty((H, W), dtype=np.float32)
     ids = np.empty((H, W), dtype=np.int32)
     prims = np.empty((H, W), dtype=np.int32)
     rgba = np.empty((H, W, 4), dtype=np.uint8)
-    outs = [cl.Buffer(context.ctx, mf.WRITE_ONLY, a.nbytes) for a in (depth, ids, prims, rgba)]
+    outs = [device_buffer(context, a.nbytes, "image", False, "render a smaller image") for a in (depth, ids, prims, rgba)]
     t_build = time.perf_counter()
     defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE}
     prg = build(context, "rendering/raytrace.cl", defines, real)
@@ -106,14 +121,15 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
         arena = upload(context, np.zeros(cap, dtype=packed.tape.dtype), writable=True)
         counters[:] = 0
         counters_buf = upload(context, counters, writable=True)  # host data, not a write into a used buffer
-        ev_prune = kernel(prg, "prune_tiles")(q, (ntx, nty), None, scene.quadrics, scene.tape, np.int32(n), view_buf,
+        tile_range = ((-(-ntx // 4) * 4, -(-nty // 4) * 4), (4, 4))  # a fixed group shape, as PIXEL_GROUP
+        ev_prune = kernel(prg, "prune_tiles")(q, *tile_range, scene.quadrics, scene.tape, np.int32(n), view_buf,
                                               blo, bhi, arena, np.uint32(cap), counters_buf, tiles)
         cl.enqueue_copy(q, counters, counters_buf, wait_for=[ev_prune])
         if int(counters[0]) <= cap:
             break
         cap = int(counters[0]) + int(counters[0]) // 2
-    ev = kernel(prg, "raytrace")(q, (W, H), None, scene.quadrics, arena, blo, bhi, tiles, *scene.colour_args(), view_buf,
-                                 *outs)
+    ev = kernel(prg, "raytrace")(q, *pixel_range(W, H), scene.quadrics, arena, blo, bhi, tiles, *scene.colour_args(),
+                                 view_buf, *outs)
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev])
     q.finish()
@@ -130,9 +146,9 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
         "tile_tape_mean": int(counters[2]) / (ntx * nty),
         "prune_evaluations": int(counters[1]),
         "covered_pixels": int((ids >= 0).sum()),
-        "prune_seconds": event_seconds(ev_prune),
-        "kernel_seconds": event_seconds(ev) + event_seconds(ev_prune),
-        "build_seconds": t_built - t_build,
-        "total_seconds": t_end - t_start,
+        "prune_s": event_seconds(ev_prune),
+        "kernel_s": event_seconds(ev) + event_seconds(ev_prune),
+        "build_s": t_built - t_build,
+        "total_s": t_end - t_start,
     }
     return Image(rgba, depth, ids, prims, stats)

@@ -243,10 +243,13 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     else if (!cnt[PC_SPLATS_CULLED])
         cnt[PC_SPLATS_OFFSCREEN] = 1;
 
+    /* the camera in private memory: the compiler cannot keep it in registers across the
+     * framebuffer writes otherwise (they might alias the view); same expression as view_ray */
+    real3 d00 = vload3(0, view->d00), ddx = vload3(0, view->dx), ddy = vload3(0, view->dy);
     for (int y = bound.y0; y <= bound.y1; ++y) {
         for (int x = bound.x0; x <= bound.x1; ++x) {
             cnt[PC_BOUND_PIXELS]++;
-            real3 v = view_ray(view, y, x);
+            real3 v = normalize(d00 + (real)x * ddx + (real)y * ddy);
             real tc = dot(a, v);
             real3 w0 = tc * v - a; /* o - s: o = e + tc v, the ray point closest to s */
             real m2 = r * r - dot(w0, w0);

@@ -27,15 +27,20 @@ import numpy as np
 from ..cl.constants import EMPTY_KEY, SPLAT_COUNTERS
 from ..cl.device import choose_real, context_of, require_int64_atomics
 from ..cl.programs import build, event_seconds, kernel
-from ..cl.records import upload
+from ..cl.memory import device_buffer, upload
 from ..errors import UsageError
 from .image import Image
-from .raytracer import camera_or_fit
+from .raytracer import camera_or_fit, pixel_range
 from .view import Shading, pack_view
+
+#: fixed work-group size of the splat pass (see raytracer.PIXEL_GROUP: a size chosen by the
+#: runtime would recompile the kernel for every new sample count)
+SPLAT_GROUP = 64
 
 
 def render(samples, camera=None, device=None, background=(1.0, 1.0, 1.0), precision: str = "auto",
-           surface_aligned: bool = True, backface_culling: bool = True, stats: bool = True, **shading) -> Image:
+           surface_aligned: bool = True, backface_culling: bool = True, stats: bool = True, aa: int = 1,
+           **shading) -> Image:
     """Pixel-perfect splat rendering of :class:`~clcsg.Samples` (paper section 6).
 
     Per sample, one work-item loops over the screen bound of its splat; per pixel it solves
@@ -49,14 +54,23 @@ def render(samples, camera=None, device=None, background=(1.0, 1.0, 1.0), precis
     ``backface_culling``: skip splats and fragments that face away from the eye (only valid
     from outside; turned off automatically when the eye is inside the solid).  ``stats``:
     count fragments, clip evaluations, ... with atomic counters (``Image.stats``; off is a
-    little faster).  Other arguments as in :func:`clcsg.raytrace`.  Requires 64-bit atomics
-    (``cl_khr_int64_extended_atomics``), else :class:`~clcsg.errors.DeviceError`.
+    little faster).  ``aa``: N x N supersampling (:mod:`clcsg.rendering.supersample`: colours
+    averaged in linear light, depth and ids those of the pixel centre).  Other arguments as in
+    :func:`clcsg.raytrace`.  Requires 64-bit atomics (``cl_khr_int64_extended_atomics``), else
+    :class:`~clcsg.errors.DeviceError`.
     """
+    from .supersample import supersample
+
     if not hasattr(samples, "device_buffers"):
         raise UsageError(f"render needs Samples (see clcsg.sample), got {type(samples).__name__}")
     cam = camera_or_fit(camera, samples.tape.bound)
     shade = Shading().with_options(background=background, **shading)
-    return rasterize(context_of(device), samples, cam, shade, precision, surface_aligned, backface_culling, stats)
+    ctx = context_of(device)
+
+    def render_at(c):
+        return rasterize(ctx, samples, c, shade, precision, surface_aligned, backface_culling, stats)
+
+    return supersample(render_at, cam, aa, shade.gamma)
 
 
 def eye_inside(tape, eye) -> bool:
@@ -84,17 +98,17 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
         culling, culling_note = False, "off: the eye is inside the solid"
     scene, sample_buf, clip_buf = samples.device_buffers(context, real)
     W, H = camera.width, camera.height
-    mf = cl.mem_flags
-    ctx, q = context.ctx, context.queue
+    q = context.queue
     view_buf = upload(context, pack_view(camera, scene.packed.origin, real, shading))
-    fb = cl.Buffer(ctx, mf.READ_WRITE, W * H * 8)
+    hint = "render a smaller image"
+    fb = device_buffer(context, W * H * 8, "framebuffer", hint=hint)
     counters = np.zeros(len(SPLAT_COUNTERS), dtype=np.uint64)
     cnt_buf = upload(context, counters, writable=True)
     depth = np.empty((H, W), dtype=np.float32)
     ids = np.empty((H, W), dtype=np.int32)
     prims = np.empty((H, W), dtype=np.int32)
     rgba = np.empty((H, W, 4), dtype=np.uint8)
-    outs = [cl.Buffer(ctx, mf.WRITE_ONLY, a.nbytes) for a in (depth, ids, prims, rgba)]
+    outs = [device_buffer(context, a.nbytes, "image", False, hint) for a in (depth, ids, prims, rgba)]
 
     t_build = time.perf_counter()
     defines = {
@@ -112,10 +126,11 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     events = [ev_clear]
     if n:
         events.append(kernel(splat_prg, "splat")(
-            q, (n,), None, scene.quadrics, sample_buf, np.int32(n), clip_buf, view_buf, fb, cnt_buf,
+            q, (-(-n // SPLAT_GROUP) * SPLAT_GROUP,), (SPLAT_GROUP,), scene.quadrics, sample_buf, np.int32(n),
+            clip_buf, view_buf, fb, cnt_buf,
             wait_for=[ev_clear]))
     ev_resolve = kernel(resolve_prg, "resolve")(
-        q, (W, H), None, scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, *outs,
+        q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, *outs,
         wait_for=events[-1:])
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev_resolve])
@@ -135,15 +150,15 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
         "surface_aligned": bool(surface_aligned),
         "backface_culling": culling,
         "covered_pixels": covered,
-        "splat_seconds": event_seconds(events[-1]) if n else 0.0,
-        "resolve_seconds": event_seconds(ev_resolve),
-        "build_seconds": t_built - t_build,
-        "total_seconds": t_end - t_start,
+        "splat_s": event_seconds(events[-1]) if n else 0.0,
+        "resolve_s": event_seconds(ev_resolve),
+        "build_s": t_built - t_build,
+        "total_s": t_end - t_start,
     }
     if culling_note:
         st["backface_culling_note"] = culling_note
     if stats:
         st.update({name: int(v) for name, v in zip(SPLAT_COUNTERS, counters)})
         st["overdraw"] = st["fragments"] / covered if covered else 0.0
-    st["kernel_seconds"] = st["splat_seconds"] + st["resolve_seconds"]
+    st["kernel_s"] = st["splat_s"] + st["resolve_s"]
     return Image(rgba, depth, ids, prims, st)

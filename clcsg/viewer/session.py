@@ -1,0 +1,178 @@
+"""The scene a viewer shows: loaded from its file, compiled and sampled on one device, and
+loaded again when the file (or a ``.scad`` file it includes or uses) changes.
+
+A :class:`Session` holds the last good :class:`Model` (samples, tape, radius, timings) and the
+message of the last failed load.  A failed load (a broken edit, a deleted file, a radius whose
+sampling would pass the sample limit) leaves the model as it was, so the viewer keeps showing
+it beside the error.  Every method that touches the device runs in the caller's thread; the
+server calls them from its single device thread, one at a time.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ClcsgError, UsageError
+
+#: the viewer's default sample limit (the resource guard's; ``clcsg view --max-samples``)
+DEFAULT_MAX_SAMPLES = 5_000_000
+
+
+def auto_radius(bound) -> float:
+    """1/100 of the bound's diagonal (``clcsg render``'s default)."""
+    diag = float(np.linalg.norm(np.asarray(bound[1]) - np.asarray(bound[0])))
+    return diag / 100 if diag > 0 and math.isfinite(diag) else 1.0
+
+
+def parse_radius(value) -> float | None:
+    """A radius from the page's control: a positive finite number, or None for ``"auto"``."""
+    if value is None or str(value).strip().lower() in ("", "auto"):
+        return None
+    try:
+        r = float(value)
+        ok = math.isfinite(r) and r > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise UsageError(f"radius must be a positive finite number or 'auto', got {value!r}")
+    return r
+
+
+def compiled_once(scene):
+    """``scene`` as a :class:`~clcsg.Scene` that compiles once per normal form: the viewer
+    needs the tape (its bound gives the automatic radius) before sampling, sampling compiles
+    the scene again, and a radius change samples the same scene once more."""
+    from ..model.scene import Scene
+
+    class CompiledOnce(Scene):
+        def compile(self, normal_form: str = "tree", term_limit: int | None = None):
+            key = (normal_form, term_limit)
+            if key not in tapes:
+                tapes[key] = Scene.compile(self, normal_form, term_limit)
+            return tapes[key]
+
+    tapes: dict = {}
+    return CompiledOnce(scene.shape, scene.bound, scene.source)
+
+
+@dataclass
+class Model:
+    """One sampled version of the scene."""
+
+    version: int
+    scene: object  # clcsg.Scene
+    samples: object  # clcsg.Samples
+    radius: float
+    auto: bool  # the radius is the automatic one
+    times: dict = field(default_factory=dict)  # load_s, compile_s, sample_s, total_s
+
+    @property
+    def tape(self):
+        return self.samples.tape
+
+    def summary(self) -> dict:
+        """What the page's status line shows."""
+        st = self.samples.stats
+        return {"version": self.version, "samples": len(self.samples), "radius": self.radius, "auto_radius": self.auto,
+                "quadrics": int(self.tape.n_quadrics), "empty": bool(self.tape.empty),
+                "unresolved": int(st.get("unresolved", 0) or 0),
+                **{k: round(v, 4) for k, v in self.times.items()}}
+
+
+class Session:
+    """The scene file ``path`` sampled on ``context``.
+
+    ``radius``: None for the automatic radius (1/100 of the scene's diagonal, recomputed on
+    every load), else a fixed one.  ``default_color``: the colour of primitives without one
+    (``--colors``).  ``max_samples``: the resource guard's sample limit.  ``floor``: the
+    sampler's floor (None: its default).
+    """
+
+    def __init__(self, path, context, radius: float | None = None, normal_form: str = "tree",
+                 default_color=None, max_samples: int | None = None, floor: float | None = None):
+        self.path = os.path.abspath(os.fspath(path))
+        self.context = context
+        self.radius = radius
+        self.normal_form = normal_form
+        self.default_color = default_color
+        self.max_samples = DEFAULT_MAX_SAMPLES if max_samples is None else int(max_samples)
+        self.floor = floor
+        self.model: Model | None = None
+        self.error: str | None = None
+        self.files: list[str] = [self.path]
+        self._version = 0
+
+    @property
+    def name(self) -> str:
+        return os.path.basename(self.path)
+
+    # -- loading ----------------------------------------------------------------------------------
+    def read(self):
+        """The scene from the file; for ``.scad`` also records the files OpenSCAD read."""
+        from ..model.scene import load
+
+        if self.path.lower().endswith(".scad") and os.path.isfile(self.path):
+            from ..io.scad import load_scad
+
+            scene, deps = load_scad(self.path, with_dependencies=True)
+            self.files = deps
+            return scene
+        return load(self.path)
+
+    def sample(self, scene, radius: float | None, times: dict) -> Model:
+        """A new model of ``scene`` at ``radius`` (None: automatic); raises ClcsgError."""
+        from ..sampling.sampler import sample
+
+        t = time.perf_counter()
+        tape = scene.compile(self.normal_form)
+        times["compile_s"] = time.perf_counter() - t
+        r = auto_radius(tape.bound) if radius is None else radius
+        t = time.perf_counter()
+        samples = sample(scene, r, device=self.context, normal_form=self.normal_form, progress=None,
+                         max_samples=self.max_samples, floor=self.floor)
+        times["sample_s"] = time.perf_counter() - t
+        if self.default_color is not None:
+            samples.with_default_color(self.default_color)
+        self._version += 1
+        times["total_s"] = sum(times.values())
+        return Model(self._version, scene, samples, r, radius is None, times)
+
+    def load(self) -> Model:
+        """Read, compile and sample the file; the new model replaces the old one.  Raises a
+        ClcsgError (the model and ``error`` stay as they were)."""
+        times: dict = {}
+        t = time.perf_counter()
+        scene = compiled_once(self.read())
+        times["load_s"] = time.perf_counter() - t
+        model = self.sample(scene, self.radius, times)
+        self.model, self.error = model, None
+        return model
+
+    def reload(self) -> Model | None:
+        """:meth:`load`, keeping the last good model on failure: returns the new model, or
+        None with the one-line message in ``error``."""
+        try:
+            return self.load()
+        except ClcsgError as e:
+            self.error = " ".join(str(e).split()) or type(e).__name__
+            return None
+
+    def set_radius(self, value) -> Model | None:
+        """Sample the current scene again at ``value`` (a number, or ``"auto"``/None).  Returns
+        the new model, or None with the message in ``error`` (radius and model unchanged)."""
+        try:
+            radius = parse_radius(value)
+            if self.model is None:
+                self.radius = radius
+                return self.load()
+            model = self.sample(self.model.scene, radius, {"load_s": 0.0})
+        except ClcsgError as e:
+            self.error = " ".join(str(e).split()) or type(e).__name__
+            return None
+        self.radius, self.model, self.error = radius, model, None
+        return model
