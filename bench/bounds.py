@@ -154,6 +154,10 @@ def run(quick: bool = False, device=None, programs: int | None = None):
             "failed": len(failed),
             "internal_errors": len(internal),
             "failures": failed[:20],
+            "widest_bounds": sorted(({"seed": r["seed"], "bound_ratio": r["bound_ratio"]} for r in rows
+                                     if r.get("bound_ratio")), key=lambda r: -r["bound_ratio"])[:10],
+            "loosest_estimates": sorted(({"seed": r["seed"], "guard_ratio": r["guard_ratio"]} for r in rows
+                                         if r.get("guard_ratio")), key=lambda r: -r["guard_ratio"])[:10],
             "bound_ratio": _summary(rows, "bound_ratio"),
             "guard_ratio": _summary(rows, "guard_ratio"),
             "seconds": _summary(rows, "seconds"),

@@ -489,11 +489,6 @@ def _refine_by_distance(g: _Graph, leaves: _Leaves, box):
         return (lo, hi), 0
     slack = 1e-12 * (1.0 + float(np.abs(np.concatenate([lo, hi])).max()))
 
-    def undecided(c, h):
-        d = _tree_distance(g, leaves, c)
-        r = np.linalg.norm(h, axis=1)
-        return ~(d > r * (1.0 + 1e-9) + slack)
-
     def evaluate(c, h):
         """(undecided mask, distance) of cells (centers c, half-sizes h)."""
         d = _tree_distance(g, leaves, c)
