@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import clcsg
@@ -337,3 +338,19 @@ def test_sample_rejects_bad_radius(tmp_path, capsys):
     assert _main(["sample", str(scene), "-r", "0", "-o", str(tmp_path / "x.ply")]) == 2
     err = capsys.readouterr().err
     assert "radius" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_radius_relative_to_the_scene_diagonal(tmp_path):
+    """``-r 2%`` is 2% of the bound's diagonal, for sample as for render: the same samples as
+    the absolute radius."""
+    import clcsg
+    from clcsg.io.ply import read_samples
+
+    path = tmp_path / "s.json"
+    clcsg.save(clcsg.box(2.0) - clcsg.sphere(1.2), path)
+    diag = float(np.linalg.norm(np.subtract(*clcsg.load(path).compile().bound[::-1])))
+    assert cli.main(["sample", str(path), "-r", "2%", "-o", str(tmp_path / "a.ply"), "--quiet"]) == 0
+    assert cli.main(["sample", str(path), "-r", repr(0.02 * diag), "-o", str(tmp_path / "b.ply"), "--quiet"]) == 0
+    a, b = read_samples(tmp_path / "a.ply"), read_samples(tmp_path / "b.ply")
+    assert len(a["positions"]) > 100 and np.array_equal(np.sort(a["positions"], axis=0), np.sort(b["positions"], axis=0))
+    assert cli.main(["render", str(path), "-r", "3%", "-o", str(tmp_path / "a.png"), "--size", "64x48", "--quiet"]) == 0

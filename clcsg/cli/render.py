@@ -9,6 +9,10 @@ import numpy as np
 
 from ..errors import UsageError
 from ..rendering.camera import Camera
+from ..sampling.radius import Radius
+
+#: the splat radius without --radius: 1% of the scene bound's diagonal
+DEFAULT_RADIUS = Radius(0.01, relative=True)
 
 RENDER_DESCRIPTION = """
     Render a scene to an image (.png, .jpg, .webp or .tif, by the extension of OUT).  The
@@ -46,7 +50,7 @@ def add_render_arguments(parser) -> None:
     p.add_argument("-o", "--output", metavar="OUT.png", required=True,
                    help="image file to write: .png, .jpg/.jpeg (no alpha), .webp (lossless) or .tif/.tiff")
     p.add_argument("-r", "--radius", metavar="R", default=None,
-                   help="splat radius in scene units (default: 1/100 of the scene bound's diagonal)")
+                   help="splat radius: scene units, or a percentage of the scene bound's diagonal (default: 1%%)")
     p.add_argument("--method", choices=("splat", "raytrace"), default="splat",
                    help="splat (sample, then render splats; default) or raytrace (exact ray tracing)")
     p.add_argument("--normal-form", choices=("tree", "dnf"), default="tree",
@@ -206,7 +210,7 @@ def run(args) -> int:
     from ..io.colors import ColorError, scheme_color
     from ..rendering.raytracer import raytrace
     from ..rendering.splat import render
-    from .app import parse_floats
+    from .app import bound_diagonal, parse_radius
     from .runs import Run
 
     _check_outputs(args)  # before any work: an unknown extension fails at once
@@ -225,11 +229,7 @@ def run(args) -> int:
         default_color = scheme_color(getattr(args, "colors", "clcsg"))
     except ColorError as e:
         raise UsageError(f"--colors: {e}") from None
-    radius = None
-    if args.radius is not None:
-        (radius,) = parse_floats(args.radius, 1, "--radius")
-        if radius <= 0:
-            raise UsageError(f"--radius must be positive, got {args.radius}")
+    radius = None if args.radius is None else parse_radius(args.radius)
     run = Run("render")
     samples = _saved_samples(args, run)
     normal_form = getattr(args, "normal_form", "tree")
@@ -262,9 +262,7 @@ def run(args) -> int:
         if samples is None:
             from ..sampling.sampler import sample
 
-            if radius is None:
-                diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
-                radius = diag / 100 if diag > 0 else 1.0
+            radius = (radius or DEFAULT_RADIUS).of(bound_diagonal(tape.bound))
             with run.step("sample", "sampling: building the OpenCL program"):
                 samples = sample(scene, radius, device=ctx, progress=None, normal_form=normal_form,
                                  max_samples=getattr(args, "max_samples", None))

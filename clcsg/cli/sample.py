@@ -6,7 +6,8 @@ import json
 import textwrap
 
 from ..errors import UsageError
-from .app import UNRESOLVED_HELP, _jsonable, add_subcommand, parse_bound, parse_floats, positive_int
+from .app import (UNRESOLVED_HELP, _jsonable, add_subcommand, bound_diagonal, parse_bound, parse_floats, parse_radius,
+                  positive_int)
 
 
 def add_parser(subparsers):
@@ -37,7 +38,7 @@ def add_parser(subparsers):
         """) + textwrap.dedent(UNRESOLVED_HELP),
     )
     p.add_argument("scene", metavar="SCENE", help="scene file (.json, OpenSCAD .csg or .scad)")
-    p.add_argument("-r", "--radius", metavar="R", required=True, help="coverage radius in scene units")
+    p.add_argument("-r", "--radius", metavar="R", required=True, help="coverage radius: scene units, or a percentage of the scene bound's diagonal (2%%)")
     p.add_argument("-o", "--output", metavar="OUT.ply", required=True,
                    help="file to write: .ply (binary PLY) or .npz (samples and tape, renders again)")
     p.add_argument("--stats", metavar="S.json", default=None, help="write sampling statistics as JSON")
@@ -81,7 +82,7 @@ def run(args) -> int:
     fmt = check_samples_output(args.output)  # before any work: `-o x.png` fails at once
     if args.stats:
         check_output(args.stats, ".json", "statistics", "--stats")
-    radius = parse_positive(args.radius, "--radius")
+    radius_spec = parse_radius(args.radius)
     floor = None if args.floor is None else parse_positive(args.floor, "--floor")
     bound = None if args.bound is None else parse_bound(args.bound, "--bound")
     if args.float32 and fmt != "PLY":
@@ -89,6 +90,10 @@ def run(args) -> int:
     ctx = get_context(args.device)
     run = Run("sample")
     scene = load_scene(run, args.scene, bound)
+    radius = radius_spec.value
+    if radius_spec.relative:
+        with run.step("compile", "compiling the scene (the radius is relative to its bound)"):
+            radius = radius_spec.of(bound_diagonal(scene.compile(args.normal_form, args.term_limit).bound))
     with run.step("sample", "sampling: compiling the scene, building the OpenCL program"):
         s = sample(scene, radius, device=ctx, floor=floor, normal_form=args.normal_form, term_limit=args.term_limit,
                    progress=None, max_samples=args.max_samples)

@@ -33,7 +33,7 @@ def add_parser(subparsers):
                        description=VIEW_DESCRIPTION, epilog=VIEW_EPILOG)
     p.add_argument("scene", metavar="SCENE", help="scene file (.json, OpenSCAD .csg or .scad)")
     p.add_argument("-r", "--radius", metavar="R", default=None,
-                   help="splat radius in scene units (default: 1/100 of the scene bound's diagonal)")
+                   help="splat radius: scene units, or a percentage of the scene bound's diagonal (default: 1%%)")
     p.add_argument("--port", metavar="N", type=int, default=0, help="TCP port on 127.0.0.1 (default: a free one)")
     p.add_argument("--no-browser", action="store_true", help="do not open the page in the web browser")
     p.add_argument("--normal-form", choices=("tree", "dnf"), default="tree",

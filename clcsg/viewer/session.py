@@ -17,30 +17,36 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ClcsgError, UsageError
+from ..errors import ClcsgError
+from ..sampling.radius import Radius
 
 #: the viewer's default sample limit (the resource guard's; ``clcsg view --max-samples``)
 DEFAULT_MAX_SAMPLES = 5_000_000
 
 
-def auto_radius(bound) -> float:
-    """1/100 of the bound's diagonal (``clcsg render``'s default)."""
-    diag = float(np.linalg.norm(np.asarray(bound[1]) - np.asarray(bound[0])))
-    return diag / 100 if diag > 0 and math.isfinite(diag) else 1.0
+#: the automatic radius (``clcsg render``'s default)
+AUTO_RADIUS = Radius(0.01, relative=True)
 
 
-def parse_radius(value) -> float | None:
-    """A radius from the page's control: a positive finite number, or None for ``"auto"``."""
+def diagonal(bound) -> float:
+    return float(np.linalg.norm(np.asarray(bound[1]) - np.asarray(bound[0])))
+
+
+def radius_for(radius: Radius | None, bound) -> float:
+    """``radius`` (None: :data:`AUTO_RADIUS`) for a scene of this bound; 1 for an empty or
+    degenerate bound."""
+    diag = diagonal(bound)
+    if not (diag > 0 and math.isfinite(diag)):
+        return 1.0 if radius is None or radius.relative else radius.value
+    return (radius or AUTO_RADIUS).of(diag)
+
+
+def parse_radius(value) -> Radius | None:
+    """A radius from the page's control or ``--radius``: scene units or a percentage of the
+    diagonal (:class:`~clcsg.sampling.radius.Radius`), or None for ``"auto"``."""
     if value is None or str(value).strip().lower() in ("", "auto"):
         return None
-    try:
-        r = float(value)
-        ok = math.isfinite(r) and r > 0
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
-        raise UsageError(f"radius must be a positive finite number or 'auto', got {value!r}")
-    return r
+    return Radius.parse(value)
 
 
 def compiled_once(scene):
@@ -93,7 +99,7 @@ class Session:
     sampler's floor (None: its default).
     """
 
-    def __init__(self, path, context, radius: float | None = None, normal_form: str = "tree",
+    def __init__(self, path, context, radius: Radius | None = None, normal_form: str = "tree",
                  default_color=None, max_samples: int | None = None, floor: float | None = None):
         self.path = os.path.abspath(os.fspath(path))
         self.context = context
@@ -124,14 +130,14 @@ class Session:
             return scene
         return load(self.path)
 
-    def sample(self, scene, radius: float | None, times: dict) -> Model:
+    def sample(self, scene, radius: Radius | None, times: dict) -> Model:
         """A new model of ``scene`` at ``radius`` (None: automatic); raises ClcsgError."""
         from ..sampling.sampler import sample
 
         t = time.perf_counter()
         tape = scene.compile(self.normal_form)
         times["compile_s"] = time.perf_counter() - t
-        r = auto_radius(tape.bound) if radius is None else radius
+        r = radius_for(radius, tape.bound)
         t = time.perf_counter()
         samples = sample(scene, r, device=self.context, normal_form=self.normal_form, progress=None,
                          max_samples=self.max_samples, floor=self.floor)
