@@ -5,7 +5,12 @@ on the zoo models), ``sampler`` (sampler throughput), ``models`` (the model zoo:
 Table 2 sampling columns, tree and DNF shape side by side; the everyday OpenSCAD parts and the
 Menger sponge), ``render`` (splats against the tree ray tracer per zoo model, each overdraw
 optimization on and off), ``peers`` (manifold3d on the same solids and the sponge, OpenSCAD on
-the everyday parts), ``plots`` (PNG plots from the JSON files).  Each writes
+the everyday parts), ``plots`` (PNG plots from the JSON files), ``batch`` (scenes and samples
+per second of ``clcsg batch`` on 1,000 random programs: one process, the local pool, Dask).  Each writes
+``bounds`` (scene bounds and the guard's estimate against the samples, on the zoo, the
+examples and ``--programs N`` random programs run through the CLI), ``view`` (``clcsg view``'s frame
+times per zoo model at 800x600 and 400x300, where the time goes, and the first frame after a
+reload).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -15,7 +20,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-PARTS = ("micro", "sampler", "models", "render", "peers", "plots")
+PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view")
 
 
 def main(argv=None):
@@ -26,6 +31,8 @@ def main(argv=None):
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write results (JSON, PNG) to DIR instead of bench/results")
     p.add_argument("--gallery", action="store_true", help="render: also write docs/gallery/*.png")
+    p.add_argument("--programs", type=int, default=None, metavar="N",
+                   help="bounds: how many random programs (default 200, 30 with --quick)")
     a = p.parse_args(argv)
     from . import common
 
@@ -33,6 +40,8 @@ def main(argv=None):
         common.RESULTS = a.out
     module = importlib.import_module(f".{a.part}", __package__)
     kw = {"gallery": True} if a.gallery and a.part == "render" else {}
+    if a.part == "bounds" and a.programs is not None:
+        kw["programs"] = a.programs
     module.run(quick=a.quick, device=a.device, **kw)
 
 

@@ -13,6 +13,9 @@ The data flows one way, one package per stage:
    exact tree ray tracer (:func:`raytrace`), both into an :class:`Image`.
 5. ``cl`` is the OpenCL plumbing (devices, programs, records, shared constants); ``cli`` the
    command line, one module per command.
+6. ``queries``: occupancy and a conservative signed distance at given points, on the device
+   (:func:`inside`, :func:`distance`); ``batching``: many scenes sampled (and rendered) into a
+   folder with a manifest, on a process pool or a Dask cluster (:func:`batch`).
 """
 from .errors import ClcsgError
 from .model.csg import Shape, contains, difference, intersection, union
@@ -28,3 +31,5 @@ from .rendering.raytracer import raytrace
 from .rendering.splat import render
 from .sampling.sampler import sample
 from .sampling.samples import Samples, load_samples
+from .queries import distance, inside
+from .batching.api import batch

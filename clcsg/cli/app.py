@@ -78,6 +78,21 @@ def parse_bound(text: str, name: str = "--bound") -> np.ndarray:
 _NEGATIVE_VECTOR = re.compile(r"^-\.?\d.*,")
 
 
+def parse_radius(text: str, name: str = "--radius"):
+    """``--radius``: scene units or a percentage of the bound's diagonal
+    (:class:`~clcsg.sampling.radius.Radius`)."""
+    from ..sampling.radius import Radius
+
+    return Radius.parse(text, name)
+
+
+def bound_diagonal(bound) -> float:
+    """|hi - lo| of a scene bound; 1 when it is empty or degenerate (a relative radius then
+    means that fraction of one scene unit)."""
+    d = float(np.linalg.norm(np.asarray(bound[1], dtype=np.float64) - np.asarray(bound[0], dtype=np.float64)))
+    return d if d > 0 and math.isfinite(d) else 1.0
+
+
 def join_negative_vectors(argv: list[str]) -> list[str]:
     """``["--bound", "-1,-1,-1,1,1,1"]`` -> ``["--bound=-1,-1,-1,1,1,1"]``.
 
@@ -206,6 +221,8 @@ COMMANDS: dict[str, tuple[Callable, Callable]] = {
     "info": _command("info"),
     "sample": _command("sample"),
     "render": _command("render"),
+    "batch": _command("batch"),
+    "view": _command("view"),
 }
 
 

@@ -1,0 +1,229 @@
+"""One scene of a batch, run in a worker: load, sample, render the views, encode the files.
+
+:func:`run_job` never raises for a bad scene: a :class:`~clcsg.errors.ClcsgError` (bad file,
+limit hit, device problem) or any other exception becomes a row with ``status = "error"`` and
+the message on one line.  It returns a :class:`Result`: the manifest row's fields computed
+here and the output files as bytes (relative path -> contents), which the driver writes.
+
+Each worker process opens its OpenCL device once (:func:`init_worker`, the process pool's
+initializer or the Dask worker plugin) and runs one scene at a time (a lock: kernels and
+queues of a context are not shared between threads).
+
+Views: the camera ``clcsg render`` picks by default (the silhouette fitted at 90% from the
+front right and above, 45 degree field of view, up +z), then ``views`` cameras on the orbit
+through it (:func:`clcsg.orbit` at its elevation and distance, starting at its azimuth, so
+view 0 is that camera); each is rendered like ``clcsg render`` renders it, so
+``clcsg render SCENE -r R --eye E --target T --size WxH`` with a view's camera (manifest column
+``cameras``) gives the same pixels.
+
+Test hook: with ``CLCSG_BATCH_CRASH=NAME:MARKER`` in the environment, the worker that runs
+scene NAME while the file MARKER does not exist creates MARKER and exits at once
+(``os._exit``), as a crashing worker would; the tests use it to check that no scene is lost.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import socket
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ClcsgError
+from ..model.scene import Scene
+from .inputs import Job
+from .options import Options
+from .outputs import parquet_bytes, queries_path, samples_bytes, samples_path, view_path
+
+CRASH_HOOK = "CLCSG_BATCH_CRASH"
+#: the background of the views (``clcsg render``'s default, white)
+BACKGROUND = (1.0, 1.0, 1.0, 1.0)
+#: the field of view of the views, degrees (``clcsg render``'s default)
+FOV = 45.0
+UP = (0.0, 0.0, 1.0)
+
+_lock = threading.Lock()
+_worker: dict = {"device": None, "error": None}
+
+
+@dataclass
+class Result:
+    """A scene's manifest fields (``row``) and output files (relative path -> bytes)."""
+
+    row: dict
+    files: dict = field(default_factory=dict)
+
+
+def init_worker(device=None) -> None:
+    """Open the OpenCL device ``device`` in this process, once (a failure is kept and reported
+    in the row of every scene this worker runs, so the pool itself stays usable)."""
+    from ..cl.device import get_context
+
+    _worker["device"] = device
+    try:
+        get_context(device)
+        _worker["error"] = None
+    except ClcsgError as e:
+        _worker["error"] = e
+
+
+def worker_id() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _crash_hook(name: str) -> None:
+    spec = os.environ.get(CRASH_HOOK, "")
+    target, _, marker = spec.partition(":")
+    if target and target == name and marker and not os.path.exists(marker):
+        with open(marker, "w") as f:
+            f.write(worker_id())
+        os._exit(17)
+
+
+def load_scene(job: Job):
+    """The Scene of a job, parsed from its text (a ``.scad`` file is run through openscad)."""
+    from ..errors import SceneError
+
+    if job.error:
+        raise SceneError(job.error)
+    if job.kind == ".json":
+        from ..io.scenefile import loads_json
+
+        return loads_json(job.text, job.source)
+    if job.kind == ".csg":
+        from ..io.openscad import parse_csg
+
+        return parse_csg(job.text, job.source)
+    from ..model.scene import load
+
+    return load(job.path)
+
+
+@dataclass
+class _Compiled(Scene):
+    """A Scene with its tape compiled already (the radius needs the bound before sampling, and
+    :func:`clcsg.sample` compiles the scene it is given: this one hands back ``tape``)."""
+
+    tape: object = None
+
+    def compile(self, normal_form: str = "tree", term_limit=None):
+        return self.tape
+
+
+def cameras(samples, n: int, size, ctx) -> list:
+    """The ``n`` view cameras of the module docstring."""
+    from ..rendering.camera import Camera, orbit
+
+    w, h = size
+    fitted = Camera.fit_silhouette(samples.tape, w, h, fov=FOV, up=UP, device=ctx)
+    d = fitted.eye - fitted.target
+    elevation = math.degrees(math.asin(float(np.clip(d @ np.asarray(UP) / np.linalg.norm(d), -1.0, 1.0))))
+    return list(orbit(fitted, n=n, elevation=elevation))
+
+
+def _camera_record(cam) -> dict:
+    return {"eye": cam.eye.tolist(), "target": cam.target.tolist(), "up": list(UP), "fov": cam.fov,
+            "width": cam.width, "height": cam.height}
+
+
+def _one_line(text) -> str:
+    return " ".join(str(text).split())
+
+
+def _sample(job: Job, options: Options, ctx, row: dict):
+    """The scene's samples; its statistics into ``row``.  The radius is ``options.radius`` of
+    the compiled bound's diagonal; an empty solid has no bound and no radius (NaN)."""
+    from ..sampling.sampler import sample
+
+    scene = load_scene(job)
+    t0 = time.perf_counter()
+    tape = scene.compile(options.normal_form)
+    compile_s = time.perf_counter() - t0
+    diag = 0.0 if tape.empty else float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+    radius = options.radius.of(diag) if diag > 0 or not options.radius.relative else float("nan")
+    s = sample(_Compiled(scene.shape, scene.bound, scene.source, tape), radius if radius > 0 else 1.0, device=ctx,
+               normal_form=options.normal_form, floor=options.floor, progress=False, max_samples=options.max_samples)
+    st = s.stats
+    row.update(samples=len(s), radius=radius, diagonal=diag, quadrics=int(st.get("tape_quadrics", tape.n_quadrics)),
+               primitives=len(tape.instances), instructions=int(st.get("tape_instructions", len(tape.ops))),
+               unresolved=int(st.get("unresolved", 0)), levels=int(st.get("levels", 0)),
+               clipped_samples=int(st.get("clipped_samples", 0)), compile_s=compile_s,
+               sample_s=time.perf_counter() - t0)
+    return s
+
+
+def query_points(job: Job, options: Options, tape) -> np.ndarray:
+    """The scene's query points: ``options.points``, or ``options.random_points`` uniform in
+    the bound grown by 5% of its diagonal, from a generator seeded by the scene's digest (an
+    empty solid has no bound: none)."""
+    if options.points is not None:
+        return options.points
+    if tape.empty:
+        return np.zeros((0, 3))
+    lo, hi = tape.bound
+    pad = 0.05 * float(np.linalg.norm(hi - lo))
+    rng = np.random.default_rng(int(job.digest[:16], 16))
+    return rng.uniform(lo - pad, hi + pad, (int(options.random_points), 3))
+
+
+def _queries(job: Job, options: Options, tape, ctx, row: dict, files: dict) -> None:
+    from ..queries import distance, inside
+
+    t0 = time.perf_counter()
+    pts = query_points(job, options, tape)
+    ins = inside(tape, pts, device=ctx)
+    dist = distance(tape, pts, device=ctx)
+    files[queries_path(job.name)] = parquet_bytes({"x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2], "inside": ins,
+                                                   "distance": dist}, {"scene": job.name, "source": job.source})
+    row.update(query_points=len(pts), inside_fraction=float(ins.mean()) if len(pts) else float("nan"),
+               query_s=time.perf_counter() - t0)
+
+
+def _sample_and_render(job: Job, options: Options, ctx, row: dict, files: dict) -> None:
+    from ..io.outputs import png_bytes
+    from ..rendering.splat import render
+
+    s = _sample(job, options, ctx, row)
+    meta = {"scene": job.name, "source": job.source, "radius": repr(row["radius"])}
+    files[samples_path(job.name, options.fmt)] = samples_bytes(s, options.fmt, meta)
+    t1 = time.perf_counter()
+    cams = cameras(s, options.views, options.size, ctx) if options.views and len(s) else []
+    for k, cam in enumerate(cams):
+        img = render(s, cam, device=ctx, background=BACKGROUND)
+        files[view_path(job.name, k)] = png_bytes(img.rgba)
+    row.update(views=len(cams), cameras=json.dumps([_camera_record(c) for c in cams]),
+               render_s=time.perf_counter() - t1)
+    if options.queries:
+        _queries(job, options, s.tape, ctx, row, files)
+
+
+def run_job(job: Job, options: Options) -> Result:
+    """Run one scene (see the module docstring); never raises for a bad scene."""
+    _crash_hook(job.name)
+    row = {"name": job.name, "source": job.source, "status": "ok", "error": None, "worker": worker_id()}
+    files: dict = {}
+    t0, c0 = time.perf_counter(), time.process_time()
+    with _lock, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if _worker["error"] is not None and _worker["device"] == options.device:
+                raise _worker["error"]
+            from ..cl.device import get_context
+
+            _sample_and_render(job, options, get_context(options.device), row, files)
+        except ClcsgError as e:
+            row.update(status="error", error=_one_line(e) or type(e).__name__, error_code=e.exit_code)
+            files = {}
+        except Exception as e:  # a bug or a driver failure: reported, the batch goes on
+            row.update(status="error", error=f"{type(e).__name__}: {_one_line(e) or '(no message)'}",
+                       error_code=1)
+            files = {}
+    msgs = list(dict.fromkeys(_one_line(w.message) for w in caught))
+    row.update(warnings="; ".join(msgs) or None, seconds=time.perf_counter() - t0,
+               cpu_s=time.process_time() - c0)
+    return Result(row, files)
