@@ -9,7 +9,7 @@ and ``.scad`` an OpenSCAD program, exported to CSG by the ``openscad`` binary fi
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -22,14 +22,23 @@ class Scene:
     shape: Shape
     bound: np.ndarray | None = None  # (2, 3) lo, hi corners, or None
     source: str = "scene"  # file name or description, used in error messages
+    _tapes: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def compile(self, normal_form: str = "tree", term_limit: int | None = None):
         """The scene's :class:`~clcsg.compile.tape.Tape`: the CSG tree itself (``"tree"``, the
         default) or the paper's disjunctive normal form as an OR of ANDs (``"dnf"``; the term
-        limit applies to it only)."""
+        limit applies to it only).  Compiled once per (shape, bound, normal form, term limit):
+        the callers that need the bound before sampling (a relative radius, the viewer, the
+        batch tasks) and the sampler share one tape."""
         from ..compile.tape import compile_scene
 
-        return compile_scene(self, normal_form, term_limit)
+        bound = None if self.bound is None else np.asarray(self.bound, dtype=np.float64).tobytes()
+        key = (bound, normal_form, term_limit)
+        shape, tape = self._tapes.get(key, (None, None))
+        if shape is not self.shape:
+            tape = compile_scene(self, normal_form, term_limit)
+            self._tapes[key] = (self.shape, tape)
+        return tape
 
     def normalize(self, term_limit: int | None = None):
         """The scene's :class:`~clcsg.compile.dnf.Dnf`."""

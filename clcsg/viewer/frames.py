@@ -136,7 +136,9 @@ def raytrace_camera(context, model, camera, budget: float = RAYTRACE_BUDGET) -> 
     per_pixel = max(times[2] - fixed, 0.0) / max(probe.width * probe.height - 1, 1)
     if fixed + per_pixel * w * h <= budget:
         return camera
-    scale = math.sqrt(max(budget - fixed, 0.0) / per_pixel / (w * h))
+    # timing noise can make the probe no slower than one pixel: then only the fixed cost is
+    # known, and past the budget the smallest (probe) size is the answer
+    scale = math.sqrt(max(budget - fixed, 0.0) / per_pixel / (w * h)) if per_pixel > 0 else 0.0
     return camera.resized(max(probe.width, int(w * scale)), max(probe.height, int(h * scale)))
 
 

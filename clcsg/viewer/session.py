@@ -49,23 +49,6 @@ def parse_radius(value) -> Radius | None:
     return Radius.parse(value)
 
 
-def compiled_once(scene):
-    """``scene`` as a :class:`~clcsg.Scene` that compiles once per normal form: the viewer
-    needs the tape (its bound gives the automatic radius) before sampling, sampling compiles
-    the scene again, and a radius change samples the same scene once more."""
-    from ..model.scene import Scene
-
-    class CompiledOnce(Scene):
-        def compile(self, normal_form: str = "tree", term_limit: int | None = None):
-            key = (normal_form, term_limit)
-            if key not in tapes:
-                tapes[key] = Scene.compile(self, normal_form, term_limit)
-            return tapes[key]
-
-    tapes: dict = {}
-    return CompiledOnce(scene.shape, scene.bound, scene.source)
-
-
 @dataclass
 class Model:
     """One sampled version of the scene."""
@@ -153,7 +136,7 @@ class Session:
         ClcsgError (the model and ``error`` stay as they were)."""
         times: dict = {}
         t = time.perf_counter()
-        scene = compiled_once(self.read())
+        scene = self.read()
         times["load_s"] = time.perf_counter() - t
         model = self.sample(scene, self.radius, times)
         self.model, self.error = model, None
