@@ -13,6 +13,7 @@ Exit codes (documented in README.md):
 3     bad input: scene file syntax or content, singular transform, ...
 4     OpenCL device problem: no platform, unknown device, missing feature
 5     a limit was hit: DNF term limit, resource guard
+6     an output could not be written (full disk, no permission, ...)
 ====  ==================================================================
 """
 
@@ -64,6 +65,13 @@ class LimitError(ClcsgError):
     """A configured limit was passed (DNF terms, estimated memory)."""
 
     exit_code = 5
+
+
+class OutputError(ClcsgError):
+    """An output file could not be written (full disk, no permission, a read-only folder);
+    the previous file under that name, if any, is left as it was."""
+
+    exit_code = 6
 
 
 class DnfLimitError(LimitError):

@@ -238,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
               clcsg info --help                     # options of a subcommand
 
             exit codes: 0 ok, 1 internal error, 2 bad command line, 3 bad input,
-                        4 OpenCL device problem, 5 a limit was hit
+                        4 OpenCL device problem, 5 a limit was hit, 6 an output could not be written
             """
         ).strip(),
         formatter_class=_Formatter,

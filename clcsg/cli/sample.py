@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import textwrap
 
 from ..errors import UsageError
+from ..io.outputs import write_json
 from .app import (UNRESOLVED_HELP, _jsonable, add_subcommand, bound_diagonal, parse_bound, parse_floats, parse_radius,
                   positive_int)
 
@@ -65,12 +65,7 @@ def parse_positive(text, name) -> float:
 
 
 def write_stats(path, stats) -> None:
-    try:
-        with open(path, "w", encoding="utf-8") as f:
-            json.dump(stats, f, indent=2, default=_jsonable)
-            f.write("\n")
-    except OSError as e:
-        raise UsageError(f"--stats {path}: cannot write: {e.strerror or e}") from None
+    write_json(path, stats, "statistics", default=_jsonable)
 
 
 def run(args) -> int:

@@ -7,18 +7,25 @@ JPEG (the alpha channel is dropped: transparent pixels show the background colou
 again, :mod:`clcsg.io.samples_npz`).  Per-pixel arrays are ``.npy``, statistics ``.json``.
 
 :func:`check_output` raises a one-line :class:`~clcsg.errors.UsageError` for an unknown
-extension or a missing directory, so that ``clcsg sample -o x.png`` fails at once instead of
-after the sampling.
+extension, a missing folder or a path that is a directory, and an
+:class:`~clcsg.errors.OutputError` for a folder this process cannot write in, so that
+``clcsg sample -o x.png`` fails at once instead of after the sampling.
+
+Every writer here goes through :func:`clcsg.io.atomic.atomic_open`: a temporary in the
+target's folder, synced, then renamed over the target; a failure (full disk, ...) is an
+:class:`~clcsg.errors.OutputError` (exit code 6) and leaves the old file intact.
 """
 
 from __future__ import annotations
 
 import io
+import json
 import os
 
 import numpy as np
 
-from ..errors import UsageError
+from ..errors import OutputError, UsageError
+from .atomic import atomic_open
 
 #: image extension -> Pillow format
 IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP", ".tif": "TIFF", ".tiff": "TIFF"}
@@ -50,6 +57,11 @@ def check_output(path, formats, what: str, option: str | None = "-o") -> str:
     folder = os.path.dirname(os.path.abspath(p))
     if not os.path.isdir(folder):
         raise UsageError(f"{where}: cannot write there: no such directory {os.path.dirname(p) or '.'!r}")
+    if os.path.isdir(p):
+        raise UsageError(f"{where}: is a directory; give a file name such as {os.path.join(p, 'out' + ext)}")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"{where}: cannot write there: no permission to create files in "
+                          f"{os.path.dirname(p) or '.'!r}")
     return formats[ext]
 
 
@@ -72,10 +84,25 @@ def write_image(rgba: np.ndarray, path) -> None:
     """Write an (H, W, 4) uint8 image in the format of ``path``'s extension."""
     p = os.fspath(path)
     fmt = check_image_output(p, None)
+    im = _pil_image(rgba, fmt)
     try:
-        _pil_image(rgba, fmt).save(p, format=fmt, **_SAVE_OPTIONS.get(fmt, {}))
-    except (OSError, ValueError, KeyError) as e:
-        raise UsageError(f"{p}: cannot write image: {e}") from None
+        with atomic_open(p, "wb", "image") as f:
+            im.save(f, format=fmt, **_SAVE_OPTIONS.get(fmt, {}))
+    except (ValueError, KeyError) as e:
+        raise OutputError(f"{p}: cannot write image: {e}") from None
+
+
+def write_npy(path, array: np.ndarray, what: str = "array") -> None:
+    """Write ``array`` as a ``.npy`` file, atomically."""
+    with atomic_open(path, "wb", what) as f:
+        np.save(f, np.asarray(array), allow_pickle=False)
+
+
+def write_json(path, obj, what: str = "statistics", **dump_options) -> None:
+    """Write ``obj`` as indented JSON (and a final newline), atomically."""
+    with atomic_open(path, "w", what) as f:
+        json.dump(obj, f, indent=2, **dump_options)
+        f.write("\n")
 
 
 def png_bytes(rgba: np.ndarray) -> bytes:

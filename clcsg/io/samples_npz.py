@@ -23,6 +23,7 @@ import os
 import numpy as np
 
 from ..errors import SceneError
+from .atomic import atomic_open
 
 FORMAT = "clcsg-samples"
 VERSION = 1
@@ -41,8 +42,6 @@ def _json(obj) -> np.ndarray:
 def save_samples(samples, path) -> None:
     """Write ``samples`` (with their tape) as an ``.npz`` archive at ``path`` (the name is
     used as given)."""
-    from ..errors import UsageError
-
     t = samples.tape
     insts = list(t.instances)
     lits = [np.asarray(inst.literals, dtype=np.int64).reshape(-1, 2) for inst in insts]
@@ -65,50 +64,200 @@ def save_samples(samples, path) -> None:
         origin=np.asarray(samples.packed.origin, dtype=np.float64), real=np.array(np.dtype(samples.packed.real).str),
         stats=_json(samples.stats),
     )
-    p = os.fspath(path)
+    with atomic_open(path, "wb", "samples") as f:
+        np.savez(f, **data)
+
+
+#: arrays every sample file has (``instance_kinds`` is informational and optional)
+REQUIRED = (*ARRAYS, "format", "version", "radius", "tape_ops", "tape_n_regs", "tape_quadrics", "tape_bound",
+            "tape_shape", "tape_stats", "tape_empty", "instance_literals", "instance_literal_counts",
+            "instance_colors", "instance_matrices", "instance_boxes", "origin", "real", "stats")
+#: the device precisions a sample file may ask for
+REALS = ("<f8", "<f4")
+#: a sample file's arrays may take at most this fraction of the machine's free memory
+MEMORY_FRACTION = 0.5
+
+
+def _available_memory() -> float:
+    """Bytes of memory available to this process (MemAvailable; inf where unknown)."""
     try:
-        with open(p, "wb") as f:
-            np.savez(f, **data)
-    except OSError as e:
-        raise UsageError(f"{p}: cannot write samples: {e.strerror or e}") from None
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return float("inf")
 
 
-def load_samples(path):
-    """The :class:`~clcsg.sampling.samples.Samples` saved by :func:`save_samples`."""
-    from ..cl.records import pack
-    from ..compile.tape import Instance, Tape
-    from ..sampling.samples import Samples
+def _read_arrays(p: str) -> dict:
+    """Every array of the archive at ``p``; SceneError for a file that is not one."""
+    import zipfile
+    import zlib
 
-    p = os.fspath(path)
     try:
         z = np.load(p, allow_pickle=False)
     except FileNotFoundError:
         raise SceneError(f"{p}: no such file") from None
-    except (OSError, ValueError) as e:
-        raise SceneError(f"{p}: not a sample file (.npz): {e}") from None
+    except IsADirectoryError:
+        raise SceneError(f"{p}: is a directory, not a sample file (.npz)") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise SceneError(f"{p}: not a sample file (.npz): {' '.join(str(e).split())}") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise SceneError(f"{p}: not a sample file (.npz): it holds a single array")
     with z:
-        if "format" not in z.files or str(z["format"]) != FORMAT:
-            raise SceneError(f"{p}: not a clcsg sample file (it has no \"format\": {FORMAT!r} entry)")
-        if int(z["version"]) > VERSION:
-            raise SceneError(f"{p}: sample file version {int(z['version'])} is newer than this clcsg reads ({VERSION})")
-        missing = [k for k in (*ARRAYS, "tape_ops", "tape_quadrics", "instance_literals") if k not in z.files]
-        if missing:
-            raise SceneError(f"{p}: incomplete sample file: no {missing[0]!r}")
-        counts = z["instance_literal_counts"]
-        starts = np.concatenate([[0], np.cumsum(counts)])
-        lits, colors, mats, boxes = z["instance_literals"], z["instance_colors"], z["instance_matrices"], z["instance_boxes"]
-        instances = []
-        for k in range(len(counts)):
-            box = boxes[k]
-            instances.append(Instance(
-                index=k, node=None, matrix=mats[k].copy(),
-                literals=[(int(q), int(s)) for q, s in lits[starts[k]:starts[k + 1]]],
-                color=tuple(float(c) for c in colors[k]),
-                box=None if np.isnan(box).any() else (box[0].copy(), box[1].copy())))
-        tape = Tape(ops=z["tape_ops"].astype(np.int32), n_regs=int(z["tape_n_regs"]), quadrics=z["tape_quadrics"].copy(),
-                    instances=instances, bound=z["tape_bound"].copy(), shape=str(z["tape_shape"]),
-                    stats=json.loads(str(z["tape_stats"])), empty=bool(z["tape_empty"]))
-        arrays = {name: z[name].copy() for name in ARRAYS}
-        packed = pack(tape, np.dtype(str(z["real"])), z["origin"].copy())
-        return Samples(**arrays, radius=float(z["radius"]), tape=tape, packed=packed,
-                       stats=json.loads(str(z["stats"])))
+        size = sum(info.file_size for info in z.zip.infolist())
+        if size > MEMORY_FRACTION * _available_memory():
+            from ..errors import LimitError
+
+            raise LimitError(f"{p}: its arrays take {size / 2**20:.0f} MiB, more than half of the memory "
+                             "available; free memory or use a machine with more")
+        out = {}
+        for name in z.files:
+            try:
+                out[name] = z[name]
+            except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError) as e:
+                raise SceneError(f"{p}: array {name!r} cannot be read (truncated or damaged file): "
+                                 f"{' '.join(str(e).split())}") from None
+    return out
+
+
+def _check_header(chk) -> None:
+    if "format" not in chk.arrays or chk.arrays["format"].dtype.kind != "U" or str(chk.arrays["format"]) != FORMAT:
+        raise SceneError(f"{chk.where}: not a clcsg sample file (it has no \"format\": {FORMAT!r} entry)")
+    version = chk.scalar("version", "int")
+    if version > VERSION:
+        chk.fail("version", f"sample file version {version} is newer than this clcsg reads ({VERSION})")
+    if version < 1:
+        chk.fail("version", f"unknown sample file version {version}")
+    missing = [k for k in REQUIRED if k not in chk.arrays]
+    if missing:
+        chk.fail(missing[0], "missing (an incomplete or damaged sample file)")
+
+
+def _check_json(chk, name: str) -> dict:
+    text = chk.scalar(name, "str")
+    try:
+        v = json.loads(text)
+    except ValueError:
+        chk.fail(name, "is not JSON")
+    if not isinstance(v, dict):
+        chk.fail(name, "expected a JSON object")
+    return v
+
+
+def _check_tape(chk) -> dict:
+    """The tape's arrays, checked (see :mod:`clcsg.io.validate`)."""
+    from .validate import MAX_REGS, check_programs, max_register
+
+    ops = chk.get("tape_ops", "int", (None, 4))
+    n_regs = chk.scalar("tape_n_regs", "int")
+    quadrics = chk.finite("tape_quadrics", chk.get("tape_quadrics", "float", (None, 4, 4)))
+    if not np.allclose(quadrics, np.swapaxes(quadrics, 1, 2), rtol=0, atol=1e-9 * max(1.0, float(np.abs(quadrics).max(initial=0)))):
+        chk.fail("tape_quadrics", "quadric matrices must be symmetric")
+    used = max_register(ops) + 1
+    if not 1 <= n_regs <= MAX_REGS:
+        chk.fail("tape_n_regs", f"{n_regs} registers: expected 1 to {MAX_REGS}")
+    if n_regs != max(used, 1):
+        chk.fail("tape_n_regs", f"{n_regs} registers, but the tape writes {used}")
+    empty = chk.scalar("tape_empty", "bool")
+    if not len(ops) and not empty:
+        chk.fail("tape_ops", "a non-empty solid needs at least one instruction")
+    check_programs(chk, "tape_ops", ops, np.zeros(1 if len(ops) else 0, np.int64), np.array([len(ops)] * bool(len(ops))),
+                   n_regs, len(quadrics))
+    bound = chk.finite("tape_bound", chk.get("tape_bound", "float", (2, 3)))
+    if not empty and (bound[0] > bound[1]).any():
+        chk.fail("tape_bound", "lower corner above the upper corner")
+    shape = chk.scalar("tape_shape", "str")
+    if shape not in ("tree", "dnf"):
+        chk.fail("tape_shape", f"expected 'tree' or 'dnf', got {shape!r}")
+    return dict(ops=ops.astype(np.int32), n_regs=int(n_regs), quadrics=quadrics.astype(np.float64), bound=bound,
+                shape=shape, stats=_check_json(chk, "tape_stats"), empty=bool(empty))
+
+
+def _check_instances(chk, n_quadrics: int) -> list:
+    """(matrix, literals, color, box) per primitive instance, checked."""
+    counts = chk.get("instance_literal_counts", "int", (None,))
+    n = len(counts)
+    lits = chk.get("instance_literals", "int", (None, 2))
+    chk.in_range("instance_literal_counts", counts, 0, len(lits) + 1)
+    if int(counts.astype(np.int64).sum()) != len(lits):
+        chk.fail("instance_literal_counts", f"they add up to {int(counts.sum())}, but there are {len(lits)} literals")
+    chk.in_range("instance_literals quadrics", lits[:, 0], 0, n_quadrics, f" ({n_quadrics} quadrics)")
+    chk.signs("instance_literals signs", lits[:, 1])
+    colors = chk.finite("instance_colors", chk.get("instance_colors", "float", (n, 4)))
+    if ((colors < 0) | (colors > 1)).any():
+        chk.fail("instance_colors", "components must lie in [0, 1]")
+    mats = chk.finite("instance_matrices", chk.get("instance_matrices", "float", (n, 4, 4)))
+    boxes = chk.get("instance_boxes", "float", (n, 2, 3))
+    nan = np.isnan(boxes).reshape(n, -1)
+    if not (nan.all(axis=1) | np.isfinite(boxes).reshape(n, -1).all(axis=1)).all():
+        chk.fail("instance_boxes", "each box is all NaN (none) or finite")
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return [(mats[k].astype(np.float64), [(int(q), int(s)) for q, s in lits[starts[k]:starts[k + 1]]],
+             tuple(float(c) for c in colors[k]), None if nan[k].all() else (boxes[k, 0].astype(np.float64),
+                                                                               boxes[k, 1].astype(np.float64)))
+            for k in range(n)]
+
+
+def _check_samples(chk, n_quadrics: int, n_instances: int, n_regs: int) -> dict:
+    """The per-sample arrays, checked, in the dtypes :class:`Samples` uses."""
+    from .validate import check_programs, check_spans
+
+    pos = chk.finite("positions", chk.get("positions", "float", (None, 3)))
+    n = len(pos)
+    out = {"positions": pos.astype(np.float64),
+           "normals": chk.finite("normals", chk.get("normals", "float", (n, 3))).astype(np.float64)}
+    radii = chk.finite("radii", chk.get("radii", "float", (n,)))
+    if (radii <= 0).any():
+        chk.fail("radii", "splat radii must be positive")
+    out["radii"] = radii.astype(np.float64)
+    ints = {k: chk.get(k, "int", (n,)) for k in ("quadrics", "signs", "primitives", "clip_first", "clip_count")}
+    chk.in_range("quadrics", ints["quadrics"], 0, n_quadrics, f" ({n_quadrics} quadrics in the tape)")
+    chk.signs("signs", ints["signs"])
+    chk.in_range("primitives", ints["primitives"], -1 if n_instances else 0, max(n_instances, 0),
+                 f" ({n_instances} primitive instances)")
+    clip = chk.get("clip_ops", "int", (None, 4))
+    first, count = check_spans(chk, "clip programs (clip_first, clip_count)", ints["clip_first"],
+                               ints["clip_count"], len(clip))
+    check_programs(chk, "clip_ops", clip, first, count, n_regs, n_quadrics)
+    out.update({k: v.astype(np.int32) for k, v in ints.items()})
+    out["clip_ops"] = clip.astype(np.int32)
+    return out
+
+
+def load_samples(path):
+    """The :class:`~clcsg.sampling.samples.Samples` saved by :func:`save_samples`.
+
+    The file is untrusted: every array is checked (dtype, shape, finite values, every index
+    and count in range, the tape and clip programs well-formed: :mod:`clcsg.io.validate`)
+    before anything is packed for a device; anything else is a one-line
+    :class:`~clcsg.errors.SceneError` (exit code 3).
+    """
+    from ..cl.records import pack
+    from ..compile.tape import Instance, Tape
+    from ..sampling.samples import Samples
+    from .validate import Checker
+
+    p = os.fspath(path)
+    chk = Checker(_read_arrays(p), p)
+    _check_header(chk)
+    t = _check_tape(chk)
+    insts = _check_instances(chk, len(t["quadrics"]))
+    arrays = _check_samples(chk, len(t["quadrics"]), len(insts), t["n_regs"])
+    radius = chk.scalar("radius", "float")
+    if not (np.isfinite(radius) and radius > 0):
+        chk.fail("radius", f"must be a positive finite number, got {radius}")
+    origin = chk.finite("origin", chk.get("origin", "float", (3,))).astype(np.float64)
+    real = chk.scalar("real", "str")
+    if real not in REALS:
+        chk.fail("real", f"unknown precision {real!r} (expected one of {', '.join(REALS)})")
+    stats = _check_json(chk, "stats")
+    instances = [Instance(index=k, node=None, matrix=m, literals=lits, color=c, box=box)
+                 for k, (m, lits, c, box) in enumerate(insts)]
+    tape = Tape(instances=instances, **t)
+    try:
+        packed = pack(tape, np.dtype(real), origin)
+    except (SceneError, ValueError, ArithmeticError, np.linalg.LinAlgError) as e:
+        raise SceneError(f"{p}: tape_quadrics: {' '.join(str(e).split())}") from None
+    return Samples(**arrays, radius=float(radius), tape=tape, packed=packed, stats=stats)

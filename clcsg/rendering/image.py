@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import json
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import UsageError
+from ..io.outputs import png_bytes, write_image, write_json, write_npy
 
 
 @dataclass
@@ -46,14 +44,10 @@ class Image:
         """Write the color image; the format is the extension's: ``.png``, ``.jpg`` / ``.jpeg``
         (no alpha: the alpha channel is dropped), ``.webp`` (lossless) or ``.tif`` / ``.tiff``
         (see :mod:`clcsg.io.outputs`).  Another extension is a UsageError."""
-        from ..io.outputs import write_image
-
         write_image(self.rgba, path)
 
     def _repr_png_(self) -> bytes:
         """The image as PNG, for Jupyter and IPython."""
-        from ..io.outputs import png_bytes
-
         return png_bytes(self.rgba)
 
     def save_depth(self, path) -> None:
@@ -66,22 +60,11 @@ class Image:
 
     def save_stats(self, path) -> None:
         """Write the statistics as JSON."""
-        p = os.fspath(path)
-        try:
-            with open(p, "w", encoding="utf-8") as f:
-                json.dump(_jsonable(self.stats), f, indent=2, sort_keys=True)
-                f.write("\n")
-        except OSError as e:
-            raise UsageError(f"{p}: cannot write stats: {e.strerror or e}") from None
+        write_json(path, _jsonable(self.stats), "stats", sort_keys=True)
 
 
 def _save_npy(path, a) -> None:
-    p = os.fspath(path)
-    try:
-        with open(p, "wb") as f:
-            np.save(f, a)
-    except OSError as e:
-        raise UsageError(f"{p}: cannot write: {e.strerror or e}") from None
+    write_npy(path, a, "array")
 
 
 def _jsonable(v):
