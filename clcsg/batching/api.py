@@ -8,13 +8,14 @@ manifest row as it arrives, and show progress (scenes done, failed, samples per 
 from __future__ import annotations
 
 import datetime
+import json
 import os
 import time
 
-from ..errors import UsageError
+from ..errors import OutputError, UsageError
 from . import inputs as _inputs
 from .manifest import Manifest
-from .options import Options, Radius, require
+from .options import Options, Radius, file_digests, require
 from .outputs import queries_path, samples_path, view_path, write_files
 
 
@@ -49,9 +50,15 @@ class _Tally:
             self.samples += int(row.get("samples") or 0)
 
 
-def _finish_row(row: dict, job, options: Options, content_hash: str, attempts) -> dict:
+def _hash(job, options: Options, deps) -> str:
+    """The content hash of a job whose scene read the files ``deps`` (a list of paths)."""
+    return options.content_hash(job.digest, file_digests(deps))
+
+
+def _finish_row(row: dict, job, options: Options, attempts) -> dict:
     ok = row.get("status") == "ok"
-    row.update(hash=content_hash, attempts=attempts, skipped=False,
+    deps = json.loads(row["dependencies"]) if row.get("dependencies") else []
+    row.update(hash=_hash(job, options, deps), attempts=attempts, skipped=False,
                samples_file=samples_path(job.name, options.fmt) if ok else None,
                images=[view_path(job.name, k) for k in range(int(row.get("views") or 0))] if ok else [],
                queries_file=queries_path(job.name) if ok and options.queries else None,
@@ -59,15 +66,15 @@ def _finish_row(row: dict, job, options: Options, content_hash: str, attempts) -
     return row
 
 
-def _store(result, job, options: Options, outdir: str, content_hash: str, attempts) -> dict:
+def _store(result, job, options: Options, outdir: str, attempts) -> dict:
     """Write a result's files (atomically); its finished manifest row."""
     row = dict(result.row)
     if row.get("status") == "ok":
         try:
             write_files(outdir, result.files)
-        except OSError as e:
-            row.update(status="error", error=f"{outdir}: cannot write: {e.strerror or e}")
-    return _finish_row(row, job, options, content_hash, attempts)
+        except OutputError as e:
+            row.update(status="error", error=str(e), error_code=e.exit_code)
+    return _finish_row(row, job, options, attempts)
 
 
 def dask_address(scheduler, dask) -> str | None:
@@ -151,10 +158,11 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
         raise UsageError(f"{outdir}: cannot create the output folder: {e.strerror or e}") from None
     manifest = Manifest(outdir)
     tally = _Tally(len(jobs))
-    hashes = {job.name: options.content_hash(job.digest) for job in jobs}
     todo = []
     for job in jobs:
-        old = manifest.complete(job.name, hashes[job.name], redo_errors)
+        # a .scad program's error may come from a file it includes: never final
+        old = manifest.complete(job.name, lambda deps, job=job: _hash(job, options, deps),
+                                redo_errors or job.kind == ".scad")
         if old is None:
             todo.append(job)
         else:
@@ -166,8 +174,8 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
         try:
             if todo:
                 for job, result, attempts in _engine(todo, options, workers, address, retries):
-                    row = _store(result, job, options, outdir, hashes[job.name], attempts)
-                    manifest.add(row)
+                    row = _store(result, job, options, outdir, attempts)
+                    manifest.add(row, durable=True)
                     manifest.flush()
                     tally.count(row)
                     st.update(done=tally.done, note=tally.note(), ok=tally.ok, failed=tally.failed,

@@ -11,7 +11,10 @@ workers fails with ``KilledWorker`` and gets an error row.
 
 ``address`` is a scheduler's address (``tcp://host:8786``) or ``local:N``: a ``LocalCluster``
 of N worker processes with one thread each, started here and closed at the end (its
-allowed-failures set to ``retries``).
+allowed-failures set to ``retries``).  A local cluster's nannies run in this process and keep
+watching their workers as usual; the worker processes, children of this process, also end
+with it however it ends (:mod:`clcsg.batching.lifeline`: a parent-death signal and a watchdog
+on the parent's pipe, set up by :class:`DevicePlugin`).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import logging
 import uuid
 
 from ..errors import UsageError
+from .lifeline import die_with_parent
 from .local import died_row
 from .options import require
 from .task import Result, init_worker, run_job
@@ -39,10 +43,13 @@ class DevicePlugin(_WorkerPlugin):
 
     name = "clcsg-device"
 
-    def __init__(self, device=None):
+    def __init__(self, device=None, lifeline: bool = False):
         self.device = device
+        self.lifeline = lifeline
 
     def setup(self, worker):
+        if self.lifeline:
+            die_with_parent()
         init_worker(self.device)
 
 
@@ -84,7 +91,7 @@ def run(jobs, options, address: str, retries: int = 2):
     distributed = _distributed()
     client, cluster = _connect(address, retries)
     try:
-        client.register_plugin(DevicePlugin(options.device))
+        client.register_plugin(DevicePlugin(options.device, lifeline=cluster is not None))
         tag = uuid.uuid4().hex[:8]
         # query points go to every worker once, not with each task (scattered data is lost only
         # if every worker holding it dies; the options alone are small: sent with each task)

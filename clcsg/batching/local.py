@@ -1,6 +1,8 @@
 """The local engine: a process pool on this machine, one OpenCL context per worker process.
 
-Workers are started with the ``spawn`` method (a process forked after OpenCL was initialized
+Workers end when the driver ends, however it ends (:func:`clcsg.batching.lifeline.die_with_parent`:
+a parent-death signal and a watchdog on the driver's pipe), so a killed ``clcsg batch``
+leaves no worker holding memory and a device context.  Workers are started with the ``spawn`` method (a process forked after OpenCL was initialized
 in the parent may hang or crash in the driver) and open their device once, in the pool's
 initializer (:func:`clcsg.batching.task.init_worker`).  Results are yielded as scenes finish.
 
@@ -19,14 +21,17 @@ import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 
+from .lifeline import die_with_parent
 from .task import Result, init_worker, run_job
 
 _state = {"queue": None, "options": None}
 
 
-def _init(device, started, options) -> None:
-    """The pool's initializer: the device, the queue of started scenes and the batch options
-    (sent once per worker, not with every scene: query points may be large)."""
+def _init(driver_pid, device, started, options) -> None:
+    """The pool's initializer: the lifeline to the driver, the device, the queue of started
+    scenes and the batch options (sent once per worker, not with every scene: query points
+    may be large)."""
+    die_with_parent(driver_pid)
     _state["queue"], _state["options"] = started, options
     init_worker(device)
 
@@ -68,7 +73,7 @@ def run(jobs, options, workers: int | None = None, retries: int = 2):
         started = ctx.SimpleQueue()
         heard: set = set()
         pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx, initializer=_init,
-                                   initargs=(options.device, started, options))
+                                   initargs=(os.getpid(), options.device, started, options))
         broken = False
         try:
             futures = {pool.submit(_run, job): job for job in pending.values()}

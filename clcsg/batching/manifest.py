@@ -6,23 +6,33 @@ options (:meth:`clcsg.batching.options.Options.content_hash`) is *complete*: a r
 (``skipped`` true) instead of computing it again.  So is an error row of the same hash whose
 error follows from the scene and the options alone (``error_code`` 3, bad input, or 5, a limit),
 unless ``redo_errors``.  Anything else (no row, another hash, a file missing, a device error,
-a worker that died, an internal error) is run again.  The file is rewritten atomically (temporary file, then
-``os.replace``) at most every :data:`FLUSH_INTERVAL` seconds and at the end of the run; a run
-that dies in between loses at most those rows, whose scenes the next run redoes.  Rows of
-scenes that are not in the current run are kept.
+a worker that died, an internal error) is run again.
+
+Durability: every row is appended to the *journal* ``OUTDIR/manifest.journal`` (one JSON
+object per line, flushed and ``fsync`` ed) as soon as its scene's files are written, so a
+driver killed at any moment (SIGKILL, a power cut) loses no finished scene.  The Parquet file
+is rewritten atomically (temporary file, fsync, ``os.replace``) at most every
+:data:`FLUSH_INTERVAL` seconds and at the end of the run, after which the journal is emptied;
+a new run folds the journal into the rows it reads (later lines win; a last line cut short
+by the kill is ignored).  Rows of scenes that are not in the current run are kept.
 """
 
 from __future__ import annotations
 
+import datetime
 import io
+import json
 import os
 import time
 import warnings
 
+from ..errors import OutputError
 from .options import require
 from .outputs import write_atomic
 
 NAME = "manifest.parquet"
+#: the append-only journal of finished rows beside the manifest
+JOURNAL = "manifest.journal"
 #: least seconds between two rewrites of the manifest during a run
 FLUSH_INTERVAL = 2.0
 
@@ -59,6 +69,7 @@ COLUMNS = (
     ("samples_file", "string", "the samples file, relative to OUTDIR"),
     ("images", "list_string", "the view images, relative to OUTDIR"),
     ("queries_file", "string", "the point queries (x y z inside distance), relative to OUTDIR"),
+    ("dependencies", "string", "JSON list of the other files a .scad program read (includes, uses); in the hash"),
     ("worker", "string", "host:pid of the worker that ran it"),
     ("attempts", "int32", "times it was started (local engine; null under Dask)"),
     ("skipped", "bool", "true: complete from an earlier run, not computed again"),
@@ -81,29 +92,92 @@ def table(rows):
     return pa.Table.from_pylist([{c: r.get(c) for c in cols} for r in rows], schema=schema())
 
 
+def _json_value(v):
+    if isinstance(v, datetime.datetime):
+        return {"$time": v.isoformat()}
+    if hasattr(v, "item"):
+        return v.item()
+    return str(v)
+
+
+def _from_json(row: dict) -> dict:
+    t = row.get("finished")
+    if isinstance(t, dict) and "$time" in t:
+        row["finished"] = datetime.datetime.fromisoformat(t["$time"])
+    return row
+
+
+def _valid_row(row) -> bool:
+    """Is ``row`` (from a file) shaped like a manifest row?  A row that is not is dropped (its
+    scene is run again)."""
+    if not isinstance(row, dict) or not isinstance(row.get("name"), str) or not isinstance(row.get("hash"), str):
+        return False
+    strings = ("status", "samples_file", "queries_file", "dependencies", "error")
+    if any(row.get(k) is not None and not isinstance(row[k], str) for k in strings):
+        return False
+    images = row.get("images")
+    return images is None or (isinstance(images, list) and all(isinstance(x, str) for x in images))
+
+
 class Manifest:
-    """The manifest of ``outdir``: the rows read from an earlier run, updated as scenes finish."""
+    """The manifest of ``outdir``: the rows read from an earlier run (the Parquet file and its
+    journal), updated as scenes finish."""
 
     def __init__(self, outdir: str):
         self.outdir = outdir
         self.path = os.path.join(outdir, NAME)
+        self.journal = os.path.join(outdir, JOURNAL)
         self.rows: dict[str, dict] = {}
         self._flushed = 0.0
         self._dirty = False
+        self._journal_file = None
         if os.path.exists(self.path):
-            import pyarrow.parquet as pq
+            self._read_parquet()
+        self._read_journal()
 
+    def _read_parquet(self) -> None:
+        import pyarrow.parquet as pq
+
+        try:
+            rows = pq.read_table(self.path).to_pylist()
+        except Exception as e:  # a damaged manifest: every scene is run again
+            warnings.warn(f"{self.path}: cannot read the manifest of an earlier run ({type(e).__name__}: "
+                          f"{' '.join(str(e).split())}); running every scene again", stacklevel=3)
+            return
+        self.rows = {r["name"]: r for r in rows if _valid_row(r)}
+
+    def _read_journal(self) -> None:
+        """Fold the journal's rows in (later ones win; a damaged line is skipped)."""
+        try:
+            with open(self.journal, encoding="utf-8", errors="replace") as f:
+                lines = f.read().splitlines()
+        except OSError:
+            return
+        for line in lines:
             try:
-                self.rows = {r["name"]: r for r in pq.read_table(self.path).to_pylist()}
-            except Exception as e:  # a damaged manifest: every scene is run again
-                warnings.warn(f"{self.path}: cannot read the manifest of an earlier run ({type(e).__name__}: "
-                              f"{' '.join(str(e).split())}); running every scene again", stacklevel=2)
+                row = json.loads(line)
+            except ValueError:
+                continue  # the last line of a driver killed while appending it
+            if _valid_row(row):
+                self.rows[row["name"]] = _from_json(row)
+                self._dirty = True
 
-    def complete(self, name: str, content_hash: str, redo_errors: bool = False) -> dict | None:
+    def complete(self, name: str, content_hash, redo_errors: bool = False) -> dict | None:
         """The earlier row of scene ``name`` if it is complete for ``content_hash`` (see the
-        module docstring), else None."""
+        module docstring; a function of the row's recorded dependencies, a list of paths, or a
+        string), else None."""
         row = self.rows.get(name)
-        if row is None or row.get("hash") != content_hash:
+        if row is None:
+            return None
+        if callable(content_hash):
+            try:
+                deps = json.loads(row.get("dependencies") or "[]")
+            except ValueError:
+                return None
+            if not (isinstance(deps, list) and all(isinstance(d, str) for d in deps)):
+                return None
+            content_hash = content_hash(deps)
+        if row.get("hash") != content_hash:
             return None
         if row.get("status") != "ok":
             return row if not redo_errors and row.get("error_code") in FINAL_ERRORS else None
@@ -113,12 +187,23 @@ class Manifest:
             return None
         return row
 
-    def add(self, row: dict) -> None:
+    def add(self, row: dict, durable: bool = False) -> None:
+        """Record ``row``; with ``durable`` also append it to the journal (synced to disk)."""
         self.rows[row["name"]] = row
         self._dirty = True
+        if durable:
+            try:
+                if self._journal_file is None:
+                    self._journal_file = open(self.journal, "a", encoding="utf-8")
+                self._journal_file.write(json.dumps(row, default=_json_value) + "\n")
+                self._journal_file.flush()
+                os.fsync(self._journal_file.fileno())
+            except OSError as e:
+                raise OutputError(f"{self.journal}: cannot append to the journal: {e.strerror or e}") from None
 
     def flush(self, force: bool = False) -> None:
-        """Rewrite the file if rows changed (at most every FLUSH_INTERVAL s unless ``force``)."""
+        """Rewrite the file if rows changed (at most every FLUSH_INTERVAL s unless ``force``),
+        then empty the journal (its rows are in the file now)."""
         now = time.monotonic()
         if not self._dirty or (not force and now - self._flushed < FLUSH_INTERVAL):
             return
@@ -127,6 +212,11 @@ class Manifest:
         buf = io.BytesIO()
         pq.write_table(table(self.rows.values()), buf)
         write_atomic(self.path, buf.getvalue())
+        if self._journal_file is not None:
+            self._journal_file.close()
+            self._journal_file = None
+        if os.path.exists(self.journal):
+            os.unlink(self.journal)
         self._flushed = now
         self._dirty = False
 

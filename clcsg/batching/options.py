@@ -86,9 +86,28 @@ class Options:
         """Does every scene get point queries?"""
         return self.points is not None or self.random_points > 0
 
-    def content_hash(self, scene_digest: str) -> str:
-        """sha256 of the scene text's digest and :meth:`key`: equal hashes, equal outputs."""
-        return hashlib.sha256(f"{scene_digest}\n{self.key()}".encode()).hexdigest()
+    def content_hash(self, scene_digest: str, dependencies=()) -> str:
+        """sha256 of the scene text's digest, the files it reads (``dependencies``: a
+        ``.scad`` program's includes and uses, each (path, sha256 of its contents)), the clcsg
+        version and :meth:`key`: equal hashes, equal outputs."""
+        from .. import __version__
+
+        deps = "".join(f"{path}\0{digest}\n" for path, digest in dependencies)
+        text = f"{scene_digest}\n{deps}clcsg {__version__}\n{self.key()}"
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+def file_digests(paths) -> list[tuple[str, str]]:
+    """(path, sha256 of its contents) of every file; a file that cannot be read has the
+    digest ``missing`` (so its scene is not complete any more)."""
+    out = []
+    for path in paths:
+        try:
+            with open(path, "rb") as f:
+                out.append((path, hashlib.file_digest(f, "sha256").hexdigest()))
+        except OSError:
+            out.append((path, "missing"))
+    return out
 
 
 def _points(points) -> np.ndarray:

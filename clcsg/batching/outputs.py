@@ -26,10 +26,11 @@ from __future__ import annotations
 
 import os
 import tempfile
-import uuid
 
 import numpy as np
 
+from ..errors import OutputError
+from ..io.atomic import write_bytes
 from .options import FORMATS, require
 
 SAMPLES_DIR = "samples"
@@ -92,20 +93,15 @@ def samples_bytes(samples, fmt: str, metadata: dict | None = None) -> bytes:
 
 
 def write_atomic(path: str, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in its folder and ``os.replace``: a
-    process that dies leaves the old file or none, never a partial one (no fsync: a power cut
-    is not guarded against)."""
+    """Write ``data`` to ``path`` atomically and durably (:func:`clcsg.io.atomic.write_bytes`:
+    a temporary in its folder, fsync, ``os.replace``): a process that dies leaves the old file
+    or none, never a partial one.  :class:`~clcsg.errors.OutputError` if it cannot."""
     folder = os.path.dirname(path) or "."
-    os.makedirs(folder, exist_ok=True)
-    tmp = os.path.join(folder, f".{os.path.basename(path)}.{uuid.uuid4().hex[:12]}.tmp")
     try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"{folder}: cannot create the folder: {e.strerror or e}") from None
+    write_bytes(path, data, "batch output")
 
 
 def write_files(outdir: str, files: dict) -> None:

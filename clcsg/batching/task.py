@@ -86,7 +86,9 @@ def _crash_hook(name: str) -> None:
 
 
 def load_scene(job: Job):
-    """The Scene of a job, parsed from its text (a ``.scad`` file is run through openscad)."""
+    """(the Scene of a job, parsed from its text; the other files it read).  A ``.scad`` file
+    is run through openscad, which lists the files it includes and uses (``openscad -d``);
+    they go into the scene's content hash."""
     from ..errors import SceneError
 
     if job.error:
@@ -94,14 +96,20 @@ def load_scene(job: Job):
     if job.kind == ".json":
         from ..io.scenefile import loads_json
 
-        return loads_json(job.text, job.source)
+        return loads_json(job.text, job.source), []
     if job.kind == ".csg":
         from ..io.openscad import parse_csg
 
-        return parse_csg(job.text, job.source)
+        return parse_csg(job.text, job.source), []
+    if job.kind == ".scad":
+        from ..io.scad import load_scad
+
+        scene, deps = load_scad(job.path, with_dependencies=True)
+        own = os.path.abspath(job.path)
+        return scene, [d for d in deps if d != own]
     from ..model.scene import load
 
-    return load(job.path)
+    return load(job.path), []
 
 
 @dataclass
@@ -140,7 +148,8 @@ def _sample(job: Job, options: Options, ctx, row: dict):
     the compiled bound's diagonal; an empty solid has no bound and no radius (NaN)."""
     from ..sampling.sampler import sample
 
-    scene = load_scene(job)
+    scene, deps = load_scene(job)
+    row["dependencies"] = json.dumps(deps) if deps else None
     t0 = time.perf_counter()
     tape = scene.compile(options.normal_form)
     compile_s = time.perf_counter() - t0
