@@ -23,11 +23,12 @@ nest up to ``max_depth`` levels.
 
 from __future__ import annotations
 
-import bisect
 import math
 import re
+from sys import intern
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from ..errors import SceneError
 from .trampoline import run
@@ -97,15 +98,17 @@ def fmt(v, limit: int = 60) -> str:
 
 
 # -- tokens -----------------------------------------------------------------------------------
+#: one token after any whitespace and comments (one match per token); no token group matched
+#: means the end of the text or a character no token starts with
 _TOKEN_RE = re.compile(
     r"""
-    (?P<ws>[ \t\r\n\f\v]+)
-  | (?P<lcomment>//[^\n]*)
-  | (?P<bcomment>/\*.*?\*/)
-  | (?P<num>(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)
-  | (?P<id>\$?[A-Za-z_][A-Za-z0-9_]*)
-  | (?P<str>"(?:[^"\\]|\\.)*")
-  | (?P<punct>[()\[\]{},;=:!#%*+\-])
+    (?:[ \t\r\n\f\v]+ | //[^\n]* | /\*.*?\*/)*
+    (?:
+      (?P<num>(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)
+    | (?P<id>\$?[A-Za-z_][A-Za-z0-9_]*)
+    | (?P<str>"(?:[^"\\]|\\.)*")
+    | (?P<punct>[()\[\]{},;=:!#%*+\-])
+    )?
     """,
     re.VERBOSE | re.DOTALL | re.ASCII,
 )
@@ -127,8 +130,9 @@ def _unescape(body: str) -> str:
     return _ESCAPE_RE.sub(sub, body)
 
 
-@dataclass(frozen=True)
-class Token:
+class Token(NamedTuple):
+    """A token (a tuple: made millions of times for a large file, so kept cheap)."""
+
     kind: str  # num, str, id, punct, eof
     text: str
     value: object
@@ -145,16 +149,20 @@ def show(tok: Token) -> str:
 
 
 class Source:
-    """The text plus offset -> (line, column) and message formatting."""
+    """The text plus offset -> (line, column) and message formatting.  Lines are counted only
+    when a message needs them (no index of line starts is kept: memory stays that of the text)."""
 
     def __init__(self, text: str, name: str):
         self.text = text
         self.name = name
-        self._line_starts = [0] + [m.end() for m in re.finditer("\n", text)]
+        self._mark = (0, 1)  # (offset, its line): messages mostly come in text order
 
     def where(self, pos: int) -> str:
-        i = bisect.bisect_right(self._line_starts, pos) - 1
-        return f"{self.name}:{i + 1}:{pos - self._line_starts[i] + 1}"
+        at, line = self._mark if pos >= self._mark[0] else (0, 1)
+        line += self.text.count("\n", at, pos)
+        self._mark = (pos, line)
+        start = self.text.rfind("\n", 0, pos) + 1
+        return f"{self.name}:{line}:{pos - start + 1}"
 
     def error(self, pos: int, message: str) -> SceneError:
         return SceneError(one_line(f"{self.where(pos)}: {message}"))
@@ -170,48 +178,66 @@ def one_line(s: str) -> str:
     return " ".join(s.splitlines())
 
 
-def tokenize(src: Source) -> list[Token]:
+def _bad_character(src: Source, pos: int) -> SceneError:
     text = src.text
-    out: list[Token] = []
-    pos = 0
+    c = text[pos]
+    if text.startswith("/*", pos):
+        return src.error(pos, "syntax error: unterminated comment (missing '*/')")
+    if c == '"':
+        return src.error(pos, "syntax error: unterminated string (missing '\"')")
+    if c == "<" and text[max(0, pos - 64):pos].rstrip().endswith(("include", "use")):
+        return src.error(pos, f"syntax error: unexpected character '<': {SOURCE_HINT}")
+    return src.error(pos, f"syntax error: unexpected character {c!r}")
+
+
+#: distinct number texts whose float objects the tokenizer shares
+_NUMBER_CACHE = 1 << 16
+
+
+def tokenize(src: Source):
+    """The tokens of ``src``, one at a time (a generator: no list of tokens is built), the
+    last one of kind ``eof``."""
+    text = src.text
     n = len(text)
     match = _TOKEN_RE.match
-    while pos < n:
+    numbers: dict[str, float] = {}  # one float object per distinct number text (0, 1, ... repeat a lot)
+    pos = 0
+    while True:
         m = match(text, pos)
-        if m is None:
-            c = text[pos]
-            if text.startswith("/*", pos):
-                raise src.error(pos, "syntax error: unterminated comment (missing '*/')")
-            if c == '"':
-                raise src.error(pos, "syntax error: unterminated string (missing '\"')")
-            if c == "<" and text[:pos].rstrip().endswith(("include", "use")):
-                raise src.error(pos, f"syntax error: unexpected character '<': {SOURCE_HINT}")
-            raise src.error(pos, f"syntax error: unexpected character {c!r}")
         kind = m.lastgroup
-        t = m.group()
+        if kind is None:
+            end = m.end()
+            if end >= n:
+                break
+            raise _bad_character(src, end)
+        start = m.start(kind)
+        t = m.group(kind)
         if kind == "num":
-            out.append(Token("num", t, float(t), pos))
-        elif kind == "id":
-            out.append(Token("id", t, t, pos))
+            v = numbers.get(t)
+            if v is None:
+                if len(numbers) > _NUMBER_CACHE:
+                    numbers.clear()
+                v = numbers[t] = float(t)
+            yield Token("num", t, v, start)
         elif kind == "str":
-            out.append(Token("str", t, _unescape(t[1:-1]), pos))
-        elif kind == "punct":
-            out.append(Token("punct", t, t, pos))
+            yield Token("str", t, _unescape(t[1:-1]), start)
+        else:  # names and punctuation repeat: one string object each
+            t = intern(t)
+            yield Token(kind, t, t, start)
         pos = m.end()
-    out.append(Token("eof", "", None, n))
-    return out
+    yield Token("eof", "", None, n)
 
 
 
 # -- syntax tree ------------------------------------------------------------------------------
-@dataclass
+@dataclass(slots=True)
 class Arg:
     name: str | None
     value: object
     pos: int
 
 
-@dataclass
+@dataclass(slots=True)
 class Node:
     name: str
     args: list[Arg]
@@ -238,8 +264,8 @@ class Parser:
 
     def __init__(self, src: Source, max_node_depth: int, max_depth: int):
         self.src = src
-        self.toks = tokenize(src)
-        self.i = 0
+        self._tokens = tokenize(src)
+        self._ahead = [next(self._tokens)]  # the current token and at most one more
         self.depth = 0  # nested nodes
         self.vdepth = 0  # nested vectors and signs
         self.limits = {"depth": max_node_depth, "vdepth": max_depth}
@@ -247,19 +273,27 @@ class Parser:
     # token helpers
     @property
     def tok(self) -> Token:
-        return self.toks[self.i]
+        return self._ahead[0]
 
-    def peek(self, k: int = 1) -> Token:
-        return self.toks[min(self.i + k, len(self.toks) - 1)]
+    def peek(self) -> Token:
+        """The token after the current one."""
+        ahead = self._ahead
+        if len(ahead) == 1:
+            ahead.append(ahead[0] if ahead[0].kind == "eof" else next(self._tokens))
+        return ahead[1]
 
     def is_punct(self, p: str, tok: Token | None = None) -> bool:
         t = self.tok if tok is None else tok
         return t.kind == "punct" and t.text == p
 
     def advance(self) -> Token:
-        t = self.toks[self.i]
+        ahead = self._ahead
+        t = ahead[0]
         if t.kind != "eof":
-            self.i += 1
+            if len(ahead) == 1:
+                ahead[0] = next(self._tokens)
+            else:
+                del ahead[0]
         return t
 
     def fail(self, what: str, tok: Token | None = None):
