@@ -67,6 +67,7 @@ import numpy as np
 from ..errors import SceneError
 from ..model.csg import Difference, Intersection, Shape, Transformed, Union
 from ..model.scene import Scene
+from .budget import CSG_FACTOR, check_file, check_input
 from .colors import NAMED_COLORS, ColorError, from_string
 from .openscad_tokens import SOURCE_HINT, UNDEF, Node, OpenScadWarning, Parser, Source, fmt, is_num
 from .trampoline import run
@@ -450,6 +451,7 @@ def parse_csg(text: str, source: str = "<string>") -> Scene:
         raise SceneError(f"{source}: expected the text of a .csg file, got {type(text).__name__}")
     if text.startswith("\ufeff"):
         text = text[1:]
+    check_input(str(source), len(text), CSG_FACTOR)
     try:
         src = Source(text, str(source))
         nodes = Parser(src, MAX_NODE_DEPTH, MAX_DEPTH).parse_file()
@@ -469,6 +471,7 @@ def parse_csg(text: str, source: str = "<string>") -> Scene:
 def load_csg(path) -> Scene:
     """Load an OpenSCAD ``.csg`` file (``openscad -o model.csg model.scad``)."""
     p = os.fspath(path)
+    check_file(p, CSG_FACTOR)
     try:
         with open(p, "rb") as f:
             data = f.read()

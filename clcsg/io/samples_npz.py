@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .atomic import atomic_open
+from .budget import available_memory
 
 FORMAT = "clcsg-samples"
 VERSION = 1
@@ -78,18 +79,6 @@ REALS = ("<f8", "<f4")
 MEMORY_FRACTION = 0.5
 
 
-def _available_memory() -> float:
-    """Bytes of memory available to this process (MemAvailable; inf where unknown)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return float("inf")
-
-
 def _read_arrays(p: str) -> dict:
     """Every array of the archive at ``p``; SceneError for a file that is not one."""
     import zipfile
@@ -107,7 +96,7 @@ def _read_arrays(p: str) -> dict:
         raise SceneError(f"{p}: not a sample file (.npz): it holds a single array")
     with z:
         size = sum(info.file_size for info in z.zip.infolist())
-        if size > MEMORY_FRACTION * _available_memory():
+        if size > MEMORY_FRACTION * available_memory():
             from ..errors import LimitError
 
             raise LimitError(f"{p}: its arrays take {size / 2**20:.0f} MiB, more than half of the memory "

@@ -61,6 +61,7 @@ from ..errors import SceneError, TransformError
 from ..model import solids
 from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.scene import Scene
+from .budget import JSON_FACTOR, check_file, check_input
 from .colors import ColorError, parse_color
 from .scene_schema import FORMAT_VERSION, TOP_KEYS, TRANSFORM_STEPS, UNARY, join, jtype, key, scene_schema, suggest
 from .trampoline import run
@@ -87,6 +88,7 @@ SAVE_DEPTH = 100
 def load_json(path) -> Scene:
     """Load and validate a ``.json`` scene file."""
     p = os.fspath(path)
+    check_file(p, JSON_FACTOR)
     try:
         with open(p, encoding="utf-8-sig") as f:
             text = f.read()
@@ -107,6 +109,8 @@ def loads_json(text: str, source: str = "<string>") -> Scene:
 def parse_json(text: str, source: str = "<string>") -> Any:
     """Strict JSON parsing: syntax errors with line and column; NaN, Infinity and duplicate
     keys are kept as markers that :func:`scene_from_dict` reports with their JSON path."""
+    if isinstance(text, str):
+        check_input(source, len(text), JSON_FACTOR)
     try:
         return json.loads(text, parse_constant=_BadConstant, object_pairs_hook=_object)
     except json.JSONDecodeError as e:
@@ -139,13 +143,11 @@ def dumps(data) -> str:
 
 def save_json(scene, path) -> None:
     """Write a Scene (or a bare Shape) as a ``.json`` scene file."""
-    p = os.fspath(path)
+    from .atomic import atomic_open
+
     text = dumps(scene_to_dict(scene))
-    try:
-        with open(p, "w", encoding="utf-8") as f:
-            f.write(text)
-    except OSError as e:
-        raise SceneError(f"{p}: cannot write: {e.strerror or e}") from None
+    with atomic_open(path, "w", "scene") as f:
+        f.write(text)
 
 
 # -- JSON parsing helpers -----------------------------------------------------------------------
