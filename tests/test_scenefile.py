@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import clcsg
 from clcsg.model import csg, solids
 from clcsg.io import scenefile
-from clcsg.errors import DnfLimitError, SceneError
+from clcsg.errors import DnfLimitError, OutputError, SceneError
 from clcsg.model.scene import Scene
 from strategies import any_primitives, affine_maps, shapes, shared_nodes
 
@@ -212,7 +212,7 @@ def test_dumps_is_readable_json():
 
 
 def test_save_errors(tmp_path):
-    with pytest.raises(SceneError, match="cannot write"):
+    with pytest.raises(OutputError, match="cannot write"):  # a failed write: exit code 6
         scenefile.save_json(solids.box(), tmp_path / "missing-dir" / "x.json")
     with pytest.raises(SceneError, match="expected a Scene or a Shape"):
         scenefile.scene_to_dict("box")

@@ -235,3 +235,66 @@ def test_ply_reader_refuses_damaged_files(tmp_path, reference):
         (tmp_path / "bad.ply").write_bytes(bad)
         with pytest.raises(SceneError, match=why):
             read_samples(tmp_path / "bad.ply")
+
+
+# -- huge scene files ---------------------------------------------------------------------------
+
+_MEASURE = """
+import os, resource, sys
+from clcsg.model.scene import load
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+load(sys.argv[1])
+print((resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) * 1024 / os.path.getsize(sys.argv[1]))
+"""
+
+
+def _holes_csg(path, n: int) -> None:
+    """An OpenSCAD export of a plate with ``n`` holes and pins (about 190 bytes per item)."""
+    rng = np.random.default_rng(5)
+    with open(path, "w") as f:
+        f.write("group() {\n\tdifference() {\n\t\tcube(size = [100, 100, 10], center = false);\n")
+        for k, (x, y) in enumerate(rng.uniform(0, 100, (n, 2))):
+            r = 0.3 + 0.001 * (k % 50)
+            f.write(f"\t\tmultmatrix([[1, 0, 0, {x:.6g}], [0, 1, 0, {y:.6g}], [0, 0, 1, -1], [0, 0, 0, 1]]) {{\n"
+                    f"\t\t\tcylinder($fn = 0, $fa = 12, $fs = 2, h = 12, r1 = {r:g}, r2 = {r:g}, center = false);\n"
+                    "\t\t}\n")
+        f.write("\t}\n}\n")
+
+
+def _holes_json(path, n: int) -> None:
+    rng = np.random.default_rng(5)
+    items = ['{"box": {"size": [100, 100, 10]}}'] + [
+        '{"cylinder": {"height": 12, "radius": %g}, "transform": [{"translate": [%.6g, %.6g, 0]}]}'
+        % (0.3 + 0.001 * (k % 50), x, y) for k, (x, y) in enumerate(rng.uniform(0, 100, (n, 2)))]
+    with open(path, "w") as f:
+        f.write('{"clcsg": 1, "root": {"difference": [\n' + ",\n".join(items) + "\n]}}\n")
+
+
+@pytest.mark.parametrize("ext,make,factor", [(".csg", _holes_csg, "CSG_FACTOR"), (".json", _holes_json, "JSON_FACTOR")])
+def test_scene_readers_stay_within_the_memory_the_guard_assumes(tmp_path, ext, make, factor):
+    """Peak RSS growth while loading a ~1 MB file, per byte of the file, is within the factor
+    the up-front memory guard uses (so the guard's estimate is an upper bound)."""
+    from clcsg.io import budget
+
+    path = str(tmp_path / f"big{ext}")
+    make(path, 5000)
+    env = {**os.environ, "PYTHONPATH": ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    r = subprocess.run([sys.executable, "-c", _MEASURE, path], capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr
+    assert float(r.stdout) <= getattr(budget, factor), f"{float(r.stdout):.1f} bytes of memory per byte of {ext}"
+
+
+def test_a_scene_larger_than_memory_is_refused_up_front(tmp_path, monkeypatch):
+    from clcsg.errors import LimitError
+    from clcsg.io import budget
+    from clcsg.model.scene import load
+
+    path = tmp_path / "big.csg"
+    _holes_csg(path, 200)
+    monkeypatch.setattr(budget, "available_memory", lambda: 1e5)
+    with pytest.raises(LimitError, match=r"big\.csg: reading this .* needs about .* of memory, more than") as e:
+        load(path)
+    assert e.value.exit_code == 5
+    (tmp_path / "big.json").write_text('{"clcsg": 1, "root": {"sphere": {"radius": 1}}}' + " " * 100_000)
+    with pytest.raises(LimitError, match="big.json"):
+        load(tmp_path / "big.json")

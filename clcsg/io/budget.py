@@ -18,7 +18,7 @@ from ..errors import LimitError
 #: peak bytes of memory per byte of a .csg file while it is read into a Scene
 CSG_FACTOR = 25
 #: peak bytes of memory per byte of a .json scene file while it is read into a Scene
-JSON_FACTOR = 35
+JSON_FACTOR = 50
 
 
 def available_memory() -> float:
