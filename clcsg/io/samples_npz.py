@@ -246,7 +246,11 @@ def load_samples(path):
                  for k, (m, lits, c, box) in enumerate(insts)]
     tape = Tape(instances=instances, **t)
     try:
-        packed = pack(tape, np.dtype(real), origin)
+        with np.errstate(all="ignore"):  # an overflow is reported below, as one error
+            packed = pack(tape, np.dtype(real), origin)
     except (SceneError, ValueError, ArithmeticError, np.linalg.LinAlgError) as e:
         raise SceneError(f"{p}: tape_quadrics: {' '.join(str(e).split())}") from None
+    coef = packed.quadrics
+    if not all(np.isfinite(coef[f]).all() for f in coef.dtype.names) or not np.isfinite(packed.local_matrices).all():
+        chk.fail("tape_quadrics", "too large: the quadrics overflow in device coordinates (about the origin)")
     return Samples(**arrays, radius=float(radius), tape=tape, packed=packed, stats=stats)

@@ -9,7 +9,8 @@ reason.
 Tapes (rows ``(op, out, a, b)``, :mod:`clcsg.compile.tape`) are *well-formed* for ``n_regs``
 registers and ``n_quadrics`` quadrics when every op is known, every register written or read
 is in ``[0, n_regs)``, every LEAF names a quadric in ``[0, n_quadrics)`` with sign +1 or -1,
-and every register an AND, OR or COPY reads was written by an earlier row of the same
+CONST holds 0 or 1, the unused operand of COPY and CONST is 0 (every field is checked, as
+the tape pruner writes them), and every register an AND, OR or COPY reads was written by an earlier row of the same
 program (:func:`check_programs`, vectorized: sort by (program, register), first writer per
 key, one binary search per read).  The kernels size their private register files with
 ``n_regs`` (``TAPE_REGS``), so it is bounded by :data:`MAX_REGS`.
@@ -97,6 +98,9 @@ def check_programs(chk: Checker, name: str, ops: np.ndarray, first, count, n_reg
     chk.signs(f"{name} leaf signs", b[leaf])
     binary = (op == OP_AND) | (op == OP_OR)
     unary = op == OP_COPY
+    const = op == OP_CONST
+    chk.in_range(f"{name} constants", a[const], 0, 2, " (CONST takes 0 or 1)")
+    chk.in_range(f"{name} unused operands", b[unary | const], 0, 1, " (COPY and CONST rows have b = 0)")
     reads = np.concatenate([np.flatnonzero(binary | unary), np.flatnonzero(binary)])
     regs = np.concatenate([a[binary | unary], b[binary]])
     chk.in_range(f"{name} operand registers", regs, 0, n_regs, f" (n_regs = {n_regs})")
