@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import GeneratorType
 
 import numpy as np
@@ -130,9 +130,6 @@ _PARAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 @dataclass
 class _Evaluator:
     src: Source
-    #: primitives made so far, by (factory, parameters, color): equal primitives are one object
-    #: (a shared leaf of the graph: exports repeat the same hole or bolt many times over)
-    primitives: dict = field(default_factory=dict)
 
     def warn(self, pos: int, message: str):
         self.src.warn(pos, message)
@@ -341,20 +338,10 @@ class _Evaluator:
     def _make(self, node, factory, ctx, **params):
         from ..model import solids
 
-        key = (factory, ctx.color, *sorted(params.items()))
         try:
-            made = self.primitives.get(key)
-        except TypeError:  # an unhashable parameter: not shared
-            key = made = None
-        if made is not None:
-            return made
-        try:
-            made = getattr(solids, factory)(color=ctx.color, **params)
+            return getattr(solids, factory)(color=ctx.color, **params)
         except (SceneError, ValueError, ArithmeticError, TypeError) as e:
             raise self.src.error(node.pos, f"{node.name}(): {e}") from None
-        if key is not None:
-            self.primitives[key] = made
-        return made
 
     def n_cube(self, node, ctx):
         self._no_children(node)
