@@ -16,7 +16,7 @@ import os
 from ..errors import LimitError
 
 #: peak bytes of memory per byte of a .csg file while it is read into a Scene
-CSG_FACTOR = 25
+CSG_FACTOR = 30
 #: peak bytes of memory per byte of a .json scene file while it is read into a Scene
 JSON_FACTOR = 50
 

@@ -204,9 +204,11 @@ class _Evaluator:
     def children(self, node: Node, ctx: _Ctx):
         """The children that take part (not disabled, not background), evaluated."""
         out = []
-        for c in node.children:
+        kids = node.children
+        for i, c in enumerate(kids):
             if not (c.disabled or c.background):
                 out.append((yield (c, ctx)))
+            kids[i] = None  # evaluated: its syntax tree is garbage now (memory stays near the file's size)
         return out
 
     def union_of(self, nodes: list[Node], ctx: _Ctx) -> Shape | None:
