@@ -15,7 +15,7 @@ from collections import Counter
 
 import numpy as np
 
-from .csg import Complement, Primitive, Shape, Union, walk
+from .csg import Complement, Intersection, Primitive, Shape, Union
 
 _ORDER = ("plane", "cylinder", "elliptic cylinder", "cone", "sphere", "ellipsoid", "quadric")
 
@@ -23,11 +23,13 @@ _ORDER = ("plane", "cylinder", "elliptic cylinder", "cone", "sphere", "ellipsoid
 class Construction(Union):
     __slots__ = ("label", "surfaces", "vertices", "kind")
 
-    def __init__(self, kind: str, label: str, body: Shape, vertices=None):
+    def __init__(self, kind: str, label: str, body: Shape, vertices=None, box=None):
+        self.surfaces = count_surfaces(body)
+        if box is not None:
+            body = bounded(body, *box)
         super().__init__([body])
         self.kind = kind
         self.label = label
-        self.surfaces = count_surfaces(body)
         self.vertices = None if vertices is None else np.asarray(vertices, dtype=np.float64)
 
     def describe(self) -> str:
@@ -66,12 +68,34 @@ def _key(m):
 
 
 def count_surfaces(shape: Shape) -> dict:
-    seen = {}
-    for node in walk(shape):
+    """Unique surfaces by type, bounding boxes (:func:`bounded`) left out."""
+    seen, done, stack = {}, set(), [shape]
+    while stack:
+        node = stack.pop()
+        if id(node) in done:
+            continue
+        done.add(id(node))
+        stack.extend(node.operands[:1] if isinstance(node, Bounded) else node.children())
         if isinstance(node, Primitive):
             for q in node.quadrics():
                 seen.setdefault(_key(q.matrix), surface_type(q.matrix))
     return dict(Counter(seen.values()))
+
+
+class Bounded(Intersection):
+    """A body and the box around it that only serves the bounds (see :func:`bounded`)."""
+
+
+def bounded(body: Shape, lo, hi) -> Shape:
+    """``body`` inside its bounding box ``lo``..``hi`` grown by 1/1000 of the diagonal (and a
+    little more than rounding), so that the box's planes never reach the surface: the box only
+    gives the compile step's bounds (which are boxes of single literals, and the half-spaces
+    and cones of a construction are unbounded one by one) a finite start."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    grow = 1e-3 * np.linalg.norm(hi - lo) + 1e-9 * np.abs(np.r_[lo, hi]).max() + 1e-300
+    lo, hi = lo - grow, hi + grow
+    box = Primitive("box", {"size": (hi - lo).tolist(), "center": ((hi + lo) / 2).tolist()})
+    return Bounded([body, box])
 
 
 # -- leaves ----------------------------------------------------------------------------------

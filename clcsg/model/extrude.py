@@ -72,7 +72,12 @@ def extrude(profile: Profile, height=1.0, center=False, scale=1.0, twist=0.0, co
         lp = profile.loops[0]
         top = lp * s
         verts = np.vstack([np.c_[lp, np.full(len(lp), z0)], np.c_[top, np.full(len(lp), z0 + h)]])
-    return Construction("extrude", f"linear_extrude of {profile.describe()} (height {h:g}{sc})", solid, verts)
+    if profile.bbox is None:
+        raise ProfileError("linear_extrude() of an unbounded profile")
+    x0, y0, x1, y1 = profile.bbox
+    xs, ys = [x0, x1, x0 * s[0], x1 * s[0]], [y0, y1, y0 * s[1], y1 * s[1]]
+    box = ((min(xs), min(ys), z0), (max(xs), max(ys), z0 + h))
+    return Construction("extrude", f"linear_extrude of {profile.describe()} (height {h:g}{sc})", solid, verts, box)
 
 
 def _convex(lp):

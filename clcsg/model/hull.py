@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .construction import Construction, ball, plane
+from .construction import Construction, ball, bounded, plane
 from .csg import Intersection, Primitive, Shape, Transformed, Union
 from .extrude import extrude
 from .minkowski import minkowski_ball, z_prism
@@ -124,7 +124,8 @@ def hull(*solids: Shape, color=None) -> Construction:
         poly = convex_polytope(np.vstack([it.points for it in its]))
         if poly.dim < 3:
             raise ProfileError("hull() of flat points (coplanar) has no volume")
-        return Construction("hull", what, polytope_solid(poly, color), poly.vertices)
+        box = (poly.vertices.min(axis=0), poly.vertices.max(axis=0))
+        return Construction("hull", what, polytope_solid(poly, color), poly.vertices, box)
     if kinds == {"sphere"}:
         return _hull_spheres(its, what, color)
     if kinds == {"cylinder"}:
@@ -141,7 +142,8 @@ def _hull_spheres(its, what, color):
         poly = convex_polytope(c)
         return Construction("hull", what, minkowski_ball(poly, r[0], color=color).operands[0])
     if len(its) == 2:
-        return Construction("hull", what, _two_spheres(c[0], r[0], c[1], r[1], color))
+        box = ((c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0))
+        return Construction("hull", what, _two_spheres(c[0], r[0], c[1], r[1], color), box=box)
     raise ProfileError("hull() of more than two spheres of different radii is not covered exactly; "
                        "nearest exact alternative: spheres of one radius (a rounded polytope)")
 
@@ -224,7 +226,7 @@ def _sum(its, color):
         return _prism_cylinder(poly, cyl, color)
     if poly.dim < 3:
         raise ProfileError("minkowski() of flat polytopes has no volume")
-    return polytope_solid(poly, color)
+    return bounded(polytope_solid(poly, color), poly.vertices.min(axis=0), poly.vertices.max(axis=0))
 
 
 def _prism_cylinder(poly, cyl, color):

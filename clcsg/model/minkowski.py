@@ -53,7 +53,8 @@ def polytope_plus_ball(poly: Polytope, radius: float, center=(0, 0, 0), color=No
 
 def minkowski_ball(poly: Polytope, radius: float, center=(0, 0, 0), what="a polytope", color=None):
     body = polytope_plus_ball(poly, radius, center, color)
-    return Construction("minkowski", f"minkowski of {what} and a sphere", body)
+    v = poly.vertices + np.asarray(center, dtype=np.float64)
+    return Construction("minkowski", f"minkowski of {what} and a sphere", body, box=(v.min(axis=0) - radius, v.max(axis=0) + radius))
 
 
 def z_prism(poly: Polytope):

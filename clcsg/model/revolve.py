@@ -76,4 +76,5 @@ def revolve(profile: Profile, angle=360.0, color=None):
             wedge = wedge.transform(np.diag([1.0, -1.0, 1.0, 1.0]))
         body = Intersection([body, wedge])
     label = f"rotate_extrude of {profile.describe()}" + ("" if abs(ang) == 360 else f" ({ang:g} degrees)")
-    return Construction("revolve", label, body)
+    x0, y0, x1, y1 = profile.bbox
+    return Construction("revolve", label, body, box=((-x1, -x1, y0), (x1, x1, y1)))
