@@ -149,3 +149,10 @@ def hull_points(points) -> Profile:
     if len(pts) < 3:
         raise ProfileError("2-D hull of collinear points has no area")
     return polygon(pts)
+
+
+def offset(profile: Profile, r: float | None = None, delta: float | None = None, chamfer: bool = False) -> Profile:
+    """OpenSCAD's ``offset``: rounded by ``r``, or sharp (``chamfer``: squared) by ``delta``."""
+    if (r is None) == (delta is None):
+        raise ProfileError("offset needs exactly one of r and delta")
+    return offset_r(profile, r) if r is not None else offset_delta(profile, delta, chamfer)
