@@ -23,6 +23,7 @@ from ..model.extrude import extrude
 from ..model.hull import hull, minkowski
 from ..model.profile import Profile, circle, difference2d, intersection2d, polygon, square, union2d
 from ..model.profile_ops import hull_disks, hull_points, offset_delta, offset_r
+from ..model.polytope import convex_polyhedron
 from ..model.revolve import revolve
 from .openscad_tokens import fmt, is_num
 
@@ -36,14 +37,13 @@ PARAMS_2D = {
     "rotate_extrude": (("angle",), ("convexity", "file", "layer", "origin", "scale")),
     "hull": ((), ()),
     "minkowski": (("convexity",), ()),
+    "polyhedron": (("points", "faces", "convexity"), ("triangles",)),
 }
 
 #: nodes that have no exact quadric form: the reason, and the nearest exact alternative
 REFUSED = {
     "text": "text() outlines glyphs with Bezier curves, not lines and arcs; nearest exact alternative: none "
             "(model lettering with polygons)",
-    "polyhedron": "polyhedron() faces may be non-planar or non-convex; nearest exact alternative: hull() of "
-                  "its points for a convex polyhedron",
     "import": "import() reads a mesh or a drawing, not exact geometry",
     "surface": "surface() is a height-map mesh",
     "projection": "projection() of a 3-D solid to 2-D has curved outlines of higher degree",
@@ -118,6 +118,19 @@ class Constructions:
             return None
         try:
             return minkowski(*kids, color=ctx.color or _first_color(kids))
+        except SceneError as e:
+            self._fail(node, e)
+
+    def n_polyhedron(self, node, ctx):
+        self._no_children(node)
+        p = self.bind(node)
+        pts, faces = p.get("points"), p.get("faces", p.get("triangles"))
+        if not (isinstance(pts, list) and all(isinstance(q, list) and len(q) == 3 and all(is_num(v) for v in q) for q in pts)):
+            raise self.src.error(node.pos, f"polyhedron(): points = {fmt(pts)} is not a list of [x, y, z] points")
+        if not (isinstance(faces, list) and all(isinstance(f, list) and all(is_num(v) and 0 <= v < len(pts) for v in f) for f in faces)):
+            raise self.src.error(node.pos, f"polyhedron(): faces = {fmt(faces)} is not a list of point index lists")
+        try:
+            return convex_polyhedron(np.array(pts, dtype=float), [[int(v) for v in f] for f in faces], ctx.color)
         except SceneError as e:
             self._fail(node, e)
 

@@ -131,3 +131,30 @@ def polytope_solid(poly: Polytope, color=None):
     if poly.dim < 3:
         raise ProfileError("the points span no volume (they are coplanar): the hull is flat")
     return Intersection([plane(n, d, color) for n, d, _ in poly.faces])
+
+
+def convex_polyhedron(points, faces, color=None):
+    """A polyhedron given by points and faces, if it is convex: the intersection of its hull's
+    face planes.  Convex means every face lies in one face plane of the hull of its points and
+    every point on the hull's boundary (a closed surface inside the hull's boundary is all of
+    it); otherwise a :class:`ProfileError`."""
+    from .construction import Construction
+
+    poly = convex_polytope(points)
+    if poly.dim < 3:
+        raise ProfileError("polyhedron() is flat: it has no volume")
+    scale = float(np.abs(points).max())
+    tol = 1e-9 * scale
+    planes = np.array([np.r_[n, d] for n, d, _ in poly.faces])
+    dist = points @ planes[:, :3].T - planes[:, 3]
+    on = np.abs(dist) <= tol
+    if not np.all(on.any(axis=1)):
+        raise ProfileError("polyhedron() is not convex (a point lies inside its hull); nearest exact alternative: "
+                           "a union of convex polyhedra or hull()")
+    for k, f in enumerate(faces):
+        if len(f) < 3 or not np.any(np.all(on[f], axis=0)):
+            raise ProfileError(f"polyhedron() is not convex (face {k} is not on its hull); nearest exact alternative: "
+                               "a union of convex polyhedra or hull()")
+    box = (poly.vertices.min(axis=0), poly.vertices.max(axis=0))
+    return Construction("polyhedron", f"convex polyhedron of {len(faces)} faces", polytope_solid(poly, color),
+                        poly.vertices, box)
