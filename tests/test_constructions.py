@@ -210,3 +210,48 @@ def test_refusals_are_one_line_exit_3(name, tmp_path):
     lines = [ln for ln in p.stderr.splitlines() if ln.startswith("clcsg: error:")]
     assert len(lines) == 1 and "Traceback" not in p.stderr, p.stderr
     assert f"{scad} (CSG export):" in lines[0] and expected in lines[0], lines[0]
+
+
+# -- scene files --------------------------------------------------------------------------------
+def _api_models():
+    return {
+        "extrude": clcsg.extrude(clcsg.offset(clcsg.square([3, 2]), r=0.5) - clcsg.circle(0.3).translate((1, 1)), 2,
+                                 scale=0.8, color=(1, 0, 0)),
+        "revolve": clcsg.revolve(clcsg.polygon([(1, 0), (2, 0), (1.5, 1)]).rotate(10), 200),
+        "hull": clcsg.hull(clcsg.sphere(1), clcsg.sphere(0.5, (3, 0, 0))).translate((0, 1, 0)),
+        "minkowski": clcsg.minkowski(clcsg.box(1), clcsg.sphere(0.2, color=(0, 0, 1))),
+    }
+
+
+@pytest.mark.parametrize("name", ["extrude", "revolve", "hull", "minkowski"])
+def test_scene_file_round_trip(name, tmp_scene):
+    shape = _api_models()[name]
+    path = tmp_scene(shape)
+    text = path.read_text()
+    assert f'"{name}"' in text
+    back = clcsg.load(path).shape
+    built = [n.describe() for n in walk(back) if isinstance(n, Construction)]
+    assert built == [n.describe() for n in walk(shape) if isinstance(n, Construction)] and built
+    pts = np.random.default_rng(5).uniform(-4, 4, (20000, 3))
+    np.testing.assert_array_equal(T.contains(back, pts), T.contains(shape, pts))
+    assert {n.color for n in walk(back) if hasattr(n, "color")} == {n.color for n in walk(shape) if hasattr(n, "color")}
+
+
+@pytest.mark.parametrize("root, message", [
+    ({"extrude": {"profile": {"square": {"size": 1}, "circle": {"radius": 1}}, "height": 1}},
+     "$.root.extrude.profile: a profile needs exactly one of square, circle, polygon, offset, hull, union, intersection, difference, got 2"),
+    ({"extrude": {"profile": {"polygon": {"points": [[0, 0], [2, 2], [2, 0], [0, 2]]}}}},
+     "$.root.extrude.profile.polygon: polygon path 0 crosses itself: not a simple polygon with holes"),
+    ({"revolve": {"profile": {"circle": {"radius": 1, "center": [3, 0]}}}},
+     "$.root.revolve: rotate_extrude() of a circle sweeps a torus, a quartic surface, not a quadric"),
+    ({"hull": [{"box": {"size": 1}}, {"sphere": {"radius": 1}}]}, "$.root.hull: hull() of 1 cube and 1 sphere is not covered exactly"),
+    ({"extrude": {"height": 1}}, "$.root.extrude"),
+])
+def test_scene_file_construction_errors(root, message):
+    from clcsg.errors import SceneError
+    from clcsg.io.scenefile import scene_from_dict
+
+    with pytest.raises(SceneError) as info:
+        scene_from_dict({"clcsg": 1, "root": root}, "part.json")
+    assert str(info.value).startswith(f"part.json: {message}"), str(info.value)
+    assert "\n" not in str(info.value)

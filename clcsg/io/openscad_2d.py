@@ -18,11 +18,10 @@ import math
 import numpy as np
 
 from ..errors import SceneError
-from ..model.csg import Primitive, walk
 from ..model.extrude import extrude
 from ..model.hull import hull, minkowski
 from ..model.profile import Profile, circle, difference2d, intersection2d, polygon, square, union2d
-from ..model.profile_ops import hull_disks, hull_points, offset_delta, offset_r
+from ..model.profile_ops import hull2d_of, offset
 from ..model.polytope import convex_polyhedron
 from ..model.revolve import revolve
 from .openscad_tokens import fmt, is_num
@@ -107,7 +106,7 @@ class Constructions:
         if not kids:
             return None
         try:
-            return hull(*kids, color=ctx.color or _first_color(kids))
+            return hull(*kids, color=ctx.color)
         except SceneError as e:
             self._fail(node, e)
 
@@ -117,7 +116,7 @@ class Constructions:
         if not kids:
             return None
         try:
-            return minkowski(*kids, color=ctx.color or _first_color(kids))
+            return minkowski(*kids, color=ctx.color)
         except SceneError as e:
             self._fail(node, e)
 
@@ -242,9 +241,9 @@ class Constructions:
         if child is None:
             return None
         if is_num(p.get("r")):
-            return offset_r(child, p["r"])
+            return offset(child, r=p["r"])
         delta = p.get("delta", 1.0)
-        return offset_delta(child, delta if is_num(delta) else 1.0, p.get("chamfer", False) is True)
+        return offset(child, delta=delta if is_num(delta) else 1.0, chamfer=p.get("chamfer", False) is True)
 
     def p_hull(self, node):
         self.bind(node)
@@ -252,21 +251,7 @@ class Constructions:
         kids = [k for k in kids if k is not None]
         if not kids:
             return None
-        if all(k.circle is not None for k in kids):
-            return hull_disks([k.circle[0] for k in kids], [k.circle[1] for k in kids])
-        if all(k.loops is not None for k in kids):
-            return hull_points(np.vstack([np.vstack(k.loops) for k in kids]))
-        raise SceneError("2-D hull() is covered for all polygons (and squares) or all circles; "
-                         "nearest exact alternative: hull the circles or the polygons separately")
+        return hull2d_of(*kids)
 
     def p_minkowski(self, node):
         raise SceneError("2-D minkowski() is not covered; nearest exact alternative: offset(r = ...)")
-
-
-def _first_color(shapes) -> tuple | None:
-    for s in shapes:
-        for n in walk(s):
-            if isinstance(n, Primitive):
-                return n.color
-    return None
-

@@ -21,9 +21,12 @@ _ORDER = ("plane", "cylinder", "elliptic cylinder", "cone", "sphere", "ellipsoid
 
 
 class Construction(Union):
-    __slots__ = ("label", "surfaces", "vertices", "kind")
+    __slots__ = ("label", "surfaces", "vertices", "kind", "spec")
 
-    def __init__(self, kind: str, label: str, body: Shape, vertices=None, box=None):
+    def __init__(self, kind: str, label: str, body: Shape, vertices=None, box=None, spec=None):
+        #: how to build it again (scene files): {"extrude": {...}} with a JSON profile, or
+        #: ("hull" | "minkowski", operand shapes); None: saved as its expansion
+        self.spec = spec
         self.surfaces = count_surfaces(body)
         if box is not None:
             body = bounded(body, *box)
@@ -96,6 +99,18 @@ def bounded(body: Shape, lo, hi) -> Shape:
     lo, hi = lo - grow, hi + grow
     box = Primitive("box", {"size": (hi - lo).tolist(), "center": ((hi + lo) / 2).tolist()})
     return Bounded([body, box])
+
+
+def first_color(shapes) -> tuple | None:
+    """The color of the first primitive found in ``shapes`` (None if there is none)."""
+    for s in shapes:
+        stack = [s]
+        while stack:
+            n = stack.pop()
+            if isinstance(n, Primitive):
+                return n.color
+            stack.extend(reversed(n.children()))
+    return None
 
 
 # -- leaves ----------------------------------------------------------------------------------

@@ -77,7 +77,9 @@ def extrude(profile: Profile, height=1.0, center=False, scale=1.0, twist=0.0, co
     x0, y0, x1, y1 = profile.bbox
     xs, ys = [x0, x1, x0 * s[0], x1 * s[0]], [y0, y1, y0 * s[1], y1 * s[1]]
     box = ((min(xs), min(ys), z0), (max(xs), max(ys), z0 + h))
-    return Construction("extrude", f"linear_extrude of {profile.describe()} (height {h:g}{sc})", solid, verts, box)
+    spec = None if profile.spec is None else {"extrude": {"profile": profile.spec, "height": h, "center": bool(center),
+                                                          "scale": float(s[0]) if uniform else s.tolist()}}
+    return Construction("extrude", f"linear_extrude of {profile.describe()} (height {h:g}{sc})", solid, verts, box, spec)
 
 
 def _convex(lp):

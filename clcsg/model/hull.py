@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .construction import Construction, ball, bounded, plane
+from .construction import Construction, ball, bounded, first_color, plane
 from .csg import Intersection, Primitive, Shape, Transformed, Union
 from .extrude import extrude
 from .minkowski import minkowski_ball, z_prism
@@ -115,6 +115,12 @@ def _count(its):
 
 def hull(*solids: Shape, color=None) -> Construction:
     """The exact convex hull of ``solids`` (OpenSCAD's ``hull()``)."""
+    out = _hull(solids, first_color(solids) if color is None else color)
+    out.spec = ("hull", tuple(solids))
+    return out
+
+
+def _hull(solids, color):
     its = [it for s in solids for it in items(s)]
     if not its:
         raise ProfileError("hull() of nothing")
@@ -189,6 +195,12 @@ def _hull_cylinders(its, what, color):
 
 def minkowski(*solids: Shape, color=None) -> Construction:
     """The exact Minkowski sum of ``solids`` (OpenSCAD's ``minkowski()``)."""
+    out = _minkowski(solids, first_color(solids) if color is None else color)
+    out.spec = ("minkowski", tuple(solids))
+    return out
+
+
+def _minkowski(solids, color):
     if not solids:
         raise ProfileError("minkowski() of nothing")
     first = items(solids[0])

@@ -32,7 +32,10 @@ def _affine_rank(p, scale):
 
 
 def convex_polytope(points) -> Polytope:
-    from scipy.spatial import ConvexHull  # heavy: only when a hull or a Minkowski sum is built
+    try:
+        from scipy.spatial import ConvexHull  # heavy: only when a hull or a Minkowski sum is built
+    except ImportError:
+        raise ProfileError("hulls and Minkowski sums of polytopes need scipy (Qhull): pip install 'clcsg[hull]'") from None
 
     p = np.unique(np.asarray(points, dtype=np.float64).reshape(-1, 3), axis=0)
     if not np.all(np.isfinite(p)):

@@ -45,12 +45,16 @@ class Profile:
     plain polygon or disk was made from (offset and hull need it); ``bbox`` is a conservative
     bound (xmin, ymin, xmax, ymax)."""
 
-    __slots__ = ("op", "data", "kids", "loops", "circle", "bbox")
+    __slots__ = ("op", "data", "kids", "loops", "circle", "bbox", "spec")
 
-    def __init__(self, op, data=None, kids=(), loops=None, circle=None, bbox=None):
+    def __init__(self, op, data=None, kids=(), loops=None, circle=None, bbox=None, spec=None):
         self.op, self.data, self.kids = op, data, tuple(kids)
         self.loops, self.circle = loops, circle
         self.bbox = bbox
+        self.spec = spec  # the scene-file node that builds this profile, or None
+
+    def with_spec(self, spec) -> "Profile":
+        return Profile(self.op, self.data, self.kids, self.loops, self.circle, self.bbox, spec)
 
     # -- Booleans -----------------------------------------------------------------------------
     def __or__(self, other):
@@ -72,7 +76,11 @@ class Profile:
             raise ProfileError(f"a 2-D transform is a finite 2x3 or 3x3 affine matrix, got {m.tolist()}")
         if abs(np.linalg.det(m[:2, :2])) <= 1e-12 * max(np.abs(m[:2, :2]).max(), 1e-300) ** 2:
             raise ProfileError("a 2-D transform must not be singular")
-        return _transform(self, m)
+        out = _transform(self, m)
+        if self.spec is not None:
+            steps = list(self.spec.get("transform", [])) + [{"matrix": m[:2].tolist()}]
+            out.spec = {**self.spec, "transform": steps}
+        return out
 
     def translate(self, offset):
         return self.transform([[1, 0, offset[0]], [0, 1, offset[1]]])
@@ -154,30 +162,35 @@ def _bbox_union(boxes):
     return (b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max())
 
 
+def _specs(name, ps):
+    specs = [p.spec for p in ps]
+    return None if any(s is None for s in specs) else {name: specs}
+
+
 def union2d(*ps) -> Profile:
     ps = [p for p in ps if p.op != "empty"]
     if not ps:
-        return Profile("empty")
+        return Profile("empty", spec={"union": []})
     if len(ps) == 1:
         return ps[0]
-    return Profile("union", kids=ps, bbox=_bbox_union([p.bbox for p in ps]))
+    return Profile("union", kids=ps, bbox=_bbox_union([p.bbox for p in ps]), spec=_specs("union", ps))
 
 
 def intersection2d(*ps) -> Profile:
     if any(p.op == "empty" for p in ps):
-        return Profile("empty")
+        return Profile("empty", spec={"union": []})
     if len(ps) == 1:
         return ps[0]
     b = np.array([p.bbox for p in ps if p.bbox is not None])
     bbox = (b[:, 0].max(), b[:, 1].max(), b[:, 2].min(), b[:, 3].min()) if len(b) else None
-    return Profile("intersection", kids=ps, bbox=bbox)
+    return Profile("intersection", kids=ps, bbox=bbox, spec=_specs("intersection", ps))
 
 
 def difference2d(first, *rest) -> Profile:
     rest = [p for p in rest if p.op != "empty"]
     if first.op == "empty" or not rest:
         return first
-    return Profile("difference", kids=(first, *rest), bbox=first.bbox)
+    return Profile("difference", kids=(first, *rest), bbox=first.bbox, spec=_specs("difference", (first, *rest)))
 
 
 def _convex_piece(pts) -> Profile:
@@ -193,7 +206,7 @@ def square(size=1.0, center=False) -> Profile:
     lo = -s / 2 if center else np.zeros(2)
     x0, y0 = lo
     x1, y1 = lo + s
-    return polygon([(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+    return polygon([(x0, y0), (x1, y0), (x1, y1), (x0, y1)]).with_spec({"square": {"size": s.tolist(), "center": bool(center)}})
 
 
 def circle(radius=1.0, center=(0.0, 0.0)) -> Profile:
@@ -202,7 +215,8 @@ def circle(radius=1.0, center=(0.0, 0.0)) -> Profile:
         raise ProfileError(f"circle radius must be positive, got {r}")
     cx, cy = (float(v) for v in center)
     c = np.array([[1, 0, -cx], [0, 1, -cy], [-cx, -cy, cx * cx + cy * cy - r * r]]) / r
-    return Profile("conic", c, circle=((cx, cy), r), bbox=(cx - r, cy - r, cx + r, cy + r))
+    return Profile("conic", c, circle=((cx, cy), r), bbox=(cx - r, cy - r, cx + r, cy + r),
+                   spec={"circle": {"radius": r, "center": [cx, cy]}})
 
 
 def polygon(points, paths=None) -> Profile:
@@ -223,7 +237,8 @@ def polygon(points, paths=None) -> Profile:
             raise ProfileError(f"polygon path {k} has no area (fewer than 3 non-collinear points)")
         loops.append(loop)
     _check_simple(loops)
-    return _from_loops(loops)
+    spec = {"polygon": {"points": pts.tolist()} | ({} if paths is None else {"paths": [[int(v) for v in q] for q in paths]})}
+    return _from_loops(loops).with_spec(spec)
 
 
 def _clean(loop):

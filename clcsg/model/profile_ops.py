@@ -144,6 +144,19 @@ def hull_disks(centers, radii) -> Profile:
     return Profile(out.op, out.data, out.kids, bbox=(*lo, *hi))
 
 
+def hull2d_of(*profiles: Profile) -> Profile:
+    """The 2-D hull of polygons (and squares), or of circles (any radii)."""
+    if all(k.circle is not None for k in profiles):
+        out = hull_disks([k.circle[0] for k in profiles], [k.circle[1] for k in profiles])
+    elif all(k.loops is not None for k in profiles):
+        out = hull_points(np.vstack([np.vstack(k.loops) for k in profiles]))
+    else:
+        raise ProfileError("2-D hull() is covered for all polygons (and squares) or all circles; "
+                           "nearest exact alternative: hull the circles or the polygons separately")
+    specs = [k.spec for k in profiles]
+    return out if any(s is None for s in specs) else out.with_spec({"hull": specs})
+
+
 def hull_points(points) -> Profile:
     pts = hull2d(points)
     if len(pts) < 3:
@@ -155,4 +168,8 @@ def offset(profile: Profile, r: float | None = None, delta: float | None = None,
     """OpenSCAD's ``offset``: rounded by ``r``, or sharp (``chamfer``: squared) by ``delta``."""
     if (r is None) == (delta is None):
         raise ProfileError("offset needs exactly one of r and delta")
-    return offset_r(profile, r) if r is not None else offset_delta(profile, delta, chamfer)
+    out = offset_r(profile, r) if r is not None else offset_delta(profile, delta, chamfer)
+    if profile.spec is None:
+        return out
+    args = {"r": float(r)} if r is not None else {"delta": float(delta), "chamfer": bool(chamfer)}
+    return out.with_spec({"offset": {"profile": profile.spec, **args}})

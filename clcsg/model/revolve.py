@@ -60,6 +60,7 @@ def revolve(profile: Profile, angle=360.0, color=None):
     if not math.isfinite(ang) or ang == 0:
         raise ProfileError(f"revolve angle must be finite and non-zero, got {ang}")
     ang = max(min(ang, 360.0), -360.0)
+    spec = None if profile.spec is None else {"revolve": {"profile": profile.spec, "angle": ang}}
     if profile.bbox is None:
         raise ProfileError("rotate_extrude() profile has no bound")
     x0, _, x1, _ = profile.bbox
@@ -77,4 +78,4 @@ def revolve(profile: Profile, angle=360.0, color=None):
         body = Intersection([body, wedge])
     label = f"rotate_extrude of {profile.describe()}" + ("" if abs(ang) == 360 else f" ({ang:g} degrees)")
     x0, y0, x1, y1 = profile.bbox
-    return Construction("revolve", label, body, box=((-x1, -x1, y0), (x1, x1, y1)))
+    return Construction("revolve", label, body, box=((-x1, -x1, y0), (x1, x1, y1)), spec=spec)
