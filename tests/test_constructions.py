@@ -187,14 +187,12 @@ REFUSALS = {
     "text": ('linear_extrude(1) text("hi");', "text() is not supported: text() outlines glyphs with Bezier curves"),
     "hull of mixed shapes": ("hull() { cube(1); sphere(1); }",
                              "hull(): hull() of 1 cube and 1 sphere is not covered exactly"),
-    "hull of spheres of three radii": ("hull() { sphere(1); translate([3, 0, 0]) sphere(2); translate([0, 3, 0]) sphere(1.5); }",
-                                       "hull(): hull() of more than two spheres of different radii is not covered exactly"),
     "minkowski of a non-convex operand": ("minkowski() { difference() { cube(2); cube(1); } sphere(0.2); }",
                                           "minkowski(): a difference inside is not covered"),
     "minkowski of spheres and cylinders": ("minkowski() { sphere(1); cylinder(h = 1, r = 1); }",
                                            "minkowski(): minkowski() of spheres and cylinders is not covered exactly"),
-    "polyhedron": ("polyhedron([[0,0,0],[1,0,0],[0,1,0],[0,0,1]], [[0,1,2],[0,3,1],[0,2,3],[1,3,2]]);",
-                   "polyhedron() is not supported: polyhedron() faces may be non-planar"),
+    "non-convex polyhedron": ("polyhedron([[0,0,0],[1,0,0],[0,1,0],[0,0,1],[0.1,0.1,0.1]], [[0,1,2],[0,3,1],[0,2,3],[1,3,4],[1,4,2],[4,3,2]]);",
+                              "polyhedron(): polyhedron() is not convex (a point lies inside its hull)"),
     "2-D at top level": ("square(1);", "square() is a 2-D shape outside linear_extrude() or rotate_extrude()"),
 }
 
@@ -255,3 +253,29 @@ def test_scene_file_construction_errors(root, message):
         scene_from_dict({"clcsg": 1, "root": root}, "part.json")
     assert str(info.value).startswith(f"part.json: {message}"), str(info.value)
     assert "\n" not in str(info.value)
+
+
+def test_hull_of_spheres_of_different_radii():
+    """conv(U B(c_i, r_i)) is the union of the balls B(sum l_i c_i, sum l_i r_i) over weights l
+    in the simplex: a point is inside iff some l certifies it (SLSQP on the convex function
+    |x - C l| - r . l), and outside if a direction n has n . x > max_i (n . c_i + r_i)."""
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(11)
+    c, r = rng.uniform(-2, 2, (5, 3)), np.array([0.4, 1.2, 0.7, 1.0, 0.3])
+    solid = clcsg.hull(*[clcsg.sphere(r[i], c[i]) for i in range(5)])
+    assert solid.describe().startswith("hull of 5 spheres: ")
+    pts = rng.uniform(-4, 4, (4000, 3))
+    got = T.contains(solid, pts)
+    n = rng.normal(size=(20000, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    outside = (pts @ n.T - (n @ c.T + r).max(axis=1)).max(axis=1) > 1e-9
+    assert not np.any(got & outside)
+    cons = ({"type": "eq", "fun": lambda w: w.sum() - 1},)
+    for x in pts[~outside][:300]:
+        res = minimize(lambda w: np.linalg.norm(x - w @ c) - w @ r, np.full(5, 0.2), bounds=[(0, 1)] * 5,
+                       constraints=cons, method="SLSQP", options={"ftol": 1e-12, "maxiter": 500})
+        if res.fun < -1e-6:  # certified inside
+            assert T.contains(solid, x[None])[0]
+        elif res.fun > 1e-6:
+            assert not T.contains(solid, x[None])[0]

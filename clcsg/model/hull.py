@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .construction import Construction, ball, bounded, first_color, plane
+from .construction import Construction, ball, bounded, first_color, plane, tube
 from .csg import Intersection, Primitive, Shape, Transformed, Union
 from .extrude import extrude
 from .minkowski import minkowski_ball, z_prism
@@ -147,11 +147,10 @@ def _hull_spheres(its, what, color):
     if np.allclose(r, r[0], rtol=1e-12, atol=0):
         poly = convex_polytope(c)
         return Construction("hull", what, minkowski_ball(poly, r[0], color=color).operands[0])
+    box = ((c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0))
     if len(its) == 2:
-        box = ((c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0))
         return Construction("hull", what, _two_spheres(c[0], r[0], c[1], r[1], color), box=box)
-    raise ProfileError("hull() of more than two spheres of different radii is not covered exactly; "
-                       "nearest exact alternative: spheres of one radius (a rounded polytope)")
+    return Construction("hull", what, _many_spheres(c, r, color), box=box)
 
 
 def _two_spheres(c1, r1, c2, r2, color):
@@ -162,13 +161,107 @@ def _two_spheres(c1, r1, c2, r2, color):
     if length + r2 <= r1:
         return ball(c1, r1, color)
     u = d / length
+    balls = [ball(p, q, color) for p, q in ((c1, r1), (c2, r2)) if q > 0]
+    if r1 == r2:
+        return Union(balls + [Intersection([tube(c1, u, r1, color), plane(u, u @ c2, color), plane(-u, -(u @ c1), color)])])
     sin = (r1 - r2) / length
     apex = c1 + u * r1 / sin
     slope = sin / math.sqrt(1 - sin * sin)
     cone = Primitive("double_cone", {"apex": apex.tolist(), "axis": u.tolist(), "slope": slope}, color)
     lo, hi = u @ c1 + r1 * sin, u @ c2 + r2 * sin
     frustum = Intersection([cone, plane(u, hi, color), plane(-u, -lo, color)])
-    return Union([ball(c1, r1, color), ball(c2, r2, color), frustum])
+    return Union(balls + [frustum])
+
+
+def _tangent_planes(c, r, i, j, k):
+    """Unit normals n with n . c_m + r_m equal for m = i, j, k (0, 1 or 2 of them)."""
+    a = np.array([c[j] - c[i], c[k] - c[i]])
+    b = np.array([r[i] - r[j], r[i] - r[k]])
+    w = np.cross(a[0], a[1])
+    if np.linalg.norm(w) <= 1e-12 * np.linalg.norm(a[0]) * np.linalg.norm(a[1]):
+        return []
+    p0 = np.linalg.lstsq(a, b, rcond=None)[0]  # the point of the solution line nearest 0
+    w = w / np.linalg.norm(w)
+    q = 1 - p0 @ p0
+    if q < 0:
+        return []
+    return [p0 + s * math.sqrt(q) * w for s in (1, -1)]
+
+
+def _pair(c, r, a, b, color):
+    """hull(B_a, B_b) without the balls: a cone frustum, or a finite cylinder (r = 0: a point,
+    the cone from it tangent to the other ball)."""
+    if np.linalg.norm(c[a] - c[b]) <= abs(r[a] - r[b]):
+        return Union([])  # one contains the other
+    return _two_spheres(c[a], r[a], c[b], r[b], color).operands[-1]
+
+
+def _faces(c, r):
+    """The hull's face planes: (normal, indices of the balls touching it), each plane tangent to
+    three balls with every ball on its inner side."""
+    n, scale = len(c), float(np.abs(c).max() + r.max())
+    out, seen = [], set()
+    for i in range(n):
+        for j in range(i + 1, n):
+            for k in range(j + 1, n):
+                for nrm in _tangent_planes(c, r, i, j, k):
+                    h = nrm @ c[i] + r[i]
+                    if np.all(c @ nrm + r <= h + 1e-12 * scale):
+                        touch = tuple(m for m in range(n) if c[m] @ nrm + r[m] >= h - 1e-12 * scale)
+                        key = (touch, tuple(np.round(nrm, 9)))
+                        if key not in seen:
+                            seen.add(key)
+                            out.append((nrm, touch))
+    return out
+
+
+def _three(c, r, color):
+    """hull of three balls (radii may be 0): conv(tangent points of its two tangent planes),
+    the balls and the three pair hulls."""
+    pieces = [ball(c[m], r[m], color) for m in range(3) if r[m] > 0]
+    pieces += [_pair(c, r, a, b, color) for a, b in ((0, 1), (0, 2), (1, 2))]
+    pts = [c[m] + r[m] * nrm for nrm, touch in _faces(c, r) for m in touch]
+    if len(pts) >= 4:
+        poly = convex_polytope(np.array(pts))
+        if poly.dim == 3:
+            pieces.append(polytope_solid(poly, color))
+    return Union(pieces)
+
+
+def _many_spheres(c, r, color):
+    """Hull of three or more balls of different radii, star-shaped from O (the centroid of the
+    centers, inside the hull): every hull point is on a segment from O to a boundary point, on
+    a face triangle, on the cone patch of an edge (i, j) or on the sphere patch of a ball i, so
+
+        hull = U conv(O, face) | U hull(O, B_i, B_j) | U hull(O, B_i)
+
+    over the faces, edges and balls of the boundary; each piece lies in the hull.  hull(O, B_i)
+    is B_i and the cone from O tangent to it; hull(O, B_i, B_j) is the three-ball case."""
+    keep = [i for i in range(len(c)) if not any(j != i and np.linalg.norm(c[i] - c[j]) + r[i] <= r[j] for j in range(len(c)))]
+    c, r = c[keep], r[keep]
+    if len(c) == 1:
+        return ball(c[0], r[0], color)
+    if len(c) == 2:
+        return _two_spheres(c[0], r[0], c[1], r[1], color)
+    faces = _faces(c, r)
+    if not faces:  # collinear centers: the balls and all pair hulls
+        n = len(c)
+        return Union([ball(c[m], r[m], color) for m in range(n)]
+                     + [_pair(c, r, a, b, color) for a in range(n) for b in range(a + 1, n)])
+    o = c.mean(axis=0)
+    pieces, edges, used = [], set(), set()
+    for nrm, touch in faces:
+        pts = np.array([o] + [c[m] + r[m] * nrm for m in touch])
+        poly = convex_polytope(pts)
+        if poly.dim == 3:
+            pieces.append(polytope_solid(poly, color))
+        edges |= {(a, b) for a in touch for b in touch if a < b}
+        used |= set(touch)
+    for a, b in sorted(edges):
+        pieces.append(_three(np.array([o, c[a], c[b]]), np.array([0.0, r[a], r[b]]), color))
+    for m in sorted(used):
+        pieces += [ball(c[m], r[m], color), _pair(np.array([o, c[m]]), np.array([0.0, r[m]]), 0, 1, color)]
+    return Union(pieces)
 
 
 def _frame(w):
