@@ -11,6 +11,8 @@ hull:
 * two spheres of different radii: both balls and the frustum of their common tangent cone
   between the two tangent circles (at distance r_i sin(alpha) from each center towards the
   smaller one, sin(alpha) = (r1 - r2) / |c2 - c1|);
+* three or more spheres of any radii: a star decomposition from the centroid of the centers
+  (:func:`_many_spheres`);
 * cylinders with parallel axes and the same two cap planes: the extrusion of the 2-D hull of
   their circles (:func:`clcsg.model.profile_ops.hull_disks`: tangent lines and arcs).
 
@@ -19,7 +21,7 @@ points + points is the hull of the pairwise sums, spheres add centers and radii,
 plus a ball is :func:`~clcsg.model.minkowski.polytope_plus_ball`, a z-prism plus a z-cylinder
 is the extrusion of the cross-section offset by the radius.
 
-Everything else (mixed operands, several spheres of different radii, skew cylinders,
+Everything else (mixed operands, skew cylinders,
 differences and intersections inside) is refused with a :class:`ProfileError` that names it.
 """
 
