@@ -272,7 +272,7 @@ def test_hull_of_spheres_of_different_radii():
     outside = (pts @ n.T - (n @ c.T + r).max(axis=1)).max(axis=1) > 1e-9
     assert not np.any(got & outside)
     cons = ({"type": "eq", "fun": lambda w: w.sum() - 1},)
-    for x in pts[~outside][:300]:
+    for x in pts[~outside][:120]:
         res = minimize(lambda w: np.linalg.norm(x - w @ c) - w @ r, np.full(5, 0.2), bounds=[(0, 1)] * 5,
                        constraints=cons, method="SLSQP", options={"ftol": 1e-12, "maxiter": 500})
         if res.fun < -1e-6:  # certified inside
