@@ -3,7 +3,9 @@
 The data flows one way, one package per stage:
 
 1. ``model``: the scene — quadrics, primitives, the CSG graph (:class:`Shape`), :class:`Scene`;
-   ``io`` reads and writes it (JSON scene files, OpenSCAD ``.csg`` / ``.scad``, PLY samples).
+   2-D :class:`Profile` s (``square``, ``circle``, ``polygon``, ``offset``) become exact solids
+   with :func:`extrude` and :func:`revolve`; :func:`hull` and :func:`minkowski` build rounded
+   solids; ``io`` reads and writes it (JSON scene files, OpenSCAD ``.csg`` / ``.scad``, PLY samples).
 2. ``compile``: the graph becomes a tape over unique canonical quadrics (transforms and
    complements pushed to the leaves, shared sub-graphs once), with primitive instances, bounds
    and principal frames; the paper's DNF is one shape of tape.
@@ -21,6 +23,11 @@ from .errors import ClcsgError
 from .model.csg import Shape, contains, difference, intersection, union
 from .model.quadric import Quadric
 from .model.solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
+from .model.profile import Profile, circle, polygon, square
+from .model.profile_ops import offset
+from .model.extrude import extrude
+from .model.revolve import revolve
+from .model.hull import hull, minkowski
 
 __version__ = "0.2.0"
 from .cl.device import devices

@@ -77,7 +77,7 @@ FILES = {
     "ok.csg": "sphere(r = 1);",
     "truncated.csg": "sphere(r = 1",
     "garbage.csg": "cube([1, 1, 1]) }}} ;;",
-    "unsupported.csg": "linear_extrude(height = 1) square(1);",
+    "unsupported.csg": "rotate_extrude() multmatrix([[1, 0, 0, 2], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) circle(1);",
     "scene.txt": "sphere(1);",
 }
 
@@ -122,7 +122,7 @@ CLI_ERRORS = [
     # OpenSCAD syntax and content
     ("info {d}/truncated.csg", 3, "syntax error"),
     ("info {d}/garbage.csg", 3, "syntax error"),
-    ("info {d}/unsupported.csg", 3, "not supported"),
+    ("info {d}/unsupported.csg", 3, "sweeps a torus, a quartic surface"),
     # options
     ("sample {d}/ok.json -r 0 -o {o}/x.ply", 2, "--radius must be a positive"),
     ("sample {d}/ok.json -r -1 -o {o}/x.ply", 2, "--radius must be a positive"),

@@ -292,7 +292,7 @@ def test_schema_structure():
     for ref in all_refs(schema):
         assert ref.startswith("#/$defs/") and ref[len("#/$defs/"):] in defs, ref
     node = defs["node"]
-    every_kind = {*solids.KINDS, *scenefile.OPERATIONS, *scenefile.UNARY, "ref"}
+    every_kind = {*solids.KINDS, *scenefile.CONSTRUCTIONS, *scenefile.OPERATIONS, *scenefile.UNARY, "ref"}
     # a node has exactly the keys of one kind (dispatch on the kind key) ...
     assert {k: v["$ref"] for k, v in node["dependentSchemas"].items()} == {k: f"#/$defs/{k}" for k in every_kind}
     assert node["not"] == {"propertyNames": {"enum": list(scenefile.NODE_EXTRA_KEYS)}}  # not only extras: a kind
@@ -303,6 +303,9 @@ def test_schema_structure():
         assert set(ps["properties"]) == set(params), kind
         required = {n for n, d in params.items() if d is __import__("inspect").Parameter.empty}
         assert set(ps.get("required", [])) == required, kind
+        assert set(defs[kind]["properties"]) == {kind, *scenefile.NODE_EXTRA_KEYS}
+        assert defs[kind]["required"] == [kind] and defs[kind]["additionalProperties"] is False
+    for kind in scenefile.CONSTRUCTIONS:
         assert set(defs[kind]["properties"]) == {kind, *scenefile.NODE_EXTRA_KEYS}
         assert defs[kind]["required"] == [kind] and defs[kind]["additionalProperties"] is False
     for op in [*scenefile.OPERATIONS, *scenefile.UNARY, "ref"]:

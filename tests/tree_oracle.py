@@ -167,7 +167,8 @@ class _Tree:
                 if isinstance(node, Transformed):
                     memo[key] = memo[child_keys[0]]
                 else:
-                    op = _OPS[type(node)] if node.children() else "none"
+                    # subclasses (a construction is a union) take their base's operation
+                    op = next(_OPS[c] for c in type(node).__mro__ if c in _OPS) if node.children() else "none"
                     memo[key] = self._emit(op, [memo[k] for k in child_keys])
                 continue
             if key in memo:

@@ -78,6 +78,8 @@ def format_info(info: dict) -> str:
     else:
         row("device", f"none ({info.get('device_problem', 'not available')})")
     row("primitives", t["primitives"])
+    for k, line in enumerate(info.get("constructions", [])):
+        lines.append(f"{'constructions:' if k == 0 else '':<22}{line}")
     row("unique quadrics", f"{info['unique_quadrics']} ({t['quadrics']} in the tape)")
     row("tape", f"{t['instructions']} instructions, {t['leaves']} leaves, {t['registers']} registers, "
                 f"depth {t['depth']}")

@@ -11,6 +11,15 @@ def _plain(v):
     return v.item() if hasattr(v, "item") else v
 
 
+def constructions(shape) -> list[str]:
+    """What each construction (extrusion, revolution, hull, Minkowski sum) of the graph expands
+    to, one line each: 'hull of 8 spheres: 12 planes, 12 cylinders, 8 spheres'."""
+    from ..model.construction import Construction
+    from ..model.csg import walk
+
+    return [n.describe() for n in walk(shape) if isinstance(n, Construction)]
+
+
 def scene_info(scene, normal_form: str = "tree", term_limit: int | None = None, bound=None,
                listing: bool = False) -> dict:
     """Statistics of ``scene`` (a Scene, Shape or path): the tape's, the number of DNF terms
@@ -31,6 +40,7 @@ def scene_info(scene, normal_form: str = "tree", term_limit: int | None = None, 
         "user_bound": None if sc.bound is None else np.asarray(sc.bound, dtype=float).tolist(),
         "user_bound_from": None if sc.bound is None else ("--bound" if bound is not None else "scene"),
     }
+    out["constructions"] = constructions(sc.shape)
     if normal_form == "dnf":
         dnf = sc.compile("dnf", term_limit)
         out["dnf"] = {

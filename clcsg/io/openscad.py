@@ -69,6 +69,7 @@ from ..model.csg import Difference, Intersection, Shape, Transformed, Union
 from ..model.scene import Scene
 from .budget import CSG_FACTOR, check_file, check_input
 from .colors import NAMED_COLORS, ColorError, from_string
+from .openscad_2d import PARAMS_2D, REFUSED, Constructions
 from .openscad_tokens import SOURCE_HINT, UNDEF, Node, OpenScadWarning, Parser, Source, fmt, is_num
 from .trampoline import run
 
@@ -95,9 +96,11 @@ _PRIMITIVES = frozenset(("cube", "sphere", "cylinder"))
 SUPPORTED_NODES = (
     "group", "union", "difference", "intersection", "render", "multmatrix", "color",
     "cube", "sphere", "cylinder",
+    "linear_extrude", "rotate_extrude", "hull", "minkowski", "square", "circle", "polygon", "offset",
 )
 
-_UNSUPPORTED_HINT = "clcsg samples quadric primitives only (cube, sphere, cylinder)"
+_UNSUPPORTED_HINT = ("clcsg reads quadric solids only (cube, sphere, cylinder, their Booleans, extrusions, "
+                     "hulls and Minkowski sums)")
 
 # Module names that exist only in the .scad language: OpenSCAD's export turns them into
 # multmatrix/group, so meeting one means the file is a .scad source, not a CSG export.
@@ -124,11 +127,12 @@ _PARAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "union": ((), ()),
     "difference": ((), ()),
     "intersection": ((), ()),
+    **PARAMS_2D,
 }
 
 
 @dataclass
-class _Evaluator:
+class _Evaluator(Constructions):
     src: Source
 
     def warn(self, pos: int, message: str):
@@ -224,6 +228,8 @@ class _Evaluator:
         node, ctx = request
         method = getattr(self, "n_" + node.name, None) if node.name in _PARAMS else None
         if method is None:
+            if node.name in REFUSED:
+                raise self.src.error(node.pos, f"{node.name}() is not supported: {REFUSED[node.name]}")
             if node.name in _SOURCE_MODULES:
                 raise self.src.error(node.pos, f"{node.name}() is not supported: {SOURCE_HINT}")
             raise self.src.error(node.pos, f"{node.name}() is not supported: {_UNSUPPORTED_HINT}")

@@ -30,6 +30,8 @@ from ..model import solids
 #: variadic operations, then the unary one and ``ref``: the node kinds besides primitives
 OPERATIONS = ("union", "intersection", "difference")
 UNARY = ("complement",)
+#: constructions: solids built exactly from a 2-D profile or from other nodes
+CONSTRUCTIONS = ("extrude", "revolve", "hull", "minkowski")
 TOP_KEYS = ("clcsg", "bound", "defs", "root", "comment", "$schema")
 TRANSFORM_STEPS = ("translate", "rotate", "scale", "matrix")
 FORMAT_VERSION = 1
@@ -73,11 +75,11 @@ def suggest(word, choices) -> str:
 
 def known_kinds() -> str:
     return (f"known primitives: {', '.join(sorted(solids.KINDS))}; "
-            f"operations: {', '.join([*OPERATIONS, *UNARY])}; or \"ref\"")
+            f"constructions: {', '.join(CONSTRUCTIONS)}; operations: {', '.join([*OPERATIONS, *UNARY])}; or \"ref\"")
 
 
 def node_kinds(obj) -> list:
-    return [k for k in obj if k in solids.KINDS or k in OPERATIONS or k in UNARY or k == "ref"]
+    return [k for k in obj if k in solids.KINDS or k in CONSTRUCTIONS or k in OPERATIONS or k in UNARY or k == "ref"]
 
 
 def _num(v) -> str:

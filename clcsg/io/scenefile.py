@@ -60,17 +60,22 @@ import numpy as np
 from ..errors import SceneError, TransformError
 from ..model import solids
 from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
+from ..model.construction import Construction, first_color
+from ..model.extrude import extrude
+from ..model.hull import hull, minkowski
+from ..model.revolve import revolve
 from ..model.scene import Scene
 from .budget import JSON_FACTOR, check_file, check_input
+from .profile_json import profile_from_json
 from .colors import ColorError, parse_color
-from .scene_schema import FORMAT_VERSION, TOP_KEYS, TRANSFORM_STEPS, UNARY, join, jtype, key, scene_schema, suggest
+from .scene_schema import CONSTRUCTIONS, FORMAT_VERSION, TOP_KEYS, TRANSFORM_STEPS, UNARY, join, jtype, key, scene_schema, suggest
 from .trampoline import run
 
 #: variadic operations (JSON key -> class); ``complement`` takes a single node
 OPERATIONS = {"union": Union, "intersection": Intersection, "difference": Difference}
 NODE_EXTRA_KEYS = ("transform", "color", "comment")
 
-__all__ = ["FORMAT_VERSION", "OPERATIONS", "UNARY", "TRANSFORM_STEPS", "TOP_KEYS", "NODE_EXTRA_KEYS", "WIDTH",
+__all__ = ["FORMAT_VERSION", "OPERATIONS", "CONSTRUCTIONS", "UNARY", "TRANSFORM_STEPS", "TOP_KEYS", "NODE_EXTRA_KEYS", "WIDTH",
            "SAVE_DEPTH", "load_json", "loads_json", "parse_json", "scene_from_dict", "scene_to_dict", "dumps",
            "save_json"]
 
@@ -292,6 +297,15 @@ class _Loader:
             shape = OPERATIONS[kind](operands)
         elif kind == "complement":
             shape = Complement((yield self._node(arg, kpath)))
+        elif kind in ("hull", "minkowski"):
+            color = self.color(v["color"], key(path, "color")) if "color" in v else None
+            operands = []
+            for i, c in enumerate(arg):
+                operands.append((yield self._node(c, f"{kpath}[{i}]")))
+            shape = self.construction(kind, operands, color, kpath)
+        elif kind in ("extrude", "revolve"):
+            color = self.color(v["color"], key(path, "color")) if "color" in v else None
+            shape = self.construction(kind, arg, color, kpath)
         else:
             shape = yield self._ref(arg, kpath)
         if "transform" in v:
@@ -314,6 +328,22 @@ class _Loader:
         self.stack.pop()
         self.built[name] = shape
         return shape
+
+    def construction(self, kind, arg, color, path) -> Shape:
+        try:
+            if kind == "hull":
+                return hull(*arg, color=color)
+            if kind == "minkowski":
+                return minkowski(*arg, color=color)
+            prof = profile_from_json(arg["profile"], key(path, "profile"), self.fail)
+            if kind == "extrude":
+                return extrude(prof, arg.get("height", 1.0), center=arg.get("center", False),
+                               scale=arg.get("scale", 1.0), color=color)
+            return revolve(prof, arg.get("angle", 360.0), color=color)
+        except SceneError as e:
+            if str(e).startswith(self.source):
+                raise
+            self.fail(path, str(e))
 
     def primitive(self, kind, params, color, path) -> Primitive:
         m = params.get("matrix") if kind == "quadric" else None
@@ -422,8 +452,10 @@ class _Saver:
             self.defs[name] = None
             self.defs[name] = yield self._node(node, True, 0)
             return {"ref": name}
+        if isinstance(node, Construction) and node.spec is not None:
+            return (yield self._construction(node, depth))
         for name, cls in OPERATIONS.items():
-            if type(node) is cls:
+            if isinstance(node, cls):  # also a construction without a spec: its expansion
                 operands = []
                 for c in node.operands:
                     operands.append((yield self._node(c, False, depth + 1)))
@@ -431,6 +463,22 @@ class _Saver:
         if type(node) is Complement:
             return {"complement": (yield self._node(node.operand, False, depth + 1))}
         self.fail(f"unknown CSG node type {type(node).__name__}")
+
+    def _construction(self, node, depth):
+        color = first_color([node.operands[0]])
+        if isinstance(node.spec, dict):
+            out = dict(node.spec)
+            implied = DEFAULT_COLOR
+        else:
+            kind, operands = node.spec
+            out = {kind: []}
+            for c in operands:
+                out[kind].append((yield self._node(c, False, depth + 1)))
+            implied = first_color(operands)
+        if color is not None and tuple(color) != tuple(implied or DEFAULT_COLOR):
+            c = [_jnum(x) for x in color]
+            out["color"] = c[:3] if c[3] == 1.0 else c
+        return out
 
     def new_name(self, node) -> str:
         if isinstance(node, Primitive):
