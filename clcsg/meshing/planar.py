@@ -14,8 +14,6 @@ ones (a loop that crosses itself after rounding).
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from .refine import _compact, common, edges_of
 
@@ -25,6 +23,9 @@ AREA_TOL = 1e-9
 
 def _plane_patches(m):
     """(triangle indices, plane quadric) of each connected planar patch."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     planes = flat_quadrics(m.tape.quadrics)
     s = m.sets[m.triangles]
     shared = common(common(s[:, 0], s[:, 1]), s[:, 2])
