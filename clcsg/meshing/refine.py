@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..compile.interpret import member
+from ..compile.interpret import contains, member
 from .project import first_order_distance, newton
 
 #: an edge is split when its midpoint is farther than this fraction of the tolerance from its
@@ -36,6 +36,8 @@ CHORD_FRACTION = 0.7
 MAX_PASSES = 16
 #: edges shorter than this fraction of the tolerance are never split
 MIN_EDGE = 1e-3
+#: the probe distance of :func:`on_boundary`, relative to the coordinates' scale
+PROBE = 1e-7
 #: a curve point this close to an edge's end (a fraction of the tolerance) moves that end
 SNAP = 0.05
 
@@ -115,6 +117,37 @@ def _on_csg(tape, x, q):
     return out
 
 
+def _probe_directions():
+    """The 6 axis and 8 diagonal unit directions, turned off the axes (a fixed rotation), so
+    that no probe lies on an axis-aligned face through the point."""
+    d = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if sum(map(abs, d)) in (1, 3)])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    a, b, c = 0.3871, 0.6143, 0.2207
+    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    ry = np.array([[np.cos(c), 0, np.sin(c)], [0, 1, 0], [-np.sin(c), 0, np.cos(c)]])
+    rz = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    return d @ (rz @ ry @ rx).T
+
+
+_PROBES = _probe_directions()
+
+
+def on_boundary(tape, x) -> np.ndarray:
+    """Points (N, 3) on the solid's boundary to rounding: among the 14 points at distance
+    :data:`PROBE` x scale (axis and diagonal directions, turned) some are inside and some
+    outside, and likewise at 100 times that distance.  Used for points on curves and corners, where substituting one quadric is
+    ambiguous."""
+    if not len(x):
+        return np.zeros(0, dtype=bool)
+    scale = max(1.0, float(np.abs(x).max()))
+    out = np.ones(len(x), dtype=bool)
+    for r in (PROBE, 100 * PROBE):  # two radii: a rounding-level disagreement of one probe is not enough
+        pts = (x[:, None, :] + r * scale * _PROBES[None]).reshape(-1, 3)
+        ins = contains(tape.ops, tape.quadrics, pts).reshape(len(x), -1)
+        out &= ins.any(axis=1) & ~ins.all(axis=1)
+    return out
+
+
 def _edge_splits(m, tol, edges):
     """New vertices for the edges to split: (edge indices, points, sets), plus the count of
     edges that needed a split but got none."""
@@ -134,9 +167,12 @@ def _edge_splits(m, tol, edges):
     single = (shared[chord, 1] < 0) & cok
     if single.any():
         cok[single] = _on_csg(m.tape, cx[single], shared[chord[single], 0])
+    curve = ~single & cok
+    cok[curve] = on_boundary(m.tape, cx[curve])
     span = np.flatnonzero((n_shared == 0) & long_enough)
     rows, sets = _candidates(s[a[span]], s[b[span]])
     sx, sok = _solve(m.tape, sets, mid[span[rows]])
+    sok[sok] = on_boundary(m.tape, sx[sok])
     dist = np.where(sok, np.linalg.norm(sx - mid[span[rows]], axis=1), np.inf)
     dist[dist > 0.75 * length[span[rows]]] = np.inf
     best = np.full(len(span), -1)
@@ -221,6 +257,7 @@ def _corner_splits(m):
     x, ok = _solve(m.tape, corner, x0)
     reach = np.linalg.norm(m.vertices[m.triangles[sel]] - x0[:, None], axis=2).max(axis=1)
     ok &= np.linalg.norm(x - x0, axis=1) <= 2.0 * reach
+    ok[ok] = on_boundary(m.tape, x[ok])
     sel, x, corner = sel[ok], x[ok], corner[ok]
     if not len(sel):
         return 0

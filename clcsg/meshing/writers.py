@@ -69,8 +69,17 @@ def write(mesh, path) -> int:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, str(path))
+    except OSError as e:
+        _remove(tmp)
+        raise UsageError(f"{path}: cannot write the mesh: {e.strerror or e}") from None
     except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        _remove(tmp)
         raise
     return len(data)
+
+
+def _remove(tmp) -> None:
+    try:
+        os.unlink(tmp)
+    except FileNotFoundError:
+        pass
