@@ -1,14 +1,15 @@
 """Flat faces with few triangles: every planar patch re-triangulated from its boundary alone.
 
 A planar patch is a connected set of triangles (sharing edges) whose vertices all lie on the
-same plane quadric.  Its boundary (the directed edges whose reverse is not in the patch) is a
+same plane quadric (and on no second plane: a sliver along a straight edge stays as it is).  Its boundary (the directed edges whose reverse is not in the patch) is a
 set of closed loops in the plane: the outer loop and the holes.  The patch is replaced by an
 ear-clipping triangulation of those loops (``mapbox_earcut``, in the plane's 2-D frame) with no
 interior vertex: the boundary, hence every edge shared with the rest of the mesh, is
 unchanged, so the mesh stays closed and manifold, and the new triangles lie exactly in the
 plane.  A patch is left as it is when its boundary is not a set of simple loops (a vertex with
 two outgoing boundary edges) or the new triangles do not cover the same area as the old
-ones (a loop that crosses itself after rounding).
+ones (a loop that crosses itself after rounding), and all patches keep their triangles if
+the result is not closed (a safety net, :func:`closed`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ import numpy as np
 from .refine import _compact, common, edges_of
 
 #: relative area mismatch beyond which a re-triangulated patch is rejected
-AREA_TOL = 1e-9
+AREA_TOL = 1e-6
+#: the zigzag of the ear clipper's input, relative to the patch size
+NUDGE = 1e-7
 
 
 def _plane_patches(m):
@@ -30,7 +33,8 @@ def _plane_patches(m):
     s = m.sets[m.triangles]
     shared = common(common(s[:, 0], s[:, 1]), s[:, 2])
     is_plane = np.isin(shared, planes)
-    plane = np.where(is_plane.any(axis=1), np.take_along_axis(shared, np.argmax(is_plane, axis=1)[:, None], 1)[:, 0], -1)
+    plane = np.where(is_plane.sum(axis=1) == 1,
+                     np.take_along_axis(shared, np.argmax(is_plane, axis=1)[:, None], 1)[:, 0], -1)
     sel = np.flatnonzero(plane >= 0)
     if not len(sel):
         return []
@@ -103,6 +107,22 @@ def _area2(p, tri):
     return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
 
 
+def _nudged(p):
+    """A loop's 2-D points for the ear clipper, every other one moved a hair into the patch
+    (to the left of the loop's direction): the clipper drops collinear and coinciding points
+    (a straight sharp edge split at many points, a corner solved from two edges), which would
+    leave a hole; a zigzag keeps every one.  Only the 2-D copy moves, not the vertices."""
+    if len(p) < 3:
+        return p
+    size = float(np.ptp(p, axis=0).max())
+    d = np.roll(p, -1, axis=0) - np.roll(p, 1, axis=0)
+    left = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    ln = np.linalg.norm(left, axis=1, keepdims=True)
+    left = np.divide(left, ln, out=np.zeros_like(left), where=ln > 0)
+    odd = (np.arange(len(p)) % 2 == 1)[:, None]
+    return p + np.where(odd, NUDGE * size * left, 0.0)
+
+
 def _retriangulate(m, tri, plane):
     """New triangles for one patch, or None to keep it."""
     import mapbox_earcut
@@ -121,7 +141,7 @@ def _retriangulate(m, tri, plane):
     areas = [0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]) for p in pts]
     outer = int(np.argmax(areas))
     order = [outer] + [k for k in range(len(ids)) if k != outer]
-    ring = np.concatenate([pts[k] for k in order])
+    ring = np.concatenate([_nudged(pts[k]) for k in order])
     vid = np.concatenate([ids[k] for k in order])
     ends = np.cumsum([len(ids[k]) for k in order]).astype(np.uint32)
     out = np.asarray(mapbox_earcut.triangulate_float64(ring, ends), dtype=np.int64).reshape(-1, 3)
@@ -132,23 +152,57 @@ def _retriangulate(m, tri, plane):
     total = abs(old_area.sum())
     if abs(np.abs(new_area).sum() - total) > AREA_TOL * max(total, 1e-300) * len(out):
         return None
-    return vid[out]
+    new = vid[out]
+    return new if _closes(new, loops) else None
+
+
+def _closes(tri, loops) -> bool:
+    """The new triangles cover every boundary edge once in the loops' direction and pair up
+    all their other edges: glued back, the mesh is closed and manifold."""
+    d = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    if np.any(d[:, 0] == d[:, 1]):
+        return False
+    keys = {(int(a), int(b)) for a, b in d}
+    if len(keys) != len(d):
+        return False
+    boundary = {(int(lp[k]), int(lp[(k + 1) % len(lp)])) for lp in loops for k in range(len(lp))}
+    if not boundary <= keys:
+        return False
+    return all((b, a) in keys for a, b in keys - boundary) and not any((b, a) in keys for a, b in boundary)
+
+
+def closed(tri) -> bool:
+    """Every directed edge's reverse is present exactly once: closed, manifold edges and a
+    consistent orientation."""
+    n = np.int64(tri.max(initial=0) + 1)
+    d = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]).astype(np.int64)
+    fwd = np.sort(d[:, 0] * n + d[:, 1])
+    rev = np.sort(d[:, 1] * n + d[:, 0])
+    return bool(np.all(np.diff(fwd) > 0) and np.array_equal(fwd, rev))
 
 
 def coarsen(m, stats: dict) -> None:
-    """Re-triangulate every planar patch of ``m`` in place; drop unused vertices."""
-    keep = np.ones(len(m.triangles), dtype=bool)
-    new = []
+    """Re-triangulate every planar patch of ``m`` in place (each kept only if the whole mesh
+    stays closed, :func:`closed`); drop unused vertices."""
     patches = skipped = 0
+    pos = np.arange(len(m.triangles))  # where each original triangle is now
     for tri_idx, plane in _plane_patches(m):
+        tri_idx = pos[tri_idx]
         t = _retriangulate(m, m.triangles[tri_idx], plane)
         if t is None:
             skipped += 1
             continue
-        patches += 1
+        keep = np.ones(len(m.triangles), dtype=bool)
         keep[tri_idx] = False
-        new.append(t)
-    m.triangles = np.concatenate([m.triangles[keep]] + new) if new else m.triangles
+        trial = np.concatenate([m.triangles[keep], t])
+        if not closed(trial):
+            skipped += 1
+            continue
+        remap = np.full(len(m.triangles), -1, dtype=np.int64)
+        remap[keep] = np.arange(keep.sum())
+        pos = remap[pos]  # the other patches' triangles keep their order, before the new ones
+        m.triangles = trial
+        patches += 1
     used = np.zeros(len(m.vertices), dtype=bool)
     used[m.triangles.ravel()] = True
     remap = np.cumsum(used) - 1

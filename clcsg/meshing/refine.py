@@ -117,25 +117,25 @@ def _on_csg(tape, x, q):
     return out
 
 
-def _probe_directions():
-    """The 6 axis and 8 diagonal unit directions, turned off the axes (a fixed rotation), so
-    that no probe lies on an axis-aligned face through the point."""
-    d = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if sum(map(abs, d)) in (1, 3)])
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    a, b, c = 0.3871, 0.6143, 0.2207
-    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
-    ry = np.array([[np.cos(c), 0, np.sin(c)], [0, 1, 0], [-np.sin(c), 0, np.cos(c)]])
-    rz = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
-    return d @ (rz @ ry @ rx).T
+def _probe_directions(n: int = 64):
+    """``n`` unit directions spread evenly over the sphere (a Fibonacci lattice, turned off
+    the axes), so that a wedge of the solid as narrow as a box corner holds some of them and
+    none lies on an axis-aligned face through the point."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = k * np.pi * (3.0 - np.sqrt(5.0)) + 0.1234
+    r = np.sqrt(1.0 - z * z)
+    d = np.stack([r * np.cos(phi), r * np.sin(phi), z + 1e-3 * np.sin(7 * k)], axis=1)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 _PROBES = _probe_directions()
 
 
 def on_boundary(tape, x) -> np.ndarray:
-    """Points (N, 3) on the solid's boundary to rounding: among the 14 points at distance
-    :data:`PROBE` x scale (axis and diagonal directions, turned) some are inside and some
-    outside, and likewise at 100 times that distance.  Used for points on curves and corners, where substituting one quadric is
+    """Points (N, 3) on the solid's boundary to rounding: among the points at distance
+    :data:`PROBE` x scale (:func:`_probe_directions`) some are inside and some outside, and
+    likewise at 100 times that distance.  Used for points on curves and corners, where substituting one quadric is
     ambiguous."""
     if not len(x):
         return np.zeros(0, dtype=bool)
