@@ -8,7 +8,8 @@ The stages, one module each:
 4. :mod:`.refine`: edges split onto the intersection curves of the quadrics (sharp edges and
    corners, solved by Newton onto two or three quadrics, :mod:`.project`) and on curved patches
    until the chord error is under the tolerance;
-5. :mod:`.planar`: each planar patch re-triangulated from its boundary alone (few triangles);
+5. :mod:`.collapse`: zero-length edges (a corner solved twice) collapsed;
+   :mod:`.planar`: each planar patch re-triangulated from its boundary alone (few triangles);
 6. :mod:`.colors`: per triangle its quadric, primitive and colour.
 """
 
@@ -25,6 +26,7 @@ from ..errors import SceneError, UsageError
 from ..model.scene import as_scene
 from ..sampling.radius import Radius
 from . import planar, refine
+from .collapse import collapse_coincident
 from .colors import triangle_owners
 from .crossings import crossings
 from .octree import surface_cells
@@ -98,6 +100,7 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     vsets[:, 0] = vq
     m = refine.Surface(tape, verts, vsets, tri)
     refine.refine(m, tol, grid.h, stats)
+    collapse_coincident(m, stats)
     planar.coarsen(m, stats)
     quad, prim, colors = triangle_owners(tape, m, tol)
     stats.update(triangles=int(len(m.triangles)), vertices=int(len(m.vertices)),

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 #: Newton iterations
-ITERATIONS = 12
+ITERATIONS = 40
 #: converged: first-order distances below this times max(1, |x|)
 REL = 1e-12
 
@@ -51,4 +51,4 @@ def newton(matrices, x0):
             x = np.where(np.isfinite(step).all(axis=1, keepdims=True), x - step, x)
         d = first_order_distance(matrices, x)
     scale = np.maximum(1.0, np.abs(x).max(axis=1))
-    return x, np.isfinite(d) & (d <= REL * scale * 1e3) & np.isfinite(x).all(axis=1)
+    return x, np.isfinite(d) & (d <= REL * scale) & np.isfinite(x).all(axis=1)

@@ -4,9 +4,10 @@ closed and manifold.
 Every vertex knows the quadrics it lies on (one on a patch, two on an intersection curve,
 three at a corner).  An edge is split at a new vertex when
 
-* its ends share no quadric (it spans a sharp edge): the new vertex is the point of the
-  intersection curve of one quadric of each end (or of their corner) nearest to the edge's
-  midpoint, by Newton (:func:`~.project.newton`), the closest converged candidate;
+* its ends share no quadric (it spans a sharp edge): the new vertex is the corner of the
+  ends' three quadrics if Newton (:func:`~.project.newton`) finds one on the solid within
+  reach, else the point of the intersection curve of one quadric of each end nearest to the
+  edge's midpoint (the closest converged candidate on the solid);
 * its ends share quadrics (it runs on a patch or along a curve) and its midpoint is farther
   than :data:`CHORD_FRACTION` of the tolerance from them (the chord error): the new vertex is
   the midpoint projected onto them.
@@ -176,7 +177,8 @@ def _edge_splits(m, tol, edges):
     dist = np.where(sok, np.linalg.norm(sx - mid[span[rows]], axis=1), np.inf)
     dist[dist > 0.75 * length[span[rows]]] = np.inf
     best = np.full(len(span), -1)
-    order = np.lexsort((dist, rows))
+    corner = sets[:, 2] >= 0  # a corner ends the edge's chain of splits: first choice when valid
+    order = np.lexsort((dist, ~corner, rows))
     first = np.ones(len(order), dtype=bool)
     first[1:] = rows[order][1:] != rows[order][:-1]
     pick = order[first & np.isfinite(dist[order])]
