@@ -6,7 +6,7 @@ from .app import add_subcommand, parse_bound, positive_int
 
 
 def add_parser(subparsers):
-    from ..meshing.mesh import DEFAULT_CELLS, DEFAULT_TOLERANCE
+    from ..meshing.pipeline import DEFAULT_CELLS, DEFAULT_TOLERANCE
     from ..meshing.writers import FORMATS
 
     p = add_subcommand(
@@ -44,7 +44,7 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from ..meshing.mesh import mesh
+    from ..meshing.pipeline import mesh
     from ..meshing.writers import check_output, write
     from ..sampling.radius import Radius
     from .runs import Run, load_scene

@@ -274,7 +274,7 @@ def _corner_splits(m):
     return len(sel)
 
 
-def refine(m: Surface, tol: float, h: float, stats: dict) -> None:
+def refine(m: Surface, tol: float, stats: dict) -> None:
     """Split until no edge spans a sharp edge or exceeds the chord error (or MAX_PASSES)."""
     splits = corners = 0
     missed = 0

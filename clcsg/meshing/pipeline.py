@@ -82,16 +82,13 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     stats.update(cells=int(len(grid.ijk)), boxes_tested=int(grid.visited), h=grid.h)
 
     def inside_of(ids):
-        ijk = np.stack([ids // (grid.size * grid.size), (ids // grid.size) % grid.size, ids % grid.size], axis=1)
-        return contains(tape.ops, tape.quadrics, grid.points(ijk))
+        return contains(tape.ops, tape.quadrics, grid.points(grid.ijk_of(ids)))
 
     edges, lo_in, tri, edge_cell = triangulate(grid, inside_of)
     if not len(tri):
         raise SceneError(f"{sc.source}: the solid is empty (or thinner than the grid, "
                          f"{grid.h:.3g} units): there is nothing to mesh")
-    ids_to_ijk = lambda ids: np.stack([ids // (grid.size * grid.size), (ids // grid.size) % grid.size,
-                                       ids % grid.size], axis=1)
-    pa, pb = grid.points(ids_to_ijk(edges[:, 0])), grid.points(ids_to_ijk(edges[:, 1]))
+    pa, pb = grid.points(grid.ijk_of(edges[:, 0])), grid.points(grid.ijk_of(edges[:, 1]))
     p_in = np.where(lo_in[:, None], pa, pb)
     p_out = np.where(lo_in[:, None], pb, pa)
     verts, vq, fallbacks = crossings(tape, p_in, p_out, np.ones(len(edges), bool), grid.quadrics[edge_cell])
@@ -99,7 +96,7 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     vsets = np.full((len(verts), 3), -1, dtype=np.int64)
     vsets[:, 0] = vq
     m = refine.Surface(tape, verts, vsets, tri)
-    refine.refine(m, tol, grid.h, stats)
+    refine.refine(m, tol, stats)
     collapse_coincident(m, stats)
     planar.coarsen(m, stats)
     quad, prim, colors = triangle_owners(tape, m, tol)
