@@ -40,3 +40,4 @@ from .sampling.sampler import sample
 from .sampling.samples import Samples, load_samples
 from .queries import distance, inside
 from .batching.api import batch
+from .meshing import mesh

@@ -223,6 +223,7 @@ COMMANDS: dict[str, tuple[Callable, Callable]] = {
     "render": _command("render"),
     "batch": _command("batch"),
     "view": _command("view"),
+    "mesh": _command("mesh"),
 }
 
 

@@ -1,0 +1,205 @@
+"""``python -m bench mesh``: ``clcsg mesh`` against ``openscad -o part.stl`` and manifold3d.
+
+Per part, the mesh's triangle count, CPU time (process time of ``clcsg.mesh``; the child's CPU
+time for openscad, from ``getrusage(RUSAGE_CHILDREN)``; manifold3d's build + ``to_mesh`` by
+process time) and its measured largest error: the first-order distance to the nearest quadric
+of the scene, over area-weighted random points on the triangles, relative to the bound's
+diagonal.  Rows:
+
+* the everyday OpenSCAD parts: openscad's STL at the file's own ``$fn`` (its error measured),
+  clcsg at the default tolerance (0.1% of the diagonal) and at openscad's measured error
+  (equal tolerance), manifold3d at the fewest segments that reach the default tolerance;
+* the zoo models: clcsg at the default tolerance and manifold3d at equal tolerance.
+
+Whether the mesh is closed and 2-manifold is checked for every mesh (manifold3d's status and
+trimesh's ``is_watertight``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import resource
+import shutil
+import subprocess
+import tempfile
+import time
+import warnings
+
+import numpy as np
+
+import clcsg
+
+from . import zoo
+from .common import Load, diagonal, fmt, write
+
+SEGMENTS = (12, 16, 24, 32, 48, 64, 96, 128)
+QUICK_SEGMENTS = (16, 32, 64)
+DEFAULT_REL = 1e-3
+SAMPLES = 20000
+
+
+def _peers():
+    """bench.peers (the manifold3d translation of a clcsg shape and the first-order surface
+    error), imported on use: bench parts import only common and zoo at module level, and this
+    part shares those two pieces with peers rather than copying them."""
+    return importlib.import_module("bench.peers")
+
+
+def surface_error(tape, points):
+    return _peers().surface_error(tape, points)
+
+
+def _sample(vertices, triangles, rng, count=SAMPLES):
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    tri = np.searchsorted(np.cumsum(area), rng.random(count) * area.sum())
+    tri = np.minimum(tri, len(triangles) - 1)
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    return a[tri] + u[:, None] * (b[tri] - a[tri]) + v[:, None] * (c[tri] - a[tri])
+
+
+def _closed(vertices, triangles) -> bool:
+    import manifold3d
+    import trimesh
+
+    mm = manifold3d.Mesh(vert_properties=np.asarray(vertices, np.float32), tri_verts=np.asarray(triangles, np.uint32))
+    ok = manifold3d.Manifold(mm).status() == manifold3d.Error.NoError
+    return bool(ok and trimesh.Trimesh(vertices, triangles, process=False).is_watertight)
+
+
+def ours(scene, tape, tolerance, rng) -> dict:
+    t0 = time.process_time()
+    m = clcsg.mesh(scene, tolerance=tolerance)
+    cpu = time.process_time() - t0
+    err = surface_error(tape, _sample(m.vertices, m.triangles, rng)).max() / diagonal(tape.bound)
+    return {"triangles": len(m.triangles), "cpu_s": cpu, "max_rel_error": float(err),
+            "tolerance_rel": m.tolerance / diagonal(tape.bound), "closed_manifold": _closed(m.vertices, m.triangles),
+            "spanning_triangles": m.stats.get("spanning_triangles"), "planar_patches": m.stats.get("planar_patches")}
+
+
+def manifold_row(shape, tape, target_rel, segments, rng) -> dict:
+    """manifold3d at the fewest segments whose measured error is under ``target_rel``."""
+    import manifold3d
+
+    peers = _peers()
+    rec = {"levels": []}
+    for n in segments:
+        try:
+            t0 = time.process_time()
+            mesh = peers.Translator(manifold3d, n, tape.bound).build(shape).to_mesh()
+            cpu = time.process_time() - t0
+        except peers.Unsupported as e:
+            rec["unsupported"] = str(e)
+            return rec
+        v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
+        t = np.asarray(mesh.tri_verts, np.int64)
+        err = float(surface_error(tape, _sample(v, t, rng)).max() / diagonal(tape.bound))
+        rec["levels"].append({"segments": n, "triangles": len(t), "cpu_s": cpu, "max_rel_error": err})
+        if err <= target_rel:
+            rec.update(at_tolerance=rec["levels"][-1])
+            break
+    return rec
+
+
+def openscad_row(exe, scad, tape, rng, timeout=600.0) -> dict:
+    import trimesh
+
+    with tempfile.TemporaryDirectory(prefix="clcsg-bench-mesh-") as d:
+        out = os.path.join(d, "part.stl")
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        try:
+            p = subprocess.run([exe, "-o", out, os.path.abspath(scad)], cwd=d, capture_output=True, text=True,
+                               timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return {"error": f"timed out after {timeout:.0f} s"}
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if p.returncode != 0 or not os.path.exists(out):
+            return {"error": " ".join((p.stderr or "").split())[-300:]}
+        tm = trimesh.load(out, force="mesh")
+    err = float(surface_error(tape, _sample(np.asarray(tm.vertices), np.asarray(tm.faces), rng)).max()
+                / diagonal(tape.bound))
+    return {"triangles": int(len(tm.faces)), "wall_s": wall,
+            "cpu_s": (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime),
+            "max_rel_error": err, "watertight": bool(tm.is_watertight)}
+
+
+def _everyday(names, segments, rng):
+    exe = shutil.which("openscad")
+    rows = []
+    for name in names:
+        scene = clcsg.load(zoo.example_path(name, "csg"))
+        tape = scene.compile()
+        rec = {"part": name, "ours": ours(scene, tape, f"{100 * DEFAULT_REL}%", rng)}
+        if exe:
+            rec["openscad"] = osc = openscad_row(exe, zoo.example_path(name, "scad"), tape, rng)
+            if "max_rel_error" in osc:
+                rec["ours_at_openscad_error"] = ours(scene, tape, f"{100 * osc['max_rel_error']}%", rng)
+        rec["manifold3d"] = manifold_row(scene.shape, tape, DEFAULT_REL, segments, rng)
+        rows.append(rec)
+        print(_line(name, rec), flush=True)
+    return rows
+
+
+def _zoo(names, segments, rng):
+    rows = []
+    for m in zoo.MODELS:
+        if m.name not in names:
+            continue
+        scene = clcsg.Scene(m.build(), source=m.name)
+        tape = scene.compile()
+        rec = {"part": m.name, "ours": ours(scene, tape, f"{100 * DEFAULT_REL}%", rng),
+               "manifold3d": manifold_row(scene.shape, tape, DEFAULT_REL, segments, rng)}
+        rows.append(rec)
+        print(_line(m.name, rec), flush=True)
+    return rows
+
+
+def _line(name, rec) -> str:
+    o = rec["ours"]
+    s = f"{name}: clcsg {o['triangles']} triangles {o['cpu_s']:.2f} s (error {o['max_rel_error']:.1e})"
+    if "openscad" in rec and "triangles" in rec["openscad"]:
+        osc = rec["openscad"]
+        s += f"; openscad {osc['triangles']} triangles {osc['cpu_s']:.2f} s (error {osc['max_rel_error']:.1e})"
+    mf = rec["manifold3d"].get("at_tolerance")
+    if mf:
+        s += f"; manifold3d n={mf['segments']} {mf['triangles']} triangles {mf['cpu_s']:.3f} s"
+    return s
+
+
+def table(payload) -> str:
+    head = ("| part | clcsg triangles | clcsg CPU s | clcsg max error | openscad triangles | openscad CPU s | "
+            "openscad max error | clcsg at openscad's error: triangles / CPU s | manifold3d at 0.1%: triangles / CPU s |")
+    lines = [head, "|" + "---|" * 9]
+    for r in payload["everyday"] + payload["zoo"]:
+        o, osc = r["ours"], r.get("openscad", {})
+        eq = r.get("ours_at_openscad_error")
+        mf = r["manifold3d"].get("at_tolerance")
+        lines.append(f"| {r['part']} | {o['triangles']} | {o['cpu_s']:.2f} | {o['max_rel_error']:.1e} | "
+                     f"{osc.get('triangles', '-')} | {fmt(osc.get('cpu_s'), '.2f')} | "
+                     f"{fmt(osc.get('max_rel_error'), '.1e')} | "
+                     f"{(str(eq['triangles']) + ' / ' + format(eq['cpu_s'], '.2f')) if eq else '-'} | "
+                     f"{(str(mf['triangles']) + ' / ' + format(mf['cpu_s'], '.3f')) if mf else '-'} |")
+    return "\n".join(lines)
+
+
+def run(quick=False, device=None):
+    warnings.simplefilter("ignore")
+    load = Load()
+    rng = np.random.default_rng(5)
+    segments = QUICK_SEGMENTS if quick else SEGMENTS
+    everyday = ("l_bracket", "rook") if quick else zoo.EVERYDAY
+    models = ("lens", "drilled_die") if quick else tuple(m.name for m in zoo.MODELS)
+    payload = {"method": " ".join(__doc__.split()), "quick": bool(quick), "default_rel_tolerance": DEFAULT_REL,
+               "everyday": _everyday(everyday, segments, rng), "zoo": _zoo(models, segments, rng)}
+    payload["environment"] = load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(),
+                                        "clcsg": clcsg.__version__, "timing": "process CPU time"})
+    path = write("mesh", payload)
+    print()
+    print(table(payload))
+    print(f"\nwritten to {path}")
+    return payload

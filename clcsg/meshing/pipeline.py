@@ -1,0 +1,105 @@
+"""``clcsg.mesh``: a closed triangle mesh of a scene, its vertices on the exact surface.
+
+The stages, one module each:
+
+1. :mod:`.octree`: the grid cells the surface may cross (octree descent over the pruned tape);
+2. :mod:`.tetra`: marching tetrahedra on those cells: a closed, oriented 2-manifold;
+3. :mod:`.crossings`: every vertex moved onto the exact surface along its crossing edge;
+4. :mod:`.refine`: edges split onto the intersection curves of the quadrics (sharp edges and
+   corners, solved by Newton onto two or three quadrics, :mod:`.project`) and on curved patches
+   until the chord error is under the tolerance;
+5. :mod:`.collapse`: zero-length edges (a corner solved twice) collapsed;
+   :mod:`.planar`: each planar patch re-triangulated from its boundary alone (few triangles);
+6. :mod:`.colors`: per triangle its quadric, primitive and colour.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..compile.interpret import contains
+from ..errors import SceneError, UsageError
+from ..model.scene import as_scene
+from ..sampling.radius import Radius
+from . import planar, refine
+from .collapse import collapse_coincident
+from .colors import triangle_owners
+from .crossings import crossings
+from .octree import surface_cells
+from .tetra import triangulate
+
+#: default tolerance: 0.1% of the bound's diagonal
+DEFAULT_TOLERANCE = "0.1%"
+#: grid cells over the longest side of the bound (before refinement)
+DEFAULT_CELLS = 32
+
+
+@dataclass
+class Mesh:
+    """A closed triangle mesh: ``vertices`` (V, 3) float64, ``triangles`` (T, 3) int64 with
+    outward (counter-clockwise) orientation, per triangle its ``quadric`` (tape quadric index),
+    ``primitive`` (instance index, -1 if none found) and ``colors`` (T, 4) RGBA in [0, 1]; per
+    vertex the quadrics it lies on (``vertex_quadrics`` (V, 3), -1 padded)."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    quadric: np.ndarray
+    primitive: np.ndarray
+    colors: np.ndarray
+    vertex_quadrics: np.ndarray
+    tolerance: float
+    stats: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.triangles)
+
+
+def resolve_tolerance(tolerance, diagonal: float) -> float:
+    """The tolerance in scene units: a number, ``"0.05"`` or ``"0.1%"`` of the diagonal."""
+    return Radius.parse(tolerance, "tolerance").of(diagonal)
+
+
+def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=None) -> Mesh:
+    """The mesh of ``scene`` (a Scene, Shape or scene file path) within ``tolerance`` of its
+    surface (scene units, or ``"0.1%"`` of the bound's diagonal).  Raises SceneError for an
+    empty solid."""
+    t0 = time.process_time()
+    sc = as_scene(scene, bound)
+    spec = Radius.parse(tolerance, "tolerance")
+    if not isinstance(cells, int) or cells < 4:
+        raise UsageError(f"cells must be an integer >= 4, got {cells!r}")
+    tape = sc.compile()
+    if tape.empty:
+        raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
+    diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+    tol = spec.of(diag if diag > 0 and math.isfinite(diag) else 1.0)
+    stats = {"tolerance": tol}
+    grid = surface_cells(tape, cells)
+    stats.update(cells=int(len(grid.ijk)), boxes_tested=int(grid.visited), h=grid.h)
+
+    def inside_of(ids):
+        return contains(tape.ops, tape.quadrics, grid.points(grid.ijk_of(ids)))
+
+    edges, lo_in, tri, edge_cell = triangulate(grid, inside_of)
+    if not len(tri):
+        raise SceneError(f"{sc.source}: the solid is empty (or thinner than the grid, "
+                         f"{grid.h:.3g} units): there is nothing to mesh")
+    pa, pb = grid.points(grid.ijk_of(edges[:, 0])), grid.points(grid.ijk_of(edges[:, 1]))
+    p_in = np.where(lo_in[:, None], pa, pb)
+    p_out = np.where(lo_in[:, None], pb, pa)
+    verts, vq, fallbacks = crossings(tape, p_in, p_out, np.ones(len(edges), bool), grid.quadrics[edge_cell])
+    stats.update(base_triangles=int(len(tri)), crossing_fallbacks=fallbacks)
+    vsets = np.full((len(verts), 3), -1, dtype=np.int64)
+    vsets[:, 0] = vq
+    m = refine.Surface(tape, verts, vsets, tri)
+    refine.refine(m, tol, stats)
+    collapse_coincident(m, stats)
+    planar.coarsen(m, stats)
+    quad, prim, colors = triangle_owners(tape, m, tol)
+    stats.update(triangles=int(len(m.triangles)), vertices=int(len(m.vertices)),
+                 cpu_s=time.process_time() - t0)
+    return Mesh(m.vertices, m.triangles, quad, prim, colors, m.sets, tol, stats)

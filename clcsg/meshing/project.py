@@ -1,0 +1,54 @@
+"""Points onto one, two or three quadrics at once, by Newton's method in float64.
+
+For k quadrics K_1..K_k (k <= 3) the residual is F_i(x) = x^T K_i x (homogeneous x) and the
+Jacobian rows are grad K_i = 2 (K_i x)[:3].  The step is the minimum-norm solution of
+J dx = -F, dx = -J^T (J J^T)^-1 F: for k = 1 the step along the gradient, for k = 2 onto the
+intersection curve (the closest point to first order), for k = 3 the corner.  Convergence is
+quadratic near a transversal intersection; a point counts as converged when every
+first-order distance |F_i| / |grad K_i| is below ``rel`` times the point's scale.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Newton iterations
+ITERATIONS = 40
+#: converged: first-order distances below this times max(1, |x|)
+REL = 1e-12
+
+
+def residuals(matrices, x):
+    """(F (N, k), J (N, k, 3)) of the quadrics ``matrices`` (N, k, 4, 4) at ``x`` (N, 3)."""
+    xh = np.concatenate([x, np.ones((len(x), 1))], axis=1)
+    kx = np.einsum("nkij,nj->nki", matrices, xh)
+    return np.einsum("nki,ni->nk", kx, xh), 2.0 * kx[..., :3]
+
+
+def first_order_distance(matrices, x) -> np.ndarray:
+    """max_i |K_i(x)| / |grad K_i(x)| (N,): the distance to the intersection, to first order."""
+    f, j = residuals(matrices, x)
+    g = np.linalg.norm(j, axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(g > 0, np.abs(f) / g, np.where(f == 0, 0.0, np.inf))
+    return d.max(axis=1)
+
+
+def newton(matrices, x0):
+    """(x, converged) after Newton on the quadrics ``matrices`` (N, k, 4, 4) from ``x0``."""
+    x = np.array(x0, dtype=np.float64, copy=True)
+    k = matrices.shape[1]
+    eye = 1e-300 * np.eye(k)
+    with np.errstate(all="ignore"):
+        for _ in range(ITERATIONS):
+            f, j = residuals(matrices, x)
+            jjt = np.einsum("nki,nli->nkl", j, j) + eye
+            ok = np.abs(np.linalg.det(jjt)) > 0
+            lam = np.zeros_like(f)
+            if ok.any():
+                lam[ok] = np.linalg.solve(jjt[ok], f[ok][..., None])[..., 0]
+            step = np.einsum("nki,nk->ni", j, lam)
+            x = np.where(np.isfinite(step).all(axis=1, keepdims=True), x - step, x)
+        d = first_order_distance(matrices, x)
+    scale = np.maximum(1.0, np.abs(x).max(axis=1))
+    return x, np.isfinite(d) & (d <= REL * scale) & np.isfinite(x).all(axis=1)

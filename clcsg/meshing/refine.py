@@ -1,0 +1,301 @@
+"""Sharp features and chord error: splitting edges onto the exact surface, keeping the mesh
+closed and manifold.
+
+Every vertex knows the quadrics it lies on (one on a patch, two on an intersection curve,
+three at a corner).  An edge is split at a new vertex when
+
+* its ends share no quadric (it spans a sharp edge): the new vertex is the corner of the
+  ends' three quadrics if Newton (:func:`~.project.newton`) finds one on the solid within
+  reach, else the point of the intersection curve of one quadric of each end nearest to the
+  edge's midpoint (the closest converged candidate on the solid);
+* its ends share quadrics (it runs on a patch or along a curve) and its midpoint is farther
+  than :data:`CHORD_FRACTION` of the tolerance from them (the chord error): the new vertex is
+  the midpoint projected onto them.
+
+Splits are keyed by edge, so both triangles of an edge split at the same vertex; a triangle
+with one, two or three split edges becomes two, three or four (the red-green patterns), which
+keeps the mesh conforming, closed and 2-manifold.  A triangle whose vertices pairwise share a
+quadric but have none in common surrounds a corner: the corner of the three quadrics, solved
+from its centroid, splits it in three.  After the splits every triangle lies on one quadric
+(its vertices share it) unless Newton found no intersection near an edge (counted).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..compile.interpret import contains, member
+from .project import first_order_distance, newton
+
+#: an edge is split when its midpoint is farther than this fraction of the tolerance from its
+#: quadric (a triangle's interior sags about 4/3 as far as its edges' midpoints)
+CHORD_FRACTION = 0.7
+#: rounds of splitting
+MAX_PASSES = 16
+#: edges shorter than this fraction of the tolerance are never split
+MIN_EDGE = 1e-3
+#: the probe distance of :func:`on_boundary`, relative to the coordinates' scale
+PROBE = 1e-7
+#: a curve point this close to an edge's end (a fraction of the tolerance) moves that end
+SNAP = 0.05
+
+
+@dataclass
+class Surface:
+    """The mesh being refined: vertices, per vertex its quadrics (V, 3) -1 padded, triangles."""
+
+    tape: object
+    vertices: np.ndarray
+    sets: np.ndarray
+    triangles: np.ndarray
+
+
+def edges_of(tri):
+    """(edges (E, 2) sorted, per triangle the index of edge k = (v_k, v_k+1) (T, 3))."""
+    a = tri
+    b = np.roll(tri, -1, axis=1)
+    n = np.int64(tri.max(initial=0) + 1)
+    keys = (np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)).ravel()
+    uniq, inv = np.unique(keys, return_inverse=True)
+    return np.stack([uniq // n, uniq % n], axis=1), inv.reshape(-1, 3)
+
+
+def common(sa, sb):
+    """Per row the quadrics of set ``sa`` also in ``sb`` ((N, 3) -1 padded, in sa's order)."""
+    hit = (sa[:, :, None] == sb[:, None, :]).any(axis=2) & (sa >= 0)
+    return np.where(hit, sa, -1)
+
+
+def _compact(sets):
+    """Sets with their quadrics first and -1 after (stable)."""
+    order = np.argsort(sets < 0, axis=1, kind="stable")
+    return np.take_along_axis(sets, order, axis=1)
+
+
+def _candidates(sa, sb):
+    """Target quadric sets for edges spanning two patches: each pair (one quadric of each
+    end) and, if the ends' union has three, their corner.  (edge row, set (3,) -1 padded)."""
+    rows, sets = [], []
+    for i, j in itertools.product(range(3), range(3)):
+        ok = (sa[:, i] >= 0) & (sb[:, j] >= 0) & (sa[:, i] != sb[:, j])
+        r = np.flatnonzero(ok)
+        rows.append(r)
+        sets.append(np.stack([sa[r, i], sb[r, j], np.full(len(r), -1)], axis=1))
+    union = np.concatenate([sa, sb], axis=1)
+    srt = np.sort(union, axis=1)
+    distinct = np.where(np.diff(srt, axis=1, prepend=-1) != 0, srt, -1)
+    distinct = np.where(distinct >= 0, distinct, -1)
+    count = (distinct >= 0).sum(axis=1)
+    r = np.flatnonzero(count == 3)
+    rows.append(r)
+    sets.append(np.sort(distinct[r], axis=1)[:, -3:])
+    return np.concatenate(rows), np.concatenate(sets)
+
+
+def _solve(tape, sets, x0):
+    """Newton onto the quadrics of ``sets`` (N, 3) from ``x0``, grouped by how many there are."""
+    x = np.full_like(x0, np.nan)
+    ok = np.zeros(len(x0), dtype=bool)
+    k = (sets >= 0).sum(axis=1)
+    for n in (1, 2, 3):
+        sel = np.flatnonzero(k == n)
+        if len(sel):
+            mats = tape.quadrics[sets[sel, :n]]
+            x[sel], ok[sel] = newton(mats, x0[sel])
+    return x, ok
+
+
+def _on_csg(tape, x, q):
+    """Points on quadric ``q`` (N,) where the CSG surface is (the substituted sides differ)."""
+    out = np.zeros(len(x), dtype=bool)
+    for u in np.unique(q):
+        sel = np.flatnonzero(q == u)
+        neg, pos = member(tape.ops, tape.quadrics, x[sel], int(u))
+        out[sel] = neg != pos
+    return out
+
+
+def _probe_directions(n: int = 64):
+    """``n`` unit directions spread evenly over the sphere (a Fibonacci lattice, turned off
+    the axes), so that a wedge of the solid as narrow as a box corner holds some of them and
+    none lies on an axis-aligned face through the point."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = k * np.pi * (3.0 - np.sqrt(5.0)) + 0.1234
+    r = np.sqrt(1.0 - z * z)
+    d = np.stack([r * np.cos(phi), r * np.sin(phi), z + 1e-3 * np.sin(7 * k)], axis=1)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+_PROBES = _probe_directions()
+
+
+def on_boundary(tape, x) -> np.ndarray:
+    """Points (N, 3) on the solid's boundary to rounding: among the points at distance
+    :data:`PROBE` x scale (:func:`_probe_directions`) some are inside and some outside, and
+    likewise at 100 times that distance.  Used for points on curves and corners, where substituting one quadric is
+    ambiguous."""
+    if not len(x):
+        return np.zeros(0, dtype=bool)
+    scale = max(1.0, float(np.abs(x).max()))
+    out = np.ones(len(x), dtype=bool)
+    for r in (PROBE, 100 * PROBE):  # two radii: a rounding-level disagreement of one probe is not enough
+        pts = (x[:, None, :] + r * scale * _PROBES[None]).reshape(-1, 3)
+        ins = contains(tape.ops, tape.quadrics, pts).reshape(len(x), -1)
+        out &= ins.any(axis=1) & ~ins.all(axis=1)
+    return out
+
+
+def _edge_splits(m, tol, edges):
+    """New vertices for the edges to split: (edge indices, points, sets), plus the count of
+    edges that needed a split but got none."""
+    v, s = m.vertices, m.sets
+    a, b = edges[:, 0], edges[:, 1]
+    mid = 0.5 * (v[a] + v[b])
+    length = np.linalg.norm(v[a] - v[b], axis=1)
+    shared = _compact(common(s[a], s[b]))
+    n_shared = (shared >= 0).sum(axis=1)
+    shared[:, 2] = -1  # a curve at most: two shared quadrics
+    long_enough = length > MIN_EDGE * tol
+    chord = np.flatnonzero((n_shared > 0) & long_enough)
+    err = first_order_distance(m.tape.quadrics[np.where(shared[chord] >= 0, shared[chord], shared[chord, :1])], mid[chord])
+    chord = chord[err > CHORD_FRACTION * tol]
+    cx, cok = _solve(m.tape, shared[chord], mid[chord])
+    cok &= np.linalg.norm(cx - mid[chord], axis=1) <= length[chord]
+    single = (shared[chord, 1] < 0) & cok
+    if single.any():
+        cok[single] = _on_csg(m.tape, cx[single], shared[chord[single], 0])
+    curve = ~single & cok
+    cok[curve] = on_boundary(m.tape, cx[curve])
+    span = np.flatnonzero((n_shared == 0) & long_enough)
+    rows, sets = _candidates(s[a[span]], s[b[span]])
+    sx, sok = _solve(m.tape, sets, mid[span[rows]])
+    sok[sok] = on_boundary(m.tape, sx[sok])
+    dist = np.where(sok, np.linalg.norm(sx - mid[span[rows]], axis=1), np.inf)
+    dist[dist > 0.75 * length[span[rows]]] = np.inf
+    best = np.full(len(span), -1)
+    corner = sets[:, 2] >= 0  # a corner ends the edge's chain of splits: first choice when valid
+    order = np.lexsort((dist, ~corner, rows))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = rows[order][1:] != rows[order][:-1]
+    pick = order[first & np.isfinite(dist[order])]
+    best[rows[pick]] = pick
+    got = best >= 0
+    _upgrade_ends(m, tol, edges[span[got]], sx[best[got]], sets[best[got]], got, np.flatnonzero(got))
+    e_idx = np.concatenate([chord[cok], span[got]])
+    pts = np.concatenate([cx[cok], sx[best[got]]])
+    new_sets = np.concatenate([shared[chord[cok]], sets[best[got]]])
+    missed = int((~cok).sum() + (~got).sum())
+    return e_idx, pts, new_sets, missed
+
+
+def _upgrade_ends(m, tol, ends, x, sets, got, rows):
+    """A curve point within :data:`SNAP` tolerances of an edge's end is no new vertex: when
+    the curve's quadrics include the end's own, the end moves onto the curve point (still on
+    its quadrics, exactly) and takes the curve's quadrics (``got[rows]`` cleared for those).
+    This stops splits from creeping towards a curve in ever shorter steps."""
+    for k in (0, 1):
+        d = np.linalg.norm(m.vertices[ends[:, k]] - x, axis=1)
+        hit = np.flatnonzero((d <= SNAP * tol) & got[rows])
+        for i in hit:
+            v = ends[i, k]
+            own = [q for q in m.sets[v] if q >= 0]
+            target = [q for q in sets[i] if q >= 0]
+            if all(q in target for q in own):
+                m.vertices[v] = x[i]
+                m.sets[v] = (target + [-1, -1, -1])[:3]
+                got[rows[i]] = False
+
+
+def split_triangles(tri, tri_edge, mid_vertex, vertices):
+    """The red-green split: a triangle with 1, 2, 3 split edges (``mid_vertex`` per edge, -1
+    if not split) becomes 2, 3, 4 triangles of the same orientation."""
+    mids = mid_vertex[tri_edge]  # (T, 3), mids[:, k] on edge (v_k, v_k+1)
+    marked = mids >= 0
+    c = marked.sum(axis=1)
+    out = [tri[c == 0]]
+    sel = np.flatnonzero(c == 1)
+    r = np.argmax(marked[sel], axis=1)
+    v, mm = _rolled(tri[sel], r), _rolled(mids[sel], r)
+    out += [np.stack([v[:, 0], mm[:, 0], v[:, 2]], 1), np.stack([mm[:, 0], v[:, 1], v[:, 2]], 1)]
+    sel = np.flatnonzero(c == 2)
+    r = (np.argmin(marked[sel], axis=1) + 1) % 3
+    v, mm = _rolled(tri[sel], r), _rolled(mids[sel], r)
+    out.append(np.stack([mm[:, 0], v[:, 1], mm[:, 1]], 1))
+    short = np.linalg.norm(vertices[v[:, 0]] - vertices[mm[:, 1]], axis=1) <= np.linalg.norm(
+        vertices[mm[:, 0]] - vertices[v[:, 2]], axis=1)
+    q1 = np.where(short[:, None], np.stack([v[:, 0], mm[:, 0], mm[:, 1]], 1), np.stack([mm[:, 0], mm[:, 1], v[:, 2]], 1))
+    q2 = np.where(short[:, None], np.stack([v[:, 0], mm[:, 1], v[:, 2]], 1), np.stack([v[:, 0], mm[:, 0], v[:, 2]], 1))
+    out += [q1, q2]
+    sel = np.flatnonzero(c == 3)
+    v, mm = tri[sel], mids[sel]
+    out += [np.stack([v[:, 0], mm[:, 0], mm[:, 2]], 1), np.stack([mm[:, 0], v[:, 1], mm[:, 1]], 1),
+            np.stack([mm[:, 2], mm[:, 1], v[:, 2]], 1), np.stack([mm[:, 0], mm[:, 1], mm[:, 2]], 1)]
+    return np.concatenate(out)
+
+
+def _rolled(a, r):
+    idx = (np.arange(3)[None, :] + r[:, None]) % 3
+    return np.take_along_axis(a, idx, axis=1)
+
+
+def _corner_splits(m):
+    """Triangles around a corner (pairwise shared quadrics, none common to all three): split in
+    three at the corner of their three quadrics.  Returns how many were split."""
+    s = m.sets[m.triangles]  # (T, 3 verts, 3)
+    ab, bc, ca = (common(s[:, i], s[:, (i + 1) % 3]) for i in range(3))
+    pair = (ab >= 0).any(1) & (bc >= 0).any(1) & (ca >= 0).any(1)
+    none = ~(common(ab, s[:, 2]) >= 0).any(1)
+    sel = np.flatnonzero(pair & none)
+    if not len(sel):
+        return 0
+    corner = np.stack([_compact(ab[sel])[:, 0], _compact(bc[sel])[:, 0], _compact(ca[sel])[:, 0]], 1)
+    distinct = (corner[:, 0] != corner[:, 1]) & (corner[:, 1] != corner[:, 2]) & (corner[:, 0] != corner[:, 2])
+    sel, corner = sel[distinct], corner[distinct]
+    x0 = m.vertices[m.triangles[sel]].mean(axis=1)
+    x, ok = _solve(m.tape, corner, x0)
+    reach = np.linalg.norm(m.vertices[m.triangles[sel]] - x0[:, None], axis=2).max(axis=1)
+    ok &= np.linalg.norm(x - x0, axis=1) <= 2.0 * reach
+    ok[ok] = on_boundary(m.tape, x[ok])
+    sel, x, corner = sel[ok], x[ok], corner[ok]
+    if not len(sel):
+        return 0
+    c = len(m.vertices) + np.arange(len(sel))
+    m.vertices = np.concatenate([m.vertices, x])
+    m.sets = np.concatenate([m.sets, corner])
+    t = m.triangles[sel]
+    keep = np.ones(len(m.triangles), dtype=bool)
+    keep[sel] = False
+    m.triangles = np.concatenate([m.triangles[keep], np.stack([t[:, 0], t[:, 1], c], 1),
+                                  np.stack([t[:, 1], t[:, 2], c], 1), np.stack([t[:, 2], t[:, 0], c], 1)])
+    return len(sel)
+
+
+def refine(m: Surface, tol: float, stats: dict) -> None:
+    """Split until no edge spans a sharp edge or exceeds the chord error (or MAX_PASSES)."""
+    splits = corners = 0
+    missed = 0
+    per_pass = []
+    for _ in range(MAX_PASSES):
+        edges, tri_edge = edges_of(m.triangles)
+        e_idx, pts, sets, missed = _edge_splits(m, tol, edges)
+        if not len(e_idx):
+            n = _corner_splits(m)
+            corners += n
+            if n:
+                continue
+            break
+        mid_vertex = np.full(len(edges), -1, dtype=np.int64)
+        mid_vertex[e_idx] = len(m.vertices) + np.arange(len(e_idx))
+        m.vertices = np.concatenate([m.vertices, pts])
+        m.sets = np.concatenate([m.sets, sets])
+        m.triangles = split_triangles(m.triangles, tri_edge, mid_vertex, m.vertices)
+        splits += len(e_idx)
+        per_pass.append(int(len(e_idx)))
+    s = m.sets[m.triangles]
+    no_common = ~(common(common(s[:, 0], s[:, 1]), s[:, 2]) >= 0).any(axis=1)
+    stats.update(splits_per_pass=per_pass, edge_splits=int(splits), corner_splits=int(corners), unsplit_edges=int(missed),
+                 spanning_triangles=int(no_common.sum()))
