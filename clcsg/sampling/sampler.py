@@ -282,14 +282,17 @@ def sample(
 
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
+    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
     scene_buf = SceneBuffers(ctx, packed)
+    finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
     sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity,
-                       estimate_samples(tape, radius), progress, max_levels)
+                       estimate_samples(tape, radius), progress, max_levels, finisher)
+    sub.task_quadrics = tasks["quadric"]
+    t_sub = time.perf_counter()
     sub.run()
     t2 = time.perf_counter()
-    timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
-    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
-    samples = _finish(ctx, fin, scene_buf, frames_rec, tasks, sub, tape, packed, radius, capacity)
+    timings["subdivide_s"] = t2 - t_sub
+    samples = finisher.samples(sub, tape, radius)
     timings["finish_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     if len(samples) == 0:
@@ -332,10 +335,17 @@ def _grow(cap, needed):
 
 
 class _Subdivision:
-    """The level loop: buffers, the overflow protocol, per-level statistics."""
+    """The level loop: buffers, the overflow protocol, per-level statistics.
+
+    Tape arenas ping-pong: level L reads its cells' tapes from one arena and writes its
+    children's tapes (exactly the rows pruning keeps) into the other, whose counter starts at
+    zero, so an arena holds the tapes of one level's live cells and never the tapes of cells
+    already done.  A sample's clip program is made from its cell's tape by the finish pass
+    right after the level that emitted it (:class:`_Finisher`), while that tape is still there.
+    """
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
-                 max_levels):
+                 max_levels, finisher):
         self.ctx, self.prg, self.scene = ctx, prg, scene
         self.real = np.dtype(scene.packed.real)
         self.radius, self.floor = radius, floor
@@ -345,15 +355,17 @@ class _Subdivision:
         self.roots = roots
         self.cdt = cell_dtype(self.real)
         self.sdt = raw_sample_dtype(self.real)
+        self.finisher = finisher
         tape = scene.packed.tape
         cap = tuple(capacity or ())
         self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(4 * len(roots), 4096)
         self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(2 * estimate, 4096)
-        self.cap_arena = max(len(tape) + 2, int(cap[2])) if len(cap) > 2 else max(64 * len(tape), 1 << 16)
+        self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
         self.progress = _Progress(progress, estimate, roots, floor, max_levels)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
         self.grown = {"cells": 0, "samples": 0, "arena": 0}
+        self.arena_peak = 0
 
     def _buffer(self, nbytes, what):
         return device_buffer(self.ctx, nbytes, what)
@@ -370,146 +382,178 @@ class _Subdivision:
             cl.enqueue_copy(self.ctx.queue, data[:used_bytes], old)
         return upload(self.ctx, data, writable=True)
 
+    def _level(self, kernel, cells_in, n_in, n_samples):
+        """Run one level until it fits (the overflow protocol); returns its counters."""
+        import pyopencl as cl
+
+        counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
+        rows = self.scene.packed.tape.itemsize
+        while True:
+            counters[:] = 0
+            counters[_SLOT["samples"]] = n_samples
+            # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
+            # checker does not see host writes into an existing buffer)
+            counters_buf = upload(self.ctx, counters, writable=True)
+            kernel(self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
+                   self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
+                   self.cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
+                   self.arena_in, self.arena_out, np.uint32(self.cap_out), counters_buf,
+                   self.real.type(self.radius), self.real.type(self.floor))
+            cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
+            n_cells_out = int(counters[_SLOT["cells"]])
+            n_samples_out = int(counters[_SLOT["samples"]])
+            arena_out = int(counters[_SLOT["arena"]])
+            ok = True
+            if n_cells_out > self.cap_cells:
+                self.cap_cells = _grow(self.cap_cells, n_cells_out)
+                self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+                self.grown["cells"] += 1
+                ok = False
+            if n_samples_out > self.cap_samples:
+                new_cap = _grow(self.cap_samples, n_samples_out)
+                self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
+                                                new_cap * self.sdt.itemsize, "sample")
+                self.cap_samples = new_cap
+                self.grown["samples"] += 1
+                ok = False
+            if arena_out > self.cap_out:
+                self.cap_out = _grow(self.cap_out, arena_out)
+                self.arena_out = self._buffer(self.cap_out * rows, "tape arena")
+                self.grown["arena"] += 1
+                ok = False
+            if ok:
+                return counters
+
     def run(self):
         import pyopencl as cl
 
-        queue = self.ctx.queue
         tape = self.scene.packed.tape
-        check_allocation(self.ctx, self.cap_arena * tape.itemsize, "tape arena")
-        arena = np.zeros(self.cap_arena, dtype=tape.dtype)
-        arena[:len(tape)] = tape
-        self.arena = upload(self.ctx, arena, writable=True)
-        arena_used = len(tape)
+        self.arena_in, self.cap_in = upload(self.ctx, tape), len(tape)
+        self.cap_out = self.cap_arena
+        self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
         cells_in = upload(self.ctx, self.roots, writable=True)
         n_in = len(self.roots)
-        cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+        self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
-        counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
         kernel = cl.Kernel(self.prg, "classify")
         n_samples = 0
         level = 0
         while n_in > 0:
             if level >= self.max_levels:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
-            while True:
-                counters[:] = 0
-                counters[_SLOT["samples"]] = n_samples
-                counters[_SLOT["arena"]] = arena_used
-                # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
-                # checker does not see host writes into an existing buffer)
-                counters_buf = upload(self.ctx, counters, writable=True)
-                kernel(queue, launch_size(n_in), (WORK_GROUP,),
-                       self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
-                       cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
-                       self.arena, np.uint32(self.cap_arena), counters_buf,
-                       self.real.type(self.radius), self.real.type(self.floor))
-                cl.enqueue_copy(queue, counters, counters_buf)
-                n_cells_out = int(counters[_SLOT["cells"]])
-                n_samples_out = int(counters[_SLOT["samples"]])
-                arena_out = int(counters[_SLOT["arena"]])
-                ok = True
-                if n_cells_out > self.cap_cells:
-                    self.cap_cells = _grow(self.cap_cells, n_cells_out)
-                    cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
-                    self.grown["cells"] += 1
-                    ok = False
-                if n_samples_out > self.cap_samples:
-                    new_cap = _grow(self.cap_samples, n_samples_out)
-                    self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
-                                                    new_cap * self.sdt.itemsize, "sample")
-                    self.cap_samples = new_cap
-                    self.grown["samples"] += 1
-                    ok = False
-                if arena_out > self.cap_arena:
-                    new_cap = _grow(self.cap_arena, arena_out)
-                    self.arena = self._grown_copy(self.arena, arena_used * tape.itemsize,
-                                                  new_cap * tape.itemsize, "tape arena")
-                    self.cap_arena = new_cap
-                    self.grown["arena"] += 1
-                    ok = False
-                if ok:
-                    break
+            counters = self._level(kernel, cells_in, n_in, n_samples)
+            n_cells_out = int(counters[_SLOT["cells"]])
+            n_samples_out = int(counters[_SLOT["samples"]])
             for name in _SUMMED:
                 self.totals[name] += int(counters[_SLOT[name]])
             self.levels.append({
                 "cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples,
                 "tape_mean": int(counters[_SLOT["tape_rows"]]) / n_in, "tape_max": int(counters[_SLOT["tape_max"]]),
+                "arena_rows": int(counters[_SLOT["arena"]]),
             })
+            self.arena_peak = max(self.arena_peak, int(counters[_SLOT["arena"]]))
+            self.finisher.run(self.samples, n_samples, n_samples_out - n_samples, self.arena_in)
             n_samples = n_samples_out
-            arena_used = arena_out
             self.progress.level(level, n_in, n_samples, n_cells_out)
-            cells_in, cells_out = cells_out, cells_in
+            cells_in, self.cells_out = self.cells_out, cells_in
             # the old input buffer becomes the next output: make sure it is large enough
-            if self.cap_cells * self.cdt.itemsize > cells_out.size:
-                cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+            if self.cap_cells * self.cdt.itemsize > self.cells_out.size:
+                self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+            self.arena_in, self.arena_out = self.arena_out, self.arena_in
+            self.cap_in, self.cap_out = self.cap_out, self.cap_in
             n_in = n_cells_out
             level += 1
         self.progress.done()
         self.n_samples = n_samples
-        self.arena_used = arena_used
         self.raw = np.zeros(n_samples, dtype=self.sdt)
         if n_samples:
-            cl.enqueue_copy(queue, self.raw, self.samples)
+            cl.enqueue_copy(self.ctx.queue, self.raw, self.samples)
         self.totals["buffer_growths"] = dict(self.grown)
-        self.totals["arena_rows"] = arena_used
+        self.totals["arena_rows"] = self.arena_peak
 
 
-def _finish(ctx, prg, scene, frames_rec, tasks, sub, tape, packed, radius, capacity) -> Samples:
-    """Clip programs, signs, normals and primitives on the device; clip programs deduplicated."""
-    import pyopencl as cl
+class _Finisher:
+    """The finish pass (``finish.cl``), run after each level on the samples it emitted: clip
+    programs, signs, normals and primitives; the per-level outputs are appended on the host and
+    equal clip programs deduplicated at the end (:func:`dedupe_programs`)."""
 
-    n = sub.n_samples
-    real = np.dtype(packed.real)
-    if n == 0:
-        return Samples.empty(radius, tape, packed, {})
-    q = ctx.queue
-    normals = np.zeros((n, 3), dtype=real)
-    ints = {k: np.zeros(n, dtype=np.int32) for k in ("signs", "primitives", "clip_first", "clip_count")}
-    bufs = {k: sub._buffer(a.nbytes, "sample output") for k, a in ints.items()}
-    nb = sub._buffer(normals.nbytes, "normal")
-    cap = tuple(capacity or ())
-    rows = scene.packed.tape.itemsize
-    cap_clip = max(2 * len(packed.tape), int(cap[3])) if len(cap) > 3 else max(n, 1 << 14)
-    counters = np.zeros(2, dtype=np.uint32)
-    kernel = cl.Kernel(prg, "finish")
-    grown = 0
-    while True:
-        clip_buf = sub._buffer(cap_clip * rows, "clip")
-        counters[:] = 0
-        counters_buf = upload(ctx, counters, writable=True)
-        kernel(q, launch_size(n), (WORK_GROUP,), scene.quadrics, upload(ctx, frames_rec), upload(ctx, tasks),
-               sub.samples, np.int32(n), sub.arena, clip_buf, np.uint32(cap_clip), counters_buf,
-               *scene.colour_args(), nb, bufs["signs"], bufs["primitives"], bufs["clip_first"], bufs["clip_count"])
-        cl.enqueue_copy(q, counters, counters_buf)
-        if int(counters[0]) <= cap_clip:
-            break
-        cap_clip = _grow(cap_clip, int(counters[0]))
-        grown += 1
-    cl.enqueue_copy(q, normals, nb)
-    for k, a in ints.items():
-        cl.enqueue_copy(q, a, bufs[k])
-    used = int(counters[0])
-    clip = np.zeros(used, dtype=packed.tape.dtype)
-    if used:
-        cl.enqueue_copy(q, clip, clip_buf)
-    clip_ops = np.asarray(clip.view(np.int32).reshape(-1, 4))
-    first, count, ops = dedupe_programs(clip_ops, ints["clip_first"], ints["clip_count"])
-    raw = sub.raw
-    return Samples(
-        positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
-        normals=np.asarray(normals, dtype=np.float64),
-        radii=np.array(raw["radius"], dtype=np.float64),
-        quadrics=tasks["quadric"][raw["task"]].astype(np.int32),
-        signs=ints["signs"],
-        primitives=ints["primitives"],
-        clip_first=first,
-        clip_count=count,
-        clip_ops=ops,
-        radius=radius,
-        tape=tape,
-        packed=packed,
-        stats={"finish_prune_evaluations": int(counters[1]), "clip_buffer_growths": grown},
-    )
+    def __init__(self, ctx, prg, scene, frames_rec, tasks, packed, capacity):
+        import pyopencl as cl
+
+        self.ctx, self.scene, self.packed = ctx, scene, packed
+        self.real = np.dtype(packed.real)
+        self.kernel = cl.Kernel(prg, "finish")
+        self.frames, self.tasks = upload(ctx, frames_rec), upload(ctx, tasks)
+        cap = tuple(capacity or ())
+        self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else 1 << 14
+        self.clip_buf = None
+        self.parts = []
+        self.clip_rows = 0
+        self.evals = 0
+        self.grown = 0
+
+    def run(self, samples, first, n, arena):
+        """Finish raw samples [first, first + n) whose cells' tapes are in ``arena``."""
+        import pyopencl as cl
+
+        if n == 0:
+            return
+        q = self.ctx.queue
+        out = {"normals": np.zeros((n, 3), dtype=self.real)}
+        out.update({k: np.zeros(n, dtype=np.int32) for k in ("signs", "primitives", "clip_first", "clip_count")})
+        bufs = {k: device_buffer(self.ctx, a.nbytes, "sample output") for k, a in out.items()}
+        counters = np.zeros(2, dtype=np.uint32)
+        rows = self.packed.tape.itemsize
+        while True:
+            if self.clip_buf is None:
+                self.clip_buf = device_buffer(self.ctx, self.cap_clip * rows, "clip")
+            counters[:] = 0
+            counters_buf = upload(self.ctx, counters, writable=True)
+            self.kernel(q, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames, self.tasks,
+                        samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
+                        counters_buf, *self.scene.colour_args(), bufs["normals"], bufs["signs"],
+                        bufs["primitives"], bufs["clip_first"], bufs["clip_count"])
+            cl.enqueue_copy(q, counters, counters_buf)
+            if int(counters[0]) <= self.cap_clip:
+                break
+            self.cap_clip = _grow(self.cap_clip, int(counters[0]))
+            self.clip_buf = None
+            self.grown += 1
+        for k, a in out.items():
+            cl.enqueue_copy(q, a, bufs[k])
+        used = int(counters[0])
+        clip = np.zeros(used, dtype=self.packed.tape.dtype)
+        if used:
+            cl.enqueue_copy(q, clip, self.clip_buf)
+        out["clip_ops"] = np.asarray(clip.view(np.int32).reshape(-1, 4))
+        out["clip_first"] = out["clip_first"] + self.clip_rows
+        self.clip_rows += used
+        self.evals += int(counters[1])
+        self.parts.append(out)
+
+    def samples(self, sub, tape, radius) -> Samples:
+        """All finished samples as :class:`Samples` (positions from the raw buffer)."""
+        packed = self.packed
+        if not self.parts:
+            return Samples.empty(radius, tape, packed, {})
+        cat = {k: np.concatenate([p[k] for p in self.parts]) for k in self.parts[0]}
+        first, count, ops = dedupe_programs(cat["clip_ops"], cat["clip_first"], cat["clip_count"])
+        raw = sub.raw
+        return Samples(
+            positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
+            normals=np.asarray(cat["normals"], dtype=np.float64),
+            radii=np.array(raw["radius"], dtype=np.float64),
+            quadrics=sub.task_quadrics[raw["task"]].astype(np.int32),
+            signs=cat["signs"],
+            primitives=cat["primitives"],
+            clip_first=first,
+            clip_count=count,
+            clip_ops=ops,
+            radius=radius,
+            tape=tape,
+            packed=packed,
+            stats={"finish_prune_evaluations": self.evals, "clip_buffer_growths": self.grown},
+        )
 
 
 def dedupe_programs(rows, first, count):
