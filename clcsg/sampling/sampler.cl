@@ -23,6 +23,14 @@
 #define MAX_FILL 65536
 #endif
 
+/* Where a split cuts the longest edge, as a fraction of it.  Not one half: models are full of
+ * features at the middle (or a quarter...) of their boxes, and a cell edge lying exactly on a
+ * trimming curve can never be decided (its corners there have d_q = 0, and no bound separates
+ * it from the curve), so it would split down to the floor.  Any fraction keeps the guarantee. */
+#ifndef SPLIT_AT
+#define SPLIT_AT 0.4871
+#endif
+
 typedef struct {
     uint queries, leaves, evals, tapes_written;
 } cell_work;
@@ -44,6 +52,7 @@ inline prune_region patch_region(const plane_frame *pf, cell_rec c, real t_lo, r
     g.a1 = (real)(0.5 * (c.y1 - c.y0)) * plane_axis(pf, pf->j);
     g.a2 = (real)(0.5 * (t_hi - t_lo)) * plane_axis(pf, pf->k);
     g.rho = grow;
+    g.on_patch = 0;
     return g;
 }
 
@@ -62,6 +71,38 @@ typedef struct {
     real t_lo, t_hi, delta, enough, wx, wy, et, diag;
     bool whole_domain, fill_fits;
 } cell_geom;
+
+/* Slope interval of the heightfield along one in-plane axis over [a, b]: from R + lam_k t^2 = 0
+ * (two sheets) dt/dx = -(lam x + beta) / (lam_k t), t in [t_lo, t_hi] of one sign; from
+ * R + 2 beta_k t = 0 (one sheet) dt/dx = -(lam x + beta) / beta_k.  lam x + beta is linear, so
+ * its range is its values at a and b. */
+inline real2 slope_range(const cell_geom *g, real lam, real beta, real a, real b)
+{
+    real u = lam * a + beta, v = lam * b + beta;
+    real2 num = (real2)(-fmax(u, v), -fmin(u, v));
+    const plane_frame *pf = &g->pf;
+    if (pf->lk == 0) return interval_mul(num, (real2)(1 / pf->bk, 1 / pf->bk));
+    real d0 = pf->lk * g->t_lo, d1 = pf->lk * g->t_hi;
+    return interval_mul(num, (real2)(1 / fmax(d0, d1), 1 / fmin(d0, d1)));
+}
+
+/* Where the heightfield is defined with a finite slope over the whole cell, give the prune
+ * region the patch itself (the mean value test of leaf_over_patch); otherwise leave it off. */
+inline void patch_on_surface(const cell_geom *g, cell_rec c, prune_region *r)
+{
+    real xm = 0.5 * (c.x0 + c.x1), ym = 0.5 * (c.y0 + c.y1);
+    if (!g->whole_domain || !isfinite(g->delta)) return;
+    if (g->pf.lk != 0 && !(g->t_lo > 0 || g->t_hi < 0)) return;
+    r->on_patch = 1;
+    r->pc = plane_point(&g->pf, xm, ym, plane_height_clamped(&g->pf, xm, ym));
+    r->ui = plane_axis(&g->pf, g->pf.i);
+    r->uj = plane_axis(&g->pf, g->pf.j);
+    r->uk = plane_axis(&g->pf, g->pf.k);
+    r->hx = 0.5 * g->wx;
+    r->hy = 0.5 * g->wy;
+    r->sx = slope_range(g, g->pf.li, g->pf.bi, c.x0, c.x1);
+    r->sy = slope_range(g, g->pf.lj, g->pf.bj, c.y0, c.y1);
+}
 
 /* Fill g from the interval bounds over the cell; false: the cell holds no point of the task
  * (the heightfield is undefined over it, plane k owns none of it, or it lies outside the
@@ -216,7 +257,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     a.tape_count = b.tape_count = count;
     real e0, e1;
     if (g->wx >= g->wy) {
-        real mid = 0.5 * (c.x0 + c.x1);
+        real mid = c.x0 + (real)SPLIT_AT * g->wx;
         a.x1 = b.x0 = mid;
         e0 = query_at(g, mid, c.y0, tape, n, qs, q, w);
         e1 = query_at(g, mid, c.y1, tape, n, qs, q, w);
@@ -225,7 +266,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
         a.d[0] = d[0]; a.d[2] = d[2];
         b.d[1] = d[1]; b.d[3] = d[3];
     } else {
-        real mid = 0.5 * (c.y0 + c.y1);
+        real mid = c.y0 + (real)SPLIT_AT * g->wy;
         a.y1 = b.y0 = mid;
         e0 = query_at(g, c.x0, mid, tape, n, qs, q, w);
         e1 = query_at(g, c.x1, mid, tape, n, qs, q, w);
@@ -253,10 +294,14 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     int n = c.tape_count;
     sample_src src = {c.task, c.tape_first, c.tape_count};
 
-    /* the tape over the patch: both sides constant decides the whole patch */
+    /* the tape over the patch: both sides constant decides the whole patch; a value that no
+     * longer depends on the task's quadric is the same on both sides: no surface */
     prune_region patch = patch_region(&g.pf, c, g.t_lo, g.t_hi, 0);
-    int decided = tape_prune(tape, n, qs, &patch, t.quadric, 0, 0, 0, &w->evals);
-    if (decided > 0) return OUT_DECIDED_DISCARD;
+    patch_on_surface(&g, c, &patch);
+    uchar state;
+    tape_prune_rows(tape, n, qs, &patch, t.quadric, &state, &w->evals);
+    int decided = prune_decision(state);
+    if (decided > 0 || !(state & ST_SELF)) return OUT_DECIDED_DISCARD;
     if (decided < 0 && g.fill_fits) {
         fill_cell(&g.pf, c, radius, src, counters, samples, cap_samples);
         return OUT_DECIDED_FILL;

@@ -153,44 +153,87 @@ def estimate_samples(tape, radius: float) -> int:
     return int(area / (math.pi * radius * radius)) + 1
 
 
+#: the larger child's share of a split (``SPLIT_AT`` in sampler.cl is the smaller one)
+SPLIT_LARGER = 1 - 0.4871
+
+
 class _Progress:
     """Progress of the level loop on the current reporter (:mod:`clcsg.io.progress`: a bar on
     a terminal, JSON lines with ``--progress json``, nothing in a pipe or with ``progress=False``).
 
-    Done / total count cells: the work of a level is its cells.  The total is a forecast,
-    refined as levels finish: the cells classified so far, plus the next level's cells (known
-    exactly), growing by the ratio seen over the last two levels (cells split in two, along x
-    and y in turn) until the expected last level, about 2 log2(largest root cell / floor)
-    (cells are dropped as unresolved below the floor).  The ETA is the rate of the levels so
-    far times the cells left.  Samples so far and the first estimate (``estimate_samples``, an
-    area bound) are shown next to the bar.
+    The work left is forecast in seconds.  Cells: after level L, with c children queued, the
+    cells of the levels ahead are c, c g_1, c g_1 g_2, ... with g the growth per level seen
+    over the last two levels, kept in [1/2, sqrt 2] (cells along a curve double each time their
+    size halves, every two levels) up to the *peak level*, where cells reach the size at which
+    a single sample resolves them (about r / 2: 2 log(extent / (r / 2)) / log(1 / SPLIT_LARGER)
+    levels below the largest root cell), and 1/2 past it (the cells left are those along
+    trimming curves, resolved within a few levels).  Time: a level costs a + b cells, with a
+    the cheapest level so far (launches, the counter read, the level's finish pass) and b the
+    rest of the time so far per cell.  The fraction shown, elapsed / (elapsed + forecast), is
+    the largest seen so far: it never goes back, and reaches 100% when the last level is done;
+    the bar counts cells, its total is done / fraction, so its ETA (rate so far times the cells
+    left) is the forecast.  The samples so far and the expected count
+    (:func:`clcsg.sampling.guard.expected_samples`) are shown next to the bar.
     """
 
-    def __init__(self, enabled, estimate=0, roots=None, floor=None, max_levels=400):
+    def __init__(self, enabled, estimate=0, roots=None, radius=None, max_levels=400):
         from ..io.progress import for_option
 
         self.reporter = for_option(enabled)
         self.estimate = int(estimate)
-        self.levels_expected = max_levels
-        if roots is not None and len(roots) and floor:
+        self.max_levels = max_levels
+        self.peak = max_levels
+        if roots is not None and len(roots) and radius:
             extent = float(np.max(np.maximum(roots["x1"] - roots["x0"], roots["y1"] - roots["y0"])))
-            if extent > floor:
-                self.levels_expected = min(max_levels, round(2 * math.log2(extent / floor)) + 2)
+            if extent > radius / 2:
+                self.peak = round(2 * math.log(2 * extent / radius) / math.log(1 / SPLIT_LARGER))
         outer = self.reporter.active()
         self.own = outer is None or outer.name != "sample"
         self.step = self.reporter.step("sample", "sampling") if self.own else outer
         self.cells = 0
+        self.fraction = 0.0
+        self.shown = 0.0
         self.history: list[int] = []
+        self.times: list[float] = []
+        self.t0 = self.t_last = time.perf_counter()
+
+    def ahead(self, level, children) -> list:
+        """Forecast cells of the levels after ``level`` (see the class docstring)."""
+        if not children:
+            return []
+        h = self.history
+        g = (children / h[-2]) ** 0.5 if len(h) > 1 else children / max(h[-1], 1)
+        g = min(max(g, 0.5), math.sqrt(2))
+        n, out, lv = float(children), [], level + 1
+        while n >= 1 and lv < self.max_levels:
+            out.append(n)
+            n *= g if lv < self.peak else 0.5
+            lv += 1
+        return out
+
+    def seconds_ahead(self, cells) -> float:
+        """Forecast seconds of levels of ``cells`` each: a + b n per level."""
+        a = min(self.times)
+        b = max(0.0, sum(self.times) - a * len(self.times)) / max(sum(self.history), 1)
+        return sum(a + b * n for n in cells)
 
     def level(self, level, cells, samples, children=0):
+        now = time.perf_counter()
+        self.times.append(now - self.t_last)
+        self.t_last = now
         self.cells += cells
         self.history.append(cells)
-        prev = self.history[-2] if len(self.history) > 1 else cells
-        growth = (children / prev) ** 0.5 if len(self.history) > 1 else children / max(cells, 1)
-        growth = min(max(growth, 0.5), 1.8)
-        remaining = max(1, self.levels_expected - level - 1)
-        ahead = children * sum(growth ** k for k in range(remaining)) if children else 0
-        self.step.update(done=self.cells, total=int(self.cells + ahead), label="sampling", unit="cells",
+        elapsed = now - self.t0
+        left = self.seconds_ahead(self.ahead(level, children))
+        if not children:
+            self.fraction = 1.0
+        elif elapsed + left > 0:
+            self.fraction = max(self.fraction, min(elapsed / (elapsed + left), 0.999))
+        total = max(self.cells, math.ceil(self.cells / max(self.fraction, 1e-9)))
+        if self.cells / total < self.shown:  # rounding must not take the bar back either
+            total = max(self.cells, math.floor(self.cells / self.shown))
+        self.shown = self.cells / total
+        self.step.update(done=self.cells, total=total, label="sampling", unit="cells",
                          phase=level == 0, level=level + 1, samples=samples, estimated=self.estimate,
                          note=f"level {level + 1}, {samples:,} samples (estimate {self.estimate:,})", always=True)
 
@@ -285,8 +328,10 @@ def sample(
     fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
     scene_buf = SceneBuffers(ctx, packed)
     finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
+    expected = guard.expected_samples(tape, est)
+    stats["expected_samples"] = expected
     sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity,
-                       estimate_samples(tape, radius), progress, max_levels, finisher)
+                       expected, progress, max_levels, finisher)
     sub.task_quadrics = tasks["quadric"]
     t_sub = time.perf_counter()
     sub.run()
@@ -307,6 +352,7 @@ def sample(
         cells_per_level=[lv["cells"] for lv in sub.levels],
         tape_mean_per_level=[lv["tape_mean"] for lv in sub.levels],
         tape_max_per_level=[lv["tape_max"] for lv in sub.levels],
+        arena_rows_per_level=[lv["arena_rows"] for lv in sub.levels],
         leaf_distances_per_query=(sub.totals["leaf_distances"] / sub.totals["distance_queries"]
                                   if sub.totals["distance_queries"] else 0.0),
         device=ctx.info.name,
@@ -359,9 +405,9 @@ class _Subdivision:
         tape = scene.packed.tape
         cap = tuple(capacity or ())
         self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(4 * len(roots), 4096)
-        self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(2 * estimate, 4096)
+        self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(int(2 * estimate), 4096)
         self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
-        self.progress = _Progress(progress, estimate, roots, floor, max_levels)
+        self.progress = _Progress(progress, estimate, roots, radius, max_levels)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
         self.grown = {"cells": 0, "samples": 0, "arena": 0}

@@ -109,6 +109,14 @@ inline int tape_self_polarity(__global const tape_op *t, int n, int self_q)
 typedef struct {
     real3 c, a0, a1, a2;
     real rho;
+    /* optional (on_patch != 0; zero-initialized otherwise): the points of the sampled quadric
+     * in the region are a heightfield patch p(x, y) = pc + x ui + y uj + (t(x, y) - t_c) uk,
+     * |x| <= hx, |y| <= hy (cell coordinates from its center), slopes dt/dx in sx, dt/dy in sy
+     * (intervals) and p in the box above; pruning for a decision over the patch may use it */
+    int on_patch;
+    real3 pc, ui, uj, uk;
+    real hx, hy;
+    real2 sx, sy;
 } prune_region;
 
 #define ST_F 0
@@ -119,6 +127,9 @@ typedef struct {
 #define ST_TAPE(s) ((s) & 3)
 #define ST_MINUS(s) (((s) >> 2) & 3)
 #define ST_PLUS(s) (((s) >> 4) & 3)
+/* bit 6: the register's pruned value depends on a leaf of self_q; without it both sides agree
+ * at every point of the region (no surface of self_q there), even where the value is live */
+#define ST_SELF 64
 
 inline int st_and(int x, int y) { return (x == ST_F || y == ST_F) ? ST_F : (x == ST_T && y == ST_T) ? ST_T : ST_LIVE; }
 inline int st_or(int x, int y) { return (x == ST_T || y == ST_T) ? ST_T : (x == ST_F && y == ST_F) ? ST_F : ST_LIVE; }
@@ -141,6 +152,48 @@ inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, con
     return d >= reach ? ST_F : d <= -reach ? ST_T : ST_LIVE;
 }
 
+/* interval product and the interval of grad Q . u over the box (c + sum_m u_m a_m): the gradient
+ * 2 (A p + w) is linear in p, so grad Q . u = 2 ((A u) . p + w . u) has the exact range
+ * value(c) +- 2 sum_m |(A u) . a_m| */
+inline real2 interval_mul(real2 a, real2 b)
+{
+    real p0 = a.x * b.x, p1 = a.x * b.y, p2 = a.y * b.x, p3 = a.y * b.y;
+    return (real2)(fmin(fmin(p0, p1), fmin(p2, p3)), fmax(fmax(p0, p1), fmax(p2, p3)));
+}
+
+inline real2 gradient_along(quadric Q, real3 u, const prune_region *g)
+{
+    real3 Au = quadric_Ap(Q, u);
+    real v = 2 * (dot(Au, g->c) + dot(quadric_minus_b(Q), u));
+    real e = 2 * (fabs(dot(Au, g->a0)) + fabs(dot(Au, g->a1)) + fabs(dot(Au, g->a2)));
+    return (real2)(v - e, v + e);
+}
+
+/* The state of leaf (q, sign) over a heightfield patch by the mean value form: f(x, y) =
+ * sign Q(p(x, y)) has f(x, y) - f(0, 0) = grad f(xi) . (x, y) for a xi in the cell, and
+ * df/dx = grad Q . ui + t_x grad Q . uk lies in G_i + S_x G_k (interval arithmetic with signs:
+ * G_* from gradient_along, S_x the slope interval), likewise y.  So f lies in
+ * f(pc) +- (max |df/dx| hx + max |df/dy| hy) over the patch: the bound is first-order exact in
+ * the derivative, so a cell at distance D from the curve Q = 0 is decided once D exceeds
+ * O(h^2), where the box and ball tests need D of the order of the cell's size h.  The rounding
+ * slack covers Q(pc) and pc's own error. */
+inline int leaf_over_patch(__global const quadric_rec *qs, int q, int sign, const prune_region *g)
+{
+    quadric Q = quadric_load(qs, q);
+    real2 gk = gradient_along(Q, g->uk, g);
+    real2 fx = gradient_along(Q, g->ui, g) + interval_mul(g->sx, gk);
+    real2 fy = gradient_along(Q, g->uj, g) + interval_mul(g->sy, gk);
+    real spread = fmax(fabs(fx.x), fabs(fx.y)) * g->hx + fmax(fabs(fy.x), fabs(fy.y)) * g->hy;
+    real v = sign * quadric_value(Q, g->pc);
+    __global const real *c = qs[q].coef;
+    real cs = 0;
+    for (int m = 0; m < 10; ++m) cs += fabs(c[m]);
+    real pl = 1 + length(g->pc) + length(g->a0) + length(g->a1) + length(g->a2);
+    spread += ROUNDING_ULPS * REAL_EPS * (4 * cs * pl * pl + length(quadric_gradient(Q, g->pc)) * pl);
+    if (!isfinite(spread)) return ST_LIVE;
+    return v > spread ? ST_F : v < -spread ? ST_T : ST_LIVE;
+}
+
 /* The forward pass of pruning t (n rows) over g with self_q substituted: leaves of one sign over
  * g become constants, constants are folded (TRUE absorbs OR, FALSE absorbs AND, the neutral
  * operand drops out and the result becomes a COPY of the other).  Rows that stay are written to
@@ -160,11 +213,12 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
         bool kept = false;
         if (o.op == OP_LEAF) {
             if (o.a == self_q) {
-                st[o.out] = o.b > 0 ? ST_PACK(ST_LIVE, ST_T, ST_F) : ST_PACK(ST_LIVE, ST_F, ST_T);
+                st[o.out] = (o.b > 0 ? ST_PACK(ST_LIVE, ST_T, ST_F) : ST_PACK(ST_LIVE, ST_F, ST_T)) | ST_SELF;
                 kept = true;
             } else {
                 ++*evals;
                 int s = leaf_over_region(qs, o.a, o.b, g);
+                if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g);
                 st[o.out] = ST_PACK(s, s, s);
                 kept = s == ST_LIVE;
             }
@@ -181,10 +235,10 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
                 int ts = ST_TAPE(st[src]);
                 kept = ts == ST_LIVE && src != o.out;
                 keep = (tape_op){OP_COPY, o.out, src, 0};
-                st[o.out] = ST_PACK(ts, mm, pp);
+                st[o.out] = ST_PACK(ts, mm, pp) | (st[src] & ST_SELF);
             } else {
                 kept = true;
-                st[o.out] = ST_PACK(ST_LIVE, mm, pp);
+                st[o.out] = ST_PACK(ST_LIVE, mm, pp) | ((sa | sb) & ST_SELF);
             }
         } else if (o.op == OP_COPY) {
             st[o.out] = st[o.a];
