@@ -25,13 +25,25 @@ in that instance's box and in the scene bound.  Follow the chain of cells that c
 projection.  A cell in the chain is never dropped as "no surface" (the heightfield is defined
 at x), nor as "not owned" (at x no in-plane component exceeds |n_k|), nor as outside the task
 box; it is not decided "no surface" by pruning (the pruned tape is exact over the patch, which
-holds x, and the sides differ at x).  It is discarded by the discs only if x lies in a disc of
+holds x, and the sides differ at x; a pruned value that no longer depends on q would make them
+equal).  It is discarded by the discs only if x lies in a disc of
 a corner p with d_q(p) > 0: the 2-D radius |d| / delta maps to a 3-D distance of at most |d|
 (delta bounds |dp| / |dx| over the cell), and no point of q within |d| of p is on the surface
 — contradiction.  Pruning keeps every tape exact where it is used: a leaf is replaced by a
 constant only where it has one sign over the whole region (planes are tested exactly on the
 patch box, other quadrics by their conservative distance), and the children's region (the
-parent's patch grown by r) holds their patches and every splat ball of their samples.  So the
+parent's patch grown by r) holds their patches and every splat ball of their samples.  The
+per-cell decision prunes over the patch itself, which is all the cell's points of q: there a
+leaf is also constant where the mean value form proves it (``leaf_over_patch`` in tape.h:
+f = s Q(p(x, y)) lies in f(center) +- (max |f_x| h_x + max |f_y| h_y), the derivative bounds
+from interval arithmetic over the cell, so a cell at distance D from a trimming curve is
+decided once D exceeds O(h^2)).  That is what resolves edge cells at the size of a splat
+instead of splitting them to the floor: a cell that crosses a trimming curve has a corner on
+each side of it (a curve flat on the cell's scale separates its corners), so once the cell is
+about r a corner with d_q < 0 gives the single sample below; a cell on the discarded side,
+not crossing, is decided by the patch test.  Splits cut the longest edge at ``SPLIT_AT`` of
+it, not the middle: a cell edge lying exactly on a trimming curve (features in the middle of a
+box are common) has corners with d_q = 0 that no bound can separate from the curve.  So the
 chain ends in (i) a fill, which puts every cell point within r of a sample (the anisotropic
 slope bound in ``fill.h``), (ii) a single sample whose radius covers the patch's whole 3-D
 box, or (iii) the floor: cells whose 3-D box is smaller than the floor and still unresolved
@@ -47,6 +59,15 @@ surfaces shared by several parts of the tree and shared sub-graphs need no speci
 Nothing is lost: each level runs with buffers sized from an estimate; the kernel counts past
 the capacity without writing, the host sees it, grows the buffer (cells, samples, tape arena)
 and re-runs the level; the finish pass does the same with the clip buffer.
+
+Scale
+-----
+A split counts the rows its children's pruned tape keeps (the forward pass of pruning, without
+writing) and reserves exactly that many in the level's output arena, never the parent's
+length.  Arenas ping-pong (:class:`_Subdivision`): a level reads its cells' tapes from one and
+writes its children's into the other, whose counter starts at zero, so an arena holds the
+tapes of one level's live cells.  A sample's clip program is made from its cell's tape right
+after the level that emitted it (:class:`_Finisher`), while that tape is still there.
 """
 
 from __future__ import annotations
@@ -273,16 +294,7 @@ def sample(
     None: 50 million samples / 80% of the device's global memory); past them
     :class:`~clcsg.errors.LimitError` is raised before anything is allocated.
     """
-    try:
-        radius = float(radius)
-    except (TypeError, ValueError):
-        raise UsageError(f"radius must be a number, got {radius!r}") from None
-    if not (math.isfinite(radius) and radius > 0):
-        raise UsageError(f"radius must be a positive finite number, got {radius}")
-    if floor is not None:
-        floor = float(floor)
-        if not (math.isfinite(floor) and floor > 0):
-            raise UsageError(f"floor must be a positive finite number, got {floor}")
+    radius, floor = _checked(radius, floor)
     timings = {}
     t0 = time.perf_counter()
     sc = as_scene(scene, bound)
@@ -291,25 +303,9 @@ def sample(
     if floor is None:
         diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
         floor = min(radius / 10, 1e-3 * diag) if diag > 0 else radius / 10
-
     ctx = scene_context(device)
     real = np.dtype(_device.real_dtype(ctx))
-    from . import guard
-
-    limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
-    est = guard.estimate_tape(tape, radius, real.itemsize)
-    try:
-        guard.check_estimate(est, ctx.info, **limits)
-    except LimitError:
-        # the estimate bounds the area from above: before refusing, measure (a run whose
-        # estimate is small) and refuse only if the extrapolated real count does not fit
-        r_probe = guard.probe_radius(est, guard.allowed_samples(est, ctx.info, max_samples=max_samples,
-                                                                 max_memory=max_memory))
-        if r_probe is None or not r_probe > radius:
-            raise
-        probe = sample(sc, r_probe, ctx, normal_form=normal_form, term_limit=term_limit, distortion=distortion,
-                       progress=False, max_samples=max(4 * guard.PROBE_SAMPLES, 1e6))
-        est = guard.check_estimate(guard.measured(est, len(probe), r_probe), ctx.info, **limits)
+    est = _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, max_samples, max_memory)
     t1 = time.perf_counter()
     packed = pack(tape, real)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
@@ -323,16 +319,11 @@ def sample(
         warnings.warn(f"{sc.source}: the solid is empty; no samples", stacklevel=2)
         return _empty(radius, tape, packed, stats)
 
-    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs}
-    prg = build(ctx, "sampling/sampler.cl", defines, real)
-    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
-    scene_buf = SceneBuffers(ctx, packed)
-    finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
-    expected = guard.expected_samples(tape, est)
-    stats["expected_samples"] = expected
-    sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity,
-                       expected, progress, max_levels, finisher)
-    sub.task_quadrics = tasks["quadric"]
+    from . import guard
+
+    stats["expected_samples"] = guard.expected_samples(tape, est)
+    sub, finisher = _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity,
+                               stats["expected_samples"], progress, max_levels)
     t_sub = time.perf_counter()
     sub.run()
     t2 = time.perf_counter()
@@ -344,24 +335,80 @@ def sample(
         warnings.warn(f"{sc.source}: no samples: no surface was found above the floor of {floor:.3g} "
                       f"({sub.totals['unresolved']} cells smaller than it were left unresolved)", stacklevel=2)
     stats.update(sub.totals)
-    stats.update(
+    stats.update(_run_stats(sub, samples, ctx, timings))
+    stats.update(samples.stats)
+    samples.stats = stats
+    return samples
+
+
+def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
+               progress, max_levels):
+    """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
+    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs}
+    prg = build(ctx, "sampling/sampler.cl", defines, real)
+    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
+    scene_buf = SceneBuffers(ctx, packed)
+    finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
+    sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity, expected, progress,
+                       max_levels, finisher)
+    sub.task_quadrics = tasks["quadric"]
+    return sub, finisher
+
+
+def _checked(radius, floor) -> tuple:
+    """(radius, floor) as floats, or :class:`UsageError` naming the bad one."""
+    try:
+        radius = float(radius)
+    except (TypeError, ValueError):
+        raise UsageError(f"radius must be a number, got {radius!r}") from None
+    if not (math.isfinite(radius) and radius > 0):
+        raise UsageError(f"radius must be a positive finite number, got {radius}")
+    if floor is not None:
+        floor = float(floor)
+        if not (math.isfinite(floor) and floor > 0):
+            raise UsageError(f"floor must be a positive finite number, got {floor}")
+    return radius, floor
+
+
+def _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, max_samples, max_memory):
+    """The resource guard's estimate, checked against the limits before anything is allocated.
+    The estimate bounds the area from above: before refusing, measure (a run whose estimate is
+    small) and refuse only if the extrapolated real count does not fit."""
+    from . import guard
+
+    limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
+    est = guard.estimate_tape(tape, radius, real.itemsize)
+    try:
+        guard.check_estimate(est, ctx.info, **limits)
+    except LimitError:
+        r_probe = guard.probe_radius(est, guard.allowed_samples(est, ctx.info, max_samples=max_samples,
+                                                                 max_memory=max_memory))
+        if r_probe is None or not r_probe > radius:
+            raise
+        probe = sample(sc, r_probe, ctx, normal_form=normal_form, term_limit=term_limit, distortion=distortion,
+                       progress=False, max_samples=max(4 * guard.PROBE_SAMPLES, 1e6))
+        est = guard.check_estimate(guard.measured(est, len(probe), r_probe), ctx.info, **limits)
+    return est
+
+
+def _run_stats(sub, samples, ctx, timings) -> dict:
+    """The statistics of a finished run: counts, per-level profiles, device, timings."""
+    lv = sub.levels
+    q = sub.totals["distance_queries"]
+    return dict(
         samples=len(samples),
         clip_rows=int(len(samples.clip_ops)),
         clipped_samples=int((samples.clip_count > 0).sum()),
-        levels=len(sub.levels),
-        cells_per_level=[lv["cells"] for lv in sub.levels],
-        tape_mean_per_level=[lv["tape_mean"] for lv in sub.levels],
-        tape_max_per_level=[lv["tape_max"] for lv in sub.levels],
-        arena_rows_per_level=[lv["arena_rows"] for lv in sub.levels],
-        leaf_distances_per_query=(sub.totals["leaf_distances"] / sub.totals["distance_queries"]
-                                  if sub.totals["distance_queries"] else 0.0),
+        levels=len(lv),
+        cells_per_level=[v["cells"] for v in lv],
+        tape_mean_per_level=[v["tape_mean"] for v in lv],
+        tape_max_per_level=[v["tape_max"] for v in lv],
+        arena_rows_per_level=[v["arena_rows"] for v in lv],
+        leaf_distances_per_query=sub.totals["leaf_distances"] / q if q else 0.0,
         device=ctx.info.name,
         compute_units=ctx.info.compute_units,
         **timings,
     )
-    stats.update(samples.stats)
-    samples.stats = stats
-    return samples
 
 
 def scene_context(device):
