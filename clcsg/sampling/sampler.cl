@@ -12,8 +12,8 @@
  * samples and tapes are appended with atomics and written only below the capacity; the
  * counters keep counting, so the host sees an overflow, grows the buffer and re-runs the level.
  *
- * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, MAX_FILL (largest grid a
- * cell may emit at once; larger cells are split instead).  Counter slots SC_* come from
+ * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, SPLIT_AT, MAX_FILL (largest
+ * grid a cell may emit at once; larger cells are split instead).  Counter slots SC_* come from
  * clcsg/cl/constants.py.
  */
 #include "tape.h"
@@ -28,7 +28,7 @@
  * trimming curve can never be decided (its corners there have d_q = 0, and no bound separates
  * it from the curve), so it would split down to the floor.  Any fraction keeps the guarantee. */
 #ifndef SPLIT_AT
-#define SPLIT_AT 0.4871
+#error "SPLIT_AT: the split fraction comes from the driver (sampler.py)"
 #endif
 
 typedef struct {

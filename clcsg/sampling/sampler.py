@@ -165,17 +165,11 @@ def root_tasks(tape, packed, frames):
     return t, c
 
 
-def estimate_samples(tape, radius: float) -> int:
-    """Rough sample count for the first buffer sizes: box areas of the sampled quadrics."""
-    area = 0.0
-    for lo, hi in quadric_boxes(tape).values():
-        e = hi - lo
-        area += 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2])
-    return int(area / (math.pi * radius * radius)) + 1
-
-
-#: the larger child's share of a split (``SPLIT_AT`` in sampler.cl is the smaller one)
-SPLIT_LARGER = 1 - 0.4871
+#: where a split cuts a cell's longest edge, as a fraction of it (the build option SPLIT_AT of
+#: sampler.cl, which says why it is not one half)
+SPLIT_AT = 0.4871
+#: the larger child's share of a split
+SPLIT_LARGER = 1 - SPLIT_AT
 
 
 class _Progress:
@@ -344,7 +338,7 @@ def sample(
 def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
                progress, max_levels):
     """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
-    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs}
+    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
     scene_buf = SceneBuffers(ctx, packed)
@@ -650,18 +644,22 @@ class _Finisher:
 
 
 def dedupe_programs(rows, first, count):
-    """Equal clip programs stored once: (first, count, rows) over a compact row buffer."""
+    """Equal clip programs stored once: (first, count, rows) over a compact row buffer.  Programs
+    of one length are compared as byte strings (a void view of their rows: one sort of keys
+    instead of a lexicographic sort over columns)."""
     first = first.copy()
     count = count.copy()
+    rows = np.ascontiguousarray(rows, dtype=np.int32)
     out = [np.zeros((0, 4), dtype=np.int32)]
     used = 0
     for c in np.unique(count[count > 0]):
         sel = np.flatnonzero(count == c)
         idx = first[sel, None] + np.arange(c)[None, :]
-        progs = rows[idx].reshape(len(sel), 4 * c)
-        uniq, inverse = np.unique(progs, axis=0, return_inverse=True)
-        out.append(uniq.reshape(-1, 4))
+        progs = np.ascontiguousarray(rows[idx].reshape(len(sel), 4 * c))
+        keys = progs.view(np.dtype((np.void, progs.itemsize * 4 * int(c)))).ravel()
+        _, keep, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        out.append(progs[keep].reshape(-1, 4))
         first[sel] = used + c * np.asarray(inverse).reshape(-1)
-        used += len(uniq) * c
+        used += len(keep) * c
     first[count == 0] = 0
     return first.astype(np.int32), count.astype(np.int32), np.concatenate(out).astype(np.int32)
