@@ -128,13 +128,17 @@ def shape_rows(ctx, scene, name, kind, sizes, repeats, budget, paper=None, try_d
                 row["paper"] = p
                 row["ratio_to_paper"] = row["sampling_s_times_cu"] / (1e-3 * p["sampling_ms"])
                 row["cpu_ratio_to_paper"] = row["sampling_cpu_s"] / (1e-3 * p["sampling_ms"])
+                row["queries_ratio_to_paper"] = row["distance_queries"] / p["distance_queries"]
             rows.append(row)
             print(_row_line(row), flush=True)
     return info, rows
 
 
 def _row_line(r) -> str:
-    extra = f", x{r['ratio_to_paper']:.1f} the paper" if r.get("ratio_to_paper") else ""
+    extra = ""
+    if r.get("ratio_to_paper"):
+        extra = (f", x{r['ratio_to_paper']:.1f} the paper (CPU time x{r['cpu_ratio_to_paper']:.1f}, "
+                 f"distance queries x{r['queries_ratio_to_paper']:.2f})")
     return (f"{r['model']} {r['size']} {r['normal_form']}: {r['samples']} samples, "
             f"{1e3 * r['sampling_s']:.1f} ms{extra}, {r['leaf_distances_per_query']:.2f} leaf distances per "
             f"query, {r['unresolved']} unresolved")
@@ -193,6 +197,9 @@ def targets(rows, cu) -> dict:
         "leaf_distances_at_most_3": bool(leaf) and all(v <= 3 for v in leaf.values()),
         "medium_time_x_cu_over_paper_tree": med,
         "medium_at_or_under_paper": bool(med) and all(v <= 1 for v in med.values()),
+        "medium_cpu_over_paper_tree": {r["model"]: r["cpu_ratio_to_paper"] for r in tree if r["size"] == "medium"},
+        "medium_queries_over_paper_tree": {r["model"]: r["queries_ratio_to_paper"] for r in tree
+                                           if r["size"] == "medium"},
         "sponge_s": sponge[0]["sampling_s"] if sponge else None,
         "sponge_under_10_s": bool(sponge) and sponge[0]["sampling_s"] < 10,
     }

@@ -188,6 +188,44 @@ def test_the_sampler_reports_levels_and_a_forecast(cl_context):
     progress = [e for e in events if e["event"] == "progress" and e["label"] == "sampling"]
     assert [e["level"] for e in progress] == list(range(1, s.stats["levels"] + 1))
     assert progress[-1]["done"] == sum(s.stats["cells_per_level"]) == progress[-1]["total"]
-    assert progress[-1]["samples"] == len(s) and progress[-1]["estimated"] >= len(s) / 4
+    assert progress[-1]["samples"] == len(s) and len(s) / 2 <= progress[-1]["estimated"] <= 2 * len(s)
     assert all(e["total"] >= e["done"] for e in progress)
     assert events[-1]["event"] == "end" and events[-1]["step"] == "sample"
+
+
+def test_the_bar_never_goes_back_on_a_terminal(tmp_path):
+    """The percentage of the sampling bar on a pty, frame by frame, never decreases; the expected
+    sample count it shows is within 2x of the real count."""
+    scene = os.path.join(ROOT, "examples", "rook.csg")
+    rc, out = run_in_pty(["sample", scene, "-r", "1%", "-o", str(tmp_path / "p.ply")])
+    assert rc == 0, out
+    frames = [f for f in re.split(r"[\r\n]+", out) if f.startswith("sampling: ") and "%|" in f and "level" in f]
+    pct = [int(re.match(r"sampling:\s+(\d+)%", f).group(1)) for f in frames]
+    assert len(pct) >= 5 and pct == sorted(pct) and pct[-1] == 100, pct
+    est = int(re.search(r"estimate ([\d,]+)\)", frames[-1]).group(1).replace(",", ""))
+    samples = int(re.search(r"level \d+, ([\d,]+) samples", frames[-1]).group(1).replace(",", ""))
+    assert 0.5 <= est / samples <= 2, (est, samples)
+
+
+EXAMPLES = sorted(os.path.relpath(p, ROOT) for pat in ("examples/*.json", "examples/*.csg", "examples/zoo/*.json")
+                  for p in __import__("glob").glob(os.path.join(ROOT, pat)) if "menger" not in p)
+#: where the expected count misses 2x (the area bounds of the gear's 80 quadrics are loose, the
+#: spheres' count is raised by their many small trimmed caps)
+EXPECTED_MISSES = {"examples/zoo/gear.json": "3.6x over", "examples/spheres.json": "0.44x"}
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.xfail(strict=True, reason=EXPECTED_MISSES[p]))
+                                  if p in EXPECTED_MISSES else p for p in EXAMPLES])
+def test_the_expected_sample_count_is_within_2x(path, cl_context):
+    """The count the progress shows before sampling (``expected_samples``) against the real
+    count at r = 1% of the diagonal, on every example (the level-3 sponge aside: it has its
+    own test module)."""
+    import warnings
+
+    scene = clcsg.load(os.path.join(ROOT, path))
+    tape = scene.compile()
+    r = float(((tape.bound[1] - tape.bound[0]) ** 2).sum() ** 0.5) / 100
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = clcsg.sample(scene, r, device=cl_context, progress=False)
+    assert 0.5 <= s.stats["expected_samples"] / len(s) <= 2, s.stats["expected_samples"] / len(s)

@@ -1,11 +1,12 @@
-/* Per sample, after the subdivision: its clip program, the side the solid is on, its outward
+/* Per sample, after the level that emitted it (while its cell's tape is still in the level's
+ * arena; samples [first, first + n) of the raw buffer, outputs from index 0): its clip program, the side the solid is on, its outward
  * normal and its primitive (driven by clcsg/sampling/sampler.py).
  *
  * The clip program is the sample's cell tape pruned over the splat ball (s, r) with the
  * sample's quadric substituted.  If both sides come out constant (and, s being on the surface,
  * different) the splat needs no clipping; otherwise the pruned tape is written to the clip
- * buffer (rows reserved with an atomic add, written only below the capacity; the host grows
- * the buffer and re-runs on overflow).  The sign is +1 where the solid is on the quadric's
+ * buffer (exactly the rows pruning keeps, reserved with an atomic add, written only below the
+ * capacity; the host grows the buffer and re-runs on overflow).  The sign is +1 where the solid is on the quadric's
  * negative side at s (outward normal +grad Q), -1 otherwise.
  */
 #include "tape.h"
@@ -13,7 +14,7 @@
 
 __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *frames,
                      __global const task_rec *tasks, __global const raw_sample_rec *raw, int n,
-                     __global const tape_op *arena, __global tape_op *clip, uint cap_clip,
+                     int first_sample, __global const tape_op *arena, __global tape_op *clip, uint cap_clip,
                      __global volatile uint *counters,
                      PRIMITIVE_TABLE,
                      __global real *normals, __global int *signs, __global int *primitives,
@@ -21,32 +22,31 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
 {
     int gid = get_global_id(0);
     if (gid >= n) return;
-    raw_sample_rec s = raw[gid];
+    raw_sample_rec s = raw[first_sample + gid];
     task_rec t = tasks[s.task];
     real3 p = (real3)(s.pos[0], s.pos[1], s.pos[2]);
     __global const tape_op *tape = arena + s.tape_first;
     int nt = s.tape_count;
     prune_region ball = {p, (real3)(0), (real3)(0), (real3)(0), s.radius};
     uint evals = 0;
+    uchar state;
     int first = 0, count = 0;
-    uint bits;
-    int decided = tape_prune(tape, nt, qs, &ball, t.quadric, 0, &first, &count, &evals);
-    if (decided < 0) {
-        bits = tape_member(tape, nt, qs, p, t.quadric);
-        clip_first[gid] = 0;
-        clip_count[gid] = 0;
-    } else {
-        uint base = atomic_add(&counters[0], (uint)(nt + 1));
-        if (base + (uint)(nt + 1) <= cap_clip) {
-            tape_prune(tape, nt, qs, &ball, t.quadric, clip + base, &first, &count, &evals);
-            clip_first[gid] = (int)base + first;
-            clip_count[gid] = count;
+    int rows = tape_prune_rows(tape, nt, qs, &ball, t.quadric, &state, &evals);
+    /* membership at s: from the decided root state, else from the (short) clip program, which
+     * equals the tape over the ball; the full tape only if the clip buffer is full this run */
+    uint bits = prune_member_bits(state);
+    if (prune_decision(state) >= 0) {
+        uint base = atomic_add(&counters[0], (uint)rows);
+        if (base + (uint)rows <= cap_clip) {
+            tape_prune_write(tape, nt, qs, &ball, t.quadric, state, clip + base, &first, &count, &evals);
+            first += (int)base;
+            bits = tape_member(clip + first, count, qs, p, t.quadric);
         } else {
-            clip_first[gid] = 0;
-            clip_count[gid] = 0;
+            bits = tape_member(tape, nt, qs, p, t.quadric);
         }
-        bits = tape_member(tape, nt, qs, p, t.quadric);
     }
+    clip_first[gid] = first;
+    clip_count[gid] = count;
     atomic_add(&counters[1], evals);
     int sign = (bits & 1) ? 1 : -1;
     real3 g = sign * quadric_gradient(quadric_load(qs, t.quadric), p);

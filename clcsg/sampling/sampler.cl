@@ -6,12 +6,14 @@
  * constant the patch is decided without a distance query (equal: no surface, discard;
  * different: all surface, fill).  Otherwise d_q(p) at the corners decides: discard, fill,
  * single sample, or split (the children get the tape pruned over the patch grown by the
- * radius, written once into the tape arena).  Children, samples and tapes are appended with
- * atomics and written only below the capacity; the counters keep counting, so the host sees
- * an overflow, grows the buffer and re-runs the level.
+ * radius, written once, with exactly the rows pruning keeps, into the level's output arena).
+ * Arenas ping-pong: a level reads its cells' tapes from `arena_in` and writes its children's
+ * into `arena_out`, so an arena holds the tapes of one level's live cells only.  Children,
+ * samples and tapes are appended with atomics and written only below the capacity; the
+ * counters keep counting, so the host sees an overflow, grows the buffer and re-runs the level.
  *
- * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, MAX_FILL (largest grid a
- * cell may emit at once; larger cells are split instead).  Counter slots SC_* come from
+ * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, SPLIT_AT, MAX_FILL (largest
+ * grid a cell may emit at once; larger cells are split instead).  Counter slots SC_* come from
  * clcsg/cl/constants.py.
  */
 #include "tape.h"
@@ -19,6 +21,14 @@
 
 #ifndef MAX_FILL
 #define MAX_FILL 65536
+#endif
+
+/* Where a split cuts the longest edge, as a fraction of it.  Not one half: models are full of
+ * features at the middle (or a quarter...) of their boxes, and a cell edge lying exactly on a
+ * trimming curve can never be decided (its corners there have d_q = 0, and no bound separates
+ * it from the curve), so it would split down to the floor.  Any fraction keeps the guarantee. */
+#ifndef SPLIT_AT
+#error "SPLIT_AT: the split fraction comes from the driver (sampler.py)"
 #endif
 
 typedef struct {
@@ -42,6 +52,7 @@ inline prune_region patch_region(const plane_frame *pf, cell_rec c, real t_lo, r
     g.a1 = (real)(0.5 * (c.y1 - c.y0)) * plane_axis(pf, pf->j);
     g.a2 = (real)(0.5 * (t_hi - t_lo)) * plane_axis(pf, pf->k);
     g.rho = grow;
+    g.on_patch = 0;
     return g;
 }
 
@@ -53,103 +64,143 @@ inline prune_region patch_region(const plane_frame *pf, cell_rec c, real t_lo, r
 #define OUT_DECIDED_DISCARD 5
 #define OUT_DECIDED_FILL 6
 
-int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const frame_rec *frames,
-                  __global const task_rec *tasks, __global cell_rec *cells_out, uint cap_cells,
-                  __global raw_sample_rec *samples, uint cap_samples, __global tape_op *arena, uint cap_arena,
-                  __global volatile uint *counters, real radius, real floor_size, cell_work *w)
+/* What the exact interval bounds say about a cell's patch: its height range [t_lo, t_hi],
+ * the distortion bound delta (|dp| <= delta |d(x, y)| over the cell) and what it needs. */
+typedef struct {
+    plane_frame pf;
+    real t_lo, t_hi, delta, enough, wx, wy, et, diag;
+    bool whole_domain, fill_fits;
+} cell_geom;
+
+/* Slope interval of the heightfield along one in-plane axis over [a, b]: from R + lam_k t^2 = 0
+ * (two sheets) dt/dx = -(lam x + beta) / (lam_k t), t in [t_lo, t_hi] of one sign; from
+ * R + 2 beta_k t = 0 (one sheet) dt/dx = -(lam x + beta) / beta_k.  lam x + beta is linear, so
+ * its range is its values at a and b. */
+inline real2 slope_range(const cell_geom *g, real lam, real beta, real a, real b)
 {
-    task_rec t = tasks[c.task];
-    plane_frame pf = plane_load(frames + t.quadric, t.plane, t.sheet);
-    __global const tape_op *tape = arena + c.tape_first;
-    int n = c.tape_count;
-    sample_src src = {c.task, c.tape_first, c.tape_count};
+    real u = lam * a + beta, v = lam * b + beta;
+    real2 num = (real2)(-fmax(u, v), -fmin(u, v));
+    const plane_frame *pf = &g->pf;
+    if (pf->lk == 0) return interval_mul(num, (real2)(1 / pf->bk, 1 / pf->bk));
+    real d0 = pf->lk * g->t_lo, d1 = pf->lk * g->t_hi;
+    return interval_mul(num, (real2)(1 / fmax(d0, d1), 1 / fmin(d0, d1)));
+}
 
-    /* exact interval bounds over the cell */
-    rect_bounds rb = rect_bounds_of(&pf, c.x0, c.x1, c.y0, c.y1);
-    real t_lo, t_hi;
-    bool whole_domain = true;
-    if (pf.lk != 0) {
-        real Hlo = -(pf.lk > 0 ? rb.R.y : rb.R.x) / pf.lk;
-        real Hhi = -(pf.lk > 0 ? rb.R.x : rb.R.y) / pf.lk;
-        if (Hhi < 0) return OUT_DISCARDED; /* no surface over this cell */
-        whole_domain = Hlo >= 0;
+/* Where the heightfield is defined with a finite slope over the whole cell, give the prune
+ * region the patch itself (the mean value test of leaf_over_patch); otherwise leave it off. */
+inline void patch_on_surface(const cell_geom *g, cell_rec c, prune_region *r)
+{
+    real xm = 0.5 * (c.x0 + c.x1), ym = 0.5 * (c.y0 + c.y1);
+    if (!g->whole_domain || !isfinite(g->delta)) return;
+    if (g->pf.lk != 0 && !(g->t_lo > 0 || g->t_hi < 0)) return;
+    r->on_patch = 1;
+    r->pc = plane_point(&g->pf, xm, ym, plane_height_clamped(&g->pf, xm, ym));
+    r->ui = plane_axis(&g->pf, g->pf.i);
+    r->uj = plane_axis(&g->pf, g->pf.j);
+    r->uk = plane_axis(&g->pf, g->pf.k);
+    r->hx = 0.5 * g->wx;
+    r->hy = 0.5 * g->wy;
+    r->sx = slope_range(g, g->pf.li, g->pf.bi, c.x0, c.x1);
+    r->sy = slope_range(g, g->pf.lj, g->pf.bj, c.y0, c.y1);
+}
+
+/* Fill g from the interval bounds over the cell; false: the cell holds no point of the task
+ * (the heightfield is undefined over it, plane k owns none of it, or it lies outside the
+ * task's box). */
+inline bool cell_geometry(const task_rec *t, __global const frame_rec *frames, cell_rec c, real radius, cell_geom *g)
+{
+    g->pf = plane_load(frames + t->quadric, t->plane, t->sheet);
+    const plane_frame *pf = &g->pf;
+    rect_bounds rb = rect_bounds_of(pf, c.x0, c.x1, c.y0, c.y1);
+    g->whole_domain = true;
+    if (pf->lk != 0) {
+        real Hlo = -(pf->lk > 0 ? rb.R.y : rb.R.x) / pf->lk;
+        real Hhi = -(pf->lk > 0 ? rb.R.x : rb.R.y) / pf->lk;
+        if (Hhi < 0) return false;
+        g->whole_domain = Hlo >= 0;
         real a = sqrt(fmax(Hlo, (real)0)), b = sqrt(Hhi);
-        t_lo = pf.sheet > 0 ? a : -b;
-        t_hi = pf.sheet > 0 ? b : -a;
+        g->t_lo = pf->sheet > 0 ? a : -b;
+        g->t_hi = pf->sheet > 0 ? b : -a;
     } else {
-        t_lo = fmin(-rb.R.y / (2 * pf.bk), -rb.R.x / (2 * pf.bk));
-        t_hi = fmax(-rb.R.y / (2 * pf.bk), -rb.R.x / (2 * pf.bk));
+        g->t_lo = fmin(-rb.R.y / (2 * pf->bk), -rb.R.x / (2 * pf->bk));
+        g->t_hi = fmax(-rb.R.y / (2 * pf->bk), -rb.R.x / (2 * pf->bk));
     }
-    /* plane k owns no point of the cell: an in-plane normal component dominates everywhere */
-    if (!rect_may_be_owned(rb)) return OUT_DISCARDED;
-    /* the patch lies outside the task's box */
-    if (t_hi < t.zlo[pf.k] || t_lo > t.zhi[pf.k]) return OUT_DISCARDED;
-
+    if (!rect_may_be_owned(rb)) return false;
+    if (g->t_hi < t->zlo[pf->k] || g->t_lo > t->zhi[pf->k]) return false;
     real ni_hi = rb.ni.y, nj_hi = rb.nj.y, nk_lo = rb.nk.x, nk_hi = rb.nk.y;
-    /* distortion bound: |dp| <= delta |d(x, y)| over the cell */
-    real delta = nk_lo > 0 ? sqrt(ni_hi * ni_hi + nj_hi * nj_hi + nk_hi * nk_hi) / nk_lo : INFINITY;
+    g->delta = nk_lo > 0 ? sqrt(ni_hi * ni_hi + nj_hi * nj_hi + nk_hi * nk_hi) / nk_lo : INFINITY;
 #if WORST_CASE_DISTORTION
-    delta = fmax(delta, sqrt((real)3));
+    g->delta = fmax(g->delta, sqrt((real)3));
 #endif
-    real wx = c.x1 - c.x0, wy = c.y1 - c.y0, et = t_hi - t_lo;
-    real diag = sqrt(wx * wx + wy * wy);
-    real enough = delta * diag;
-    real s_fill = sqrt((real)2) * radius / delta;
-    bool fill_fits = whole_domain && isfinite(delta) && (wx / s_fill + 1) * (wy / s_fill + 1) <= MAX_FILL;
+    g->wx = c.x1 - c.x0;
+    g->wy = c.y1 - c.y0;
+    g->et = g->t_hi - g->t_lo;
+    g->diag = sqrt(g->wx * g->wx + g->wy * g->wy);
+    g->enough = g->delta * g->diag;
+    real s_fill = sqrt((real)2) * radius / g->delta;
+    g->fill_fits = g->whole_domain && isfinite(g->delta) && (g->wx / s_fill + 1) * (g->wy / s_fill + 1) <= MAX_FILL;
+    return true;
+}
 
-    /* the tape over the patch: both sides constant decides the whole patch */
-    prune_region patch = patch_region(&pf, c, t_lo, t_hi, 0);
-    int unused0, unused1;
-    int decided = tape_prune(tape, n, qs, &patch, t.quadric, 0, &unused0, &unused1, &w->evals);
-    if (decided > 0) return OUT_DECIDED_DISCARD;
-    if (decided < 0 && fill_fits) {
-        fill_cell(&pf, c, radius, src, counters, samples, cap_samples);
-        return OUT_DECIDED_FILL;
-    }
-
-    /* corners: 3-D point and d_q(p) */
+/* d_q at the four corners (x0,y0), (x1,y0), (x0,y1), (x1,y1); NaN where the heightfield is
+ * undefined.  Values inherited from the parent were evaluated with the parent's tape over a
+ * larger cell: still conservative. */
+inline void corner_distances(const cell_geom *g, cell_rec c, __global const tape_op *tape, int n,
+                             __global const quadric_rec *qs, int q, real d[4], real3 p[4], cell_work *w)
+{
     real cx[4] = {c.x0, c.x1, c.x0, c.x1};
     real cy[4] = {c.y0, c.y0, c.y1, c.y1};
-    real d[4];
-    bool defined[4];
-    real3 p[4];
     for (int m = 0; m < 4; ++m) {
         real h;
-        defined[m] = plane_height(&pf, cx[m], cy[m], &h);
         d[m] = NAN;
-        if (defined[m]) {
-            p[m] = plane_point(&pf, cx[m], cy[m], h);
-            /* inherited values were evaluated for a larger cell: still conservative */
-            d[m] = (c.level > 0 && !isnan(c.d[m])) ? c.d[m] : query(tape, n, qs, t.quadric, p[m], w);
+        if (plane_height(&g->pf, cx[m], cy[m], &h)) {
+            p[m] = plane_point(&g->pf, cx[m], cy[m], h);
+            d[m] = (c.level > 0 && !isnan(c.d[m])) ? c.d[m] : query(tape, n, qs, q, p[m], w);
         }
     }
+}
 
-    /* discard: the corner discs of positive distance cover the cell */
-    bool all_pos = true, all_neg = true;
+/* +1: the discs of positive distance cover the cell (one disc of radius |d| / delta reaching
+ * the far corner, or four each reaching its quarter): no surface; -1: the same with negative
+ * distances: all surface; 0: undecided. */
+inline int corner_cover(const cell_geom *g, const real d[4])
+{
+    bool all_pos = true, all_neg = true, one_neg = false;
     real min_abs = INFINITY;
     for (int m = 0; m < 4; ++m) {
-        if (!defined[m]) {
+        if (isnan(d[m])) {
             all_pos = all_neg = false;
             continue;
         }
         all_pos = all_pos && d[m] > 0;
         all_neg = all_neg && d[m] < 0;
         min_abs = fmin(min_abs, fabs(d[m]));
-        if (d[m] > 0 && d[m] >= enough) return OUT_DISCARDED; /* one disc covers the cell */
+        if (d[m] > 0 && d[m] >= g->enough) return 1;
+        if (d[m] < 0 && -d[m] >= g->enough) one_neg = true;
     }
-    if (all_pos && min_abs >= 0.5 * enough) return OUT_DISCARDED; /* each disc covers its quarter */
+    if (all_pos && min_abs >= 0.5 * g->enough) return 1;
+    if (one_neg || (all_neg && min_abs >= 0.5 * g->enough)) return -1;
+    return 0;
+}
 
-    /* single sample (paper 4.2 special case): a corner on the CSG surface whose splat of
-     * radius r covers the patch's whole 3-D box; the splat radius shrinks to what is needed */
+/* Single sample (paper 4.2 special case): a point on the CSG surface whose splat covers the
+ * patch's whole 3-D box; a corner with d < 0 first, then the cell's center (which reaches a
+ * box twice as large, at the cost of one query).  The splat radius shrinks to what is needed. */
+inline bool try_single(const cell_geom *g, cell_rec c, const real d[4], const real3 p[4],
+                       __global const tape_op *tape, int n, __global const quadric_rec *qs, int q, real radius,
+                       sample_src src, __global volatile uint *counters, __global raw_sample_rec *samples,
+                       uint cap_samples, cell_work *w)
+{
+    real cx[4] = {c.x0, c.x1, c.x0, c.x1};
+    real cy[4] = {c.y0, c.y0, c.y1, c.y1};
     int best = -1;
     real best_r = INFINITY;
     for (int m = 0; m < 4; ++m) {
-        if (!defined[m] || !(d[m] < 0)) continue;
-        real h;
-        plane_height(&pf, cx[m], cy[m], &h);
+        if (!(d[m] < 0)) continue;
+        real h = plane_height_clamped(&g->pf, cx[m], cy[m]);
         real fx = fmax(cx[m] - c.x0, c.x1 - cx[m]);
         real fy = fmax(cy[m] - c.y0, c.y1 - cy[m]);
-        real ft = fmax(h - t_lo, t_hi - h);
+        real ft = fmax(h - g->t_lo, g->t_hi - h);
         real r = sqrt(fx * fx + fy * fy + ft * ft);
         if (r < best_r) {
             best_r = r;
@@ -159,81 +210,66 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     if (best >= 0 && best_r <= radius) {
         emit_sample(samples, atomic_inc(&counters[SC_SAMPLES]), cap_samples, p[best],
                     fmax(best_r, radius * (real)1e-3), src);
-        return OUT_SINGLE;
+        return true;
     }
-    /* the same from the cell's center, which reaches a box twice as large: one more query */
-    real center_r = 0.5 * diag;
-    if (center_r <= radius) {
-        real mx = 0.5 * (c.x0 + c.x1), my = 0.5 * (c.y0 + c.y1), h;
-        if (plane_height(&pf, mx, my, &h)) {
-            real ft = fmax(h - t_lo, t_hi - h);
-            real r = sqrt(center_r * center_r + ft * ft);
-            if (r <= radius) {
-                real3 pc = plane_point(&pf, mx, my, h);
-                if (query(tape, n, qs, t.quadric, pc, w) < 0) {
-                    emit_sample(samples, atomic_inc(&counters[SC_SAMPLES]), cap_samples, pc,
-                                fmax(r, radius * (real)1e-3), src);
-                    return OUT_SINGLE;
-                }
-            }
-        }
-    }
+    real center_r = 0.5 * g->diag, h;
+    real mx = 0.5 * (c.x0 + c.x1), my = 0.5 * (c.y0 + c.y1);
+    if (!(center_r <= radius) || !plane_height(&g->pf, mx, my, &h)) return false;
+    real ft = fmax(h - g->t_lo, g->t_hi - h);
+    real r = sqrt(center_r * center_r + ft * ft);
+    if (r > radius) return false;
+    real3 pc = plane_point(&g->pf, mx, my, h);
+    if (!(query(tape, n, qs, q, pc, w) < 0)) return false;
+    emit_sample(samples, atomic_inc(&counters[SC_SAMPLES]), cap_samples, pc, fmax(r, radius * (real)1e-3), src);
+    return true;
+}
 
-    /* fill: the corner discs of negative distance cover the cell and the heightfield is
-     * defined everywhere: a grid with spacing s <= sqrt 2 r / delta puts every point of the
-     * cell within r / delta (2-D), hence within r (3-D), of a sample */
-    bool covered = false;
-    for (int m = 0; m < 4; ++m)
-        if (defined[m] && d[m] < 0 && -d[m] >= enough) covered = true;
-    if (all_neg && min_abs >= 0.5 * enough) covered = true;
-    if (covered && fill_fits) {
-        fill_cell(&pf, c, radius, src, counters, samples, cap_samples);
-        return OUT_FILLED;
-    }
+/* d_q at the point (x, y) of the plane, NaN where the heightfield is undefined */
+inline real query_at(const cell_geom *g, real x, real y, __global const tape_op *tape, int n,
+                     __global const quadric_rec *qs, int q, cell_work *w)
+{
+    real h;
+    if (!plane_height(&g->pf, x, y, &h)) return NAN;
+    return query(tape, n, qs, q, plane_point(&g->pf, x, y, h), w);
+}
 
-    /* floor: the patch is smaller than the floor and still unresolved */
-    if (sqrt(wx * wx + wy * wy + et * et) < floor_size) return OUT_UNRESOLVED;
-
-    /* split along the longest edge */
+/* Split along the longest edge.  The children's tape is this tape pruned over the patch grown
+ * by the radius (so it stays valid over every splat ball their samples get), counted first and
+ * written with exactly that many rows into arena_out.  The two new corners, shared by both
+ * children, are evaluated here once with the parent's tape (valid over the whole patch). */
+inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
+                       __global const quadric_rec *qs, int q, real radius, __global cell_rec *cells_out,
+                       uint cap_cells, __global tape_op *arena_out, uint cap_arena,
+                       __global volatile uint *counters, cell_work *w)
+{
     uint slot = atomic_add(&counters[SC_CELLS], 2u);
-    /* the children's tape: pruned over this patch grown by the radius (so it stays valid over
-     * every splat ball their samples get), written only if that drops a row */
-    int child_first = c.tape_first, child_count = n;
-    prune_region grown = patch_region(&pf, c, t_lo, t_hi, radius);
-    if (n > 1 && tape_prune_shrinks(tape, n, qs, &grown, t.quadric, &w->evals)) {
-        uint base = atomic_add(&counters[SC_ARENA], (uint)(n + 1));
-        if (base + (uint)(n + 1) <= cap_arena) {
-            int first, count;
-            tape_prune(tape, n, qs, &grown, t.quadric, arena + base, &first, &count, &w->evals);
-            child_first = (int)base + first;
-            child_count = count;
-            w->tapes_written = 1;
-        }
-    }
-    if (slot + 1 >= cap_cells) return OUT_SPLIT;
+    prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
+    uchar state;
+    int first, count;
+    int rows = tape_prune_rows(tape, n, qs, &grown, q, &state, &w->evals);
+    uint base = atomic_add(&counters[SC_ARENA], (uint)rows);
+    if (slot + 1 >= cap_cells || base + (uint)rows > cap_arena) return; /* overflow: the level re-runs */
+    tape_prune_write(tape, n, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals);
+    w->tapes_written = 1;
     cell_rec a = c, b = c;
     a.level = b.level = c.level + 1;
-    a.tape_first = b.tape_first = child_first;
-    a.tape_count = b.tape_count = child_count;
-    /* the two new corners, shared by both children, are evaluated here once (with the
-     * parent's tape, valid over the whole patch) */
-    real e0 = NAN, e1 = NAN, h;
-    if (wx >= wy) {
-        real mid = 0.5 * (c.x0 + c.x1);
-        a.x1 = mid;
-        b.x0 = mid;
-        if (plane_height(&pf, mid, c.y0, &h)) e0 = query(tape, n, qs, t.quadric, plane_point(&pf, mid, c.y0, h), w);
-        if (plane_height(&pf, mid, c.y1, &h)) e1 = query(tape, n, qs, t.quadric, plane_point(&pf, mid, c.y1, h), w);
+    a.tape_first = b.tape_first = (int)base + first;
+    a.tape_count = b.tape_count = count;
+    real e0, e1;
+    if (g->wx >= g->wy) {
+        real mid = c.x0 + (real)SPLIT_AT * g->wx;
+        a.x1 = b.x0 = mid;
+        e0 = query_at(g, mid, c.y0, tape, n, qs, q, w);
+        e1 = query_at(g, mid, c.y1, tape, n, qs, q, w);
         a.d[1] = e0; a.d[3] = e1; /* a = [x0, mid]: new right corners */
         b.d[0] = e0; b.d[2] = e1; /* b = [mid, x1]: new left corners */
         a.d[0] = d[0]; a.d[2] = d[2];
         b.d[1] = d[1]; b.d[3] = d[3];
     } else {
-        real mid = 0.5 * (c.y0 + c.y1);
-        a.y1 = mid;
-        b.y0 = mid;
-        if (plane_height(&pf, c.x0, mid, &h)) e0 = query(tape, n, qs, t.quadric, plane_point(&pf, c.x0, mid, h), w);
-        if (plane_height(&pf, c.x1, mid, &h)) e1 = query(tape, n, qs, t.quadric, plane_point(&pf, c.x1, mid, h), w);
+        real mid = c.y0 + (real)SPLIT_AT * g->wy;
+        a.y1 = b.y0 = mid;
+        e0 = query_at(g, c.x0, mid, tape, n, qs, q, w);
+        e1 = query_at(g, c.x1, mid, tape, n, qs, q, w);
         a.d[2] = e0; a.d[3] = e1; /* a = [y0, mid]: new top corners */
         b.d[0] = e0; b.d[1] = e1; /* b = [mid, y1]: new bottom corners */
         a.d[0] = d[0]; a.d[1] = d[1];
@@ -241,6 +277,51 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     }
     cells_out[slot] = a;
     cells_out[slot + 1] = b;
+}
+
+/* One cell: geometry, the pruned tape's decision, the corner discs, single sample, fill,
+ * floor, split (in that order; see the module docstring of sampler.py for the guarantee). */
+int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const frame_rec *frames,
+                  __global const task_rec *tasks, __global cell_rec *cells_out, uint cap_cells,
+                  __global raw_sample_rec *samples, uint cap_samples, __global const tape_op *arena_in,
+                  __global tape_op *arena_out, uint cap_arena, __global volatile uint *counters, real radius,
+                  real floor_size, cell_work *w)
+{
+    task_rec t = tasks[c.task];
+    cell_geom g;
+    if (!cell_geometry(&t, frames, c, radius, &g)) return OUT_DISCARDED;
+    __global const tape_op *tape = arena_in + c.tape_first;
+    int n = c.tape_count;
+    sample_src src = {c.task, c.tape_first, c.tape_count};
+
+    /* the tape over the patch: both sides constant decides the whole patch; a value that no
+     * longer depends on the task's quadric is the same on both sides: no surface */
+    prune_region patch = patch_region(&g.pf, c, g.t_lo, g.t_hi, 0);
+    patch_on_surface(&g, c, &patch);
+    uchar state;
+    tape_prune_rows(tape, n, qs, &patch, t.quadric, &state, &w->evals);
+    int decided = prune_decision(state);
+    if (decided > 0 || !(state & ST_SELF)) return OUT_DECIDED_DISCARD;
+    if (decided < 0 && g.fill_fits) {
+        fill_cell(&g.pf, c, radius, src, counters, samples, cap_samples);
+        return OUT_DECIDED_FILL;
+    }
+    real d[4];
+    real3 p[4];
+    corner_distances(&g, c, tape, n, qs, t.quadric, d, p, w);
+    int cover = corner_cover(&g, d);
+    if (cover > 0) return OUT_DISCARDED;
+    if (try_single(&g, c, d, p, tape, n, qs, t.quadric, radius, src, counters, samples, cap_samples, w))
+        return OUT_SINGLE;
+    /* fill: the corner discs of negative distance cover the cell and the heightfield is
+     * defined everywhere: a grid with spacing s <= sqrt 2 r / delta puts every point of the
+     * cell within r / delta (2-D), hence within r (3-D), of a sample */
+    if (cover < 0 && g.fill_fits) {
+        fill_cell(&g.pf, c, radius, src, counters, samples, cap_samples);
+        return OUT_FILLED;
+    }
+    if (sqrt(g.wx * g.wx + g.wy * g.wy + g.et * g.et) < floor_size) return OUT_UNRESOLVED;
+    split_cell(&g, c, d, tape, n, qs, t.quadric, radius, cells_out, cap_cells, arena_out, cap_arena, counters, w);
     return OUT_SPLIT;
 }
 
@@ -248,14 +329,14 @@ __kernel void classify(__global const quadric_rec *qs, __global const frame_rec 
                        __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
                        __global cell_rec *cells_out, uint cap_cells,
                        __global raw_sample_rec *samples, uint cap_samples,
-                       __global tape_op *arena, uint cap_arena,
+                       __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
                        __global volatile uint *counters, real radius, real floor_size)
 {
     int gid = get_global_id(0);
     if (gid >= n_cells) return;
     cell_work w = {0, 0, 0, 0};
-    int out = classify_cell(cells_in[gid], qs, frames, tasks, cells_out, cap_cells, samples, cap_samples, arena,
-                            cap_arena, counters, radius, floor_size, &w);
+    int out = classify_cell(cells_in[gid], qs, frames, tasks, cells_out, cap_cells, samples, cap_samples, arena_in,
+                            arena_out, cap_arena, counters, radius, floor_size, &w);
     int slot = out == OUT_DISCARDED || out == OUT_DECIDED_DISCARD ? SC_DISCARDED
              : out == OUT_FILLED || out == OUT_DECIDED_FILL ? SC_FILLED
              : out == OUT_SINGLE ? SC_SINGLE

@@ -25,13 +25,25 @@ in that instance's box and in the scene bound.  Follow the chain of cells that c
 projection.  A cell in the chain is never dropped as "no surface" (the heightfield is defined
 at x), nor as "not owned" (at x no in-plane component exceeds |n_k|), nor as outside the task
 box; it is not decided "no surface" by pruning (the pruned tape is exact over the patch, which
-holds x, and the sides differ at x).  It is discarded by the discs only if x lies in a disc of
+holds x, and the sides differ at x; a pruned value that no longer depends on q would make them
+equal).  It is discarded by the discs only if x lies in a disc of
 a corner p with d_q(p) > 0: the 2-D radius |d| / delta maps to a 3-D distance of at most |d|
 (delta bounds |dp| / |dx| over the cell), and no point of q within |d| of p is on the surface
 — contradiction.  Pruning keeps every tape exact where it is used: a leaf is replaced by a
 constant only where it has one sign over the whole region (planes are tested exactly on the
 patch box, other quadrics by their conservative distance), and the children's region (the
-parent's patch grown by r) holds their patches and every splat ball of their samples.  So the
+parent's patch grown by r) holds their patches and every splat ball of their samples.  The
+per-cell decision prunes over the patch itself, which is all the cell's points of q: there a
+leaf is also constant where the mean value form proves it (``leaf_over_patch`` in tape.h:
+f = s Q(p(x, y)) lies in f(center) +- (max |f_x| h_x + max |f_y| h_y), the derivative bounds
+from interval arithmetic over the cell, so a cell at distance D from a trimming curve is
+decided once D exceeds O(h^2)).  That is what resolves edge cells at the size of a splat
+instead of splitting them to the floor: a cell that crosses a trimming curve has a corner on
+each side of it (a curve flat on the cell's scale separates its corners), so once the cell is
+about r a corner with d_q < 0 gives the single sample below; a cell on the discarded side,
+not crossing, is decided by the patch test.  Splits cut the longest edge at ``SPLIT_AT`` of
+it, not the middle: a cell edge lying exactly on a trimming curve (features in the middle of a
+box are common) has corners with d_q = 0 that no bound can separate from the curve.  So the
 chain ends in (i) a fill, which puts every cell point within r of a sample (the anisotropic
 slope bound in ``fill.h``), (ii) a single sample whose radius covers the patch's whole 3-D
 box, or (iii) the floor: cells whose 3-D box is smaller than the floor and still unresolved
@@ -47,6 +59,15 @@ surfaces shared by several parts of the tree and shared sub-graphs need no speci
 Nothing is lost: each level runs with buffers sized from an estimate; the kernel counts past
 the capacity without writing, the host sees it, grows the buffer (cells, samples, tape arena)
 and re-runs the level; the finish pass does the same with the clip buffer.
+
+Scale
+-----
+A split counts the rows its children's pruned tape keeps (the forward pass of pruning, without
+writing) and reserves exactly that many in the level's output arena, never the parent's
+length.  Arenas ping-pong (:class:`_Subdivision`): a level reads its cells' tapes from one and
+writes its children's into the other, whose counter starts at zero, so an arena holds the
+tapes of one level's live cells.  A sample's clip program is made from its cell's tape right
+after the level that emitted it (:class:`_Finisher`), while that tape is still there.
 """
 
 from __future__ import annotations
@@ -144,53 +165,90 @@ def root_tasks(tape, packed, frames):
     return t, c
 
 
-def estimate_samples(tape, radius: float) -> int:
-    """Rough sample count for the first buffer sizes: box areas of the sampled quadrics."""
-    area = 0.0
-    for lo, hi in quadric_boxes(tape).values():
-        e = hi - lo
-        area += 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2])
-    return int(area / (math.pi * radius * radius)) + 1
+#: where a split cuts a cell's longest edge, as a fraction of it (the build option SPLIT_AT of
+#: sampler.cl, which says why it is not one half)
+SPLIT_AT = 0.4871
+#: the larger child's share of a split
+SPLIT_LARGER = 1 - SPLIT_AT
 
 
 class _Progress:
     """Progress of the level loop on the current reporter (:mod:`clcsg.io.progress`: a bar on
     a terminal, JSON lines with ``--progress json``, nothing in a pipe or with ``progress=False``).
 
-    Done / total count cells: the work of a level is its cells.  The total is a forecast,
-    refined as levels finish: the cells classified so far, plus the next level's cells (known
-    exactly), growing by the ratio seen over the last two levels (cells split in two, along x
-    and y in turn) until the expected last level, about 2 log2(largest root cell / floor)
-    (cells are dropped as unresolved below the floor).  The ETA is the rate of the levels so
-    far times the cells left.  Samples so far and the first estimate (``estimate_samples``, an
-    area bound) are shown next to the bar.
+    The work left is forecast in seconds.  Cells: after level L, with c children queued, the
+    cells of the levels ahead are c, c g_1, c g_1 g_2, ... with g the growth per level seen
+    over the last two levels, kept in [1/2, sqrt 2] (cells along a curve double each time their
+    size halves, every two levels) up to the *peak level*, where cells reach the size at which
+    a single sample resolves them (about r / 2: 2 log(extent / (r / 2)) / log(1 / SPLIT_LARGER)
+    levels below the largest root cell), and 1/2 past it (the cells left are those along
+    trimming curves, resolved within a few levels).  Time: a level costs a + b cells, with a
+    the cheapest level so far (launches, the counter read, the level's finish pass) and b the
+    rest of the time so far per cell.  The fraction shown, elapsed / (elapsed + forecast), is
+    the largest seen so far: it never goes back, and reaches 100% when the last level is done;
+    the bar counts cells, its total is done / fraction, so its ETA (rate so far times the cells
+    left) is the forecast.  The samples so far and the expected count
+    (:func:`clcsg.sampling.guard.expected_samples`) are shown next to the bar.
     """
 
-    def __init__(self, enabled, estimate=0, roots=None, floor=None, max_levels=400):
+    def __init__(self, enabled, estimate=0, roots=None, radius=None, max_levels=400):
         from ..io.progress import for_option
 
         self.reporter = for_option(enabled)
         self.estimate = int(estimate)
-        self.levels_expected = max_levels
-        if roots is not None and len(roots) and floor:
+        self.max_levels = max_levels
+        self.peak = max_levels
+        if roots is not None and len(roots) and radius:
             extent = float(np.max(np.maximum(roots["x1"] - roots["x0"], roots["y1"] - roots["y0"])))
-            if extent > floor:
-                self.levels_expected = min(max_levels, round(2 * math.log2(extent / floor)) + 2)
+            if extent > radius / 2:
+                self.peak = round(2 * math.log(2 * extent / radius) / math.log(1 / SPLIT_LARGER))
         outer = self.reporter.active()
         self.own = outer is None or outer.name != "sample"
         self.step = self.reporter.step("sample", "sampling") if self.own else outer
         self.cells = 0
+        self.fraction = 0.0
+        self.shown = 0.0
         self.history: list[int] = []
+        self.times: list[float] = []
+        self.t0 = self.t_last = time.perf_counter()
+
+    def ahead(self, level, children) -> list:
+        """Forecast cells of the levels after ``level`` (see the class docstring)."""
+        if not children:
+            return []
+        h = self.history
+        g = (children / h[-2]) ** 0.5 if len(h) > 1 else children / max(h[-1], 1)
+        g = min(max(g, 0.5), math.sqrt(2))
+        n, out, lv = float(children), [], level + 1
+        while n >= 1 and lv < self.max_levels:
+            out.append(n)
+            n *= g if lv < self.peak else 0.5
+            lv += 1
+        return out
+
+    def seconds_ahead(self, cells) -> float:
+        """Forecast seconds of levels of ``cells`` each: a + b n per level."""
+        a = min(self.times)
+        b = max(0.0, sum(self.times) - a * len(self.times)) / max(sum(self.history), 1)
+        return sum(a + b * n for n in cells)
 
     def level(self, level, cells, samples, children=0):
+        now = time.perf_counter()
+        self.times.append(now - self.t_last)
+        self.t_last = now
         self.cells += cells
         self.history.append(cells)
-        prev = self.history[-2] if len(self.history) > 1 else cells
-        growth = (children / prev) ** 0.5 if len(self.history) > 1 else children / max(cells, 1)
-        growth = min(max(growth, 0.5), 1.8)
-        remaining = max(1, self.levels_expected - level - 1)
-        ahead = children * sum(growth ** k for k in range(remaining)) if children else 0
-        self.step.update(done=self.cells, total=int(self.cells + ahead), label="sampling", unit="cells",
+        elapsed = now - self.t0
+        left = self.seconds_ahead(self.ahead(level, children))
+        if not children:
+            self.fraction = 1.0
+        elif elapsed + left > 0:
+            self.fraction = max(self.fraction, min(elapsed / (elapsed + left), 0.999))
+        total = max(self.cells, math.ceil(self.cells / max(self.fraction, 1e-9)))
+        if self.cells / total < self.shown:  # rounding must not take the bar back either
+            total = max(self.cells, math.floor(self.cells / self.shown))
+        self.shown = self.cells / total
+        self.step.update(done=self.cells, total=total, label="sampling", unit="cells",
                          phase=level == 0, level=level + 1, samples=samples, estimated=self.estimate,
                          note=f"level {level + 1}, {samples:,} samples (estimate {self.estimate:,})", always=True)
 
@@ -230,16 +288,7 @@ def sample(
     None: 50 million samples / 80% of the device's global memory); past them
     :class:`~clcsg.errors.LimitError` is raised before anything is allocated.
     """
-    try:
-        radius = float(radius)
-    except (TypeError, ValueError):
-        raise UsageError(f"radius must be a number, got {radius!r}") from None
-    if not (math.isfinite(radius) and radius > 0):
-        raise UsageError(f"radius must be a positive finite number, got {radius}")
-    if floor is not None:
-        floor = float(floor)
-        if not (math.isfinite(floor) and floor > 0):
-            raise UsageError(f"floor must be a positive finite number, got {floor}")
+    radius, floor = _checked(radius, floor)
     timings = {}
     t0 = time.perf_counter()
     sc = as_scene(scene, bound)
@@ -248,25 +297,9 @@ def sample(
     if floor is None:
         diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
         floor = min(radius / 10, 1e-3 * diag) if diag > 0 else radius / 10
-
     ctx = scene_context(device)
     real = np.dtype(_device.real_dtype(ctx))
-    from . import guard
-
-    limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
-    est = guard.estimate_tape(tape, radius, real.itemsize)
-    try:
-        guard.check_estimate(est, ctx.info, **limits)
-    except LimitError:
-        # the estimate bounds the area from above: before refusing, measure (a run whose
-        # estimate is small) and refuse only if the extrapolated real count does not fit
-        r_probe = guard.probe_radius(est, guard.allowed_samples(est, ctx.info, max_samples=max_samples,
-                                                                 max_memory=max_memory))
-        if r_probe is None or not r_probe > radius:
-            raise
-        probe = sample(sc, r_probe, ctx, normal_form=normal_form, term_limit=term_limit, distortion=distortion,
-                       progress=False, max_samples=max(4 * guard.PROBE_SAMPLES, 1e6))
-        est = guard.check_estimate(guard.measured(est, len(probe), r_probe), ctx.info, **limits)
+    est = _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, max_samples, max_memory)
     t1 = time.perf_counter()
     packed = pack(tape, real)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
@@ -280,39 +313,96 @@ def sample(
         warnings.warn(f"{sc.source}: the solid is empty; no samples", stacklevel=2)
         return _empty(radius, tape, packed, stats)
 
-    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs}
-    prg = build(ctx, "sampling/sampler.cl", defines, real)
-    scene_buf = SceneBuffers(ctx, packed)
-    sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity,
-                       estimate_samples(tape, radius), progress, max_levels)
+    from . import guard
+
+    stats["expected_samples"] = guard.expected_samples(tape, est)
+    sub, finisher = _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity,
+                               stats["expected_samples"], progress, max_levels)
+    t_sub = time.perf_counter()
     sub.run()
     t2 = time.perf_counter()
-    timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
-    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
-    samples = _finish(ctx, fin, scene_buf, frames_rec, tasks, sub, tape, packed, radius, capacity)
+    timings["subdivide_s"] = t2 - t_sub
+    samples = finisher.samples(sub, tape, radius)
     timings["finish_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     if len(samples) == 0:
         warnings.warn(f"{sc.source}: no samples: no surface was found above the floor of {floor:.3g} "
                       f"({sub.totals['unresolved']} cells smaller than it were left unresolved)", stacklevel=2)
     stats.update(sub.totals)
-    stats.update(
+    stats.update(_run_stats(sub, samples, ctx, timings))
+    stats.update(samples.stats)
+    samples.stats = stats
+    return samples
+
+
+def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
+               progress, max_levels):
+    """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
+    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT}
+    prg = build(ctx, "sampling/sampler.cl", defines, real)
+    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
+    scene_buf = SceneBuffers(ctx, packed)
+    finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
+    sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity, expected, progress,
+                       max_levels, finisher)
+    sub.task_quadrics = tasks["quadric"]
+    return sub, finisher
+
+
+def _checked(radius, floor) -> tuple:
+    """(radius, floor) as floats, or :class:`UsageError` naming the bad one."""
+    try:
+        radius = float(radius)
+    except (TypeError, ValueError):
+        raise UsageError(f"radius must be a number, got {radius!r}") from None
+    if not (math.isfinite(radius) and radius > 0):
+        raise UsageError(f"radius must be a positive finite number, got {radius}")
+    if floor is not None:
+        floor = float(floor)
+        if not (math.isfinite(floor) and floor > 0):
+            raise UsageError(f"floor must be a positive finite number, got {floor}")
+    return radius, floor
+
+
+def _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, max_samples, max_memory):
+    """The resource guard's estimate, checked against the limits before anything is allocated.
+    The estimate bounds the area from above: before refusing, measure (a run whose estimate is
+    small) and refuse only if the extrapolated real count does not fit."""
+    from . import guard
+
+    limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
+    est = guard.estimate_tape(tape, radius, real.itemsize)
+    try:
+        guard.check_estimate(est, ctx.info, **limits)
+    except LimitError:
+        r_probe = guard.probe_radius(est, guard.allowed_samples(est, ctx.info, max_samples=max_samples,
+                                                                 max_memory=max_memory))
+        if r_probe is None or not r_probe > radius:
+            raise
+        probe = sample(sc, r_probe, ctx, normal_form=normal_form, term_limit=term_limit, distortion=distortion,
+                       progress=False, max_samples=max(4 * guard.PROBE_SAMPLES, 1e6))
+        est = guard.check_estimate(guard.measured(est, len(probe), r_probe), ctx.info, **limits)
+    return est
+
+
+def _run_stats(sub, samples, ctx, timings) -> dict:
+    """The statistics of a finished run: counts, per-level profiles, device, timings."""
+    lv = sub.levels
+    q = sub.totals["distance_queries"]
+    return dict(
         samples=len(samples),
         clip_rows=int(len(samples.clip_ops)),
         clipped_samples=int((samples.clip_count > 0).sum()),
-        levels=len(sub.levels),
-        cells_per_level=[lv["cells"] for lv in sub.levels],
-        tape_mean_per_level=[lv["tape_mean"] for lv in sub.levels],
-        tape_max_per_level=[lv["tape_max"] for lv in sub.levels],
-        leaf_distances_per_query=(sub.totals["leaf_distances"] / sub.totals["distance_queries"]
-                                  if sub.totals["distance_queries"] else 0.0),
+        levels=len(lv),
+        cells_per_level=[v["cells"] for v in lv],
+        tape_mean_per_level=[v["tape_mean"] for v in lv],
+        tape_max_per_level=[v["tape_max"] for v in lv],
+        arena_rows_per_level=[v["arena_rows"] for v in lv],
+        leaf_distances_per_query=sub.totals["leaf_distances"] / q if q else 0.0,
         device=ctx.info.name,
         compute_units=ctx.info.compute_units,
         **timings,
     )
-    stats.update(samples.stats)
-    samples.stats = stats
-    return samples
 
 
 def scene_context(device):
@@ -332,10 +422,17 @@ def _grow(cap, needed):
 
 
 class _Subdivision:
-    """The level loop: buffers, the overflow protocol, per-level statistics."""
+    """The level loop: buffers, the overflow protocol, per-level statistics.
+
+    Tape arenas ping-pong: level L reads its cells' tapes from one arena and writes its
+    children's tapes (exactly the rows pruning keeps) into the other, whose counter starts at
+    zero, so an arena holds the tapes of one level's live cells and never the tapes of cells
+    already done.  A sample's clip program is made from its cell's tape by the finish pass
+    right after the level that emitted it (:class:`_Finisher`), while that tape is still there.
+    """
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
-                 max_levels):
+                 max_levels, finisher):
         self.ctx, self.prg, self.scene = ctx, prg, scene
         self.real = np.dtype(scene.packed.real)
         self.radius, self.floor = radius, floor
@@ -345,15 +442,17 @@ class _Subdivision:
         self.roots = roots
         self.cdt = cell_dtype(self.real)
         self.sdt = raw_sample_dtype(self.real)
+        self.finisher = finisher
         tape = scene.packed.tape
         cap = tuple(capacity or ())
         self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(4 * len(roots), 4096)
-        self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(2 * estimate, 4096)
-        self.cap_arena = max(len(tape) + 2, int(cap[2])) if len(cap) > 2 else max(64 * len(tape), 1 << 16)
-        self.progress = _Progress(progress, estimate, roots, floor, max_levels)
+        self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(int(2 * estimate), 4096)
+        self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
+        self.progress = _Progress(progress, estimate, roots, radius, max_levels)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
         self.grown = {"cells": 0, "samples": 0, "arena": 0}
+        self.arena_peak = 0
 
     def _buffer(self, nbytes, what):
         return device_buffer(self.ctx, nbytes, what)
@@ -370,161 +469,197 @@ class _Subdivision:
             cl.enqueue_copy(self.ctx.queue, data[:used_bytes], old)
         return upload(self.ctx, data, writable=True)
 
+    def _level(self, kernel, cells_in, n_in, n_samples):
+        """Run one level until it fits (the overflow protocol); returns its counters."""
+        import pyopencl as cl
+
+        counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
+        rows = self.scene.packed.tape.itemsize
+        while True:
+            counters[:] = 0
+            counters[_SLOT["samples"]] = n_samples
+            # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
+            # checker does not see host writes into an existing buffer)
+            counters_buf = upload(self.ctx, counters, writable=True)
+            kernel(self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
+                   self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
+                   self.cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
+                   self.arena_in, self.arena_out, np.uint32(self.cap_out), counters_buf,
+                   self.real.type(self.radius), self.real.type(self.floor))
+            cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
+            n_cells_out = int(counters[_SLOT["cells"]])
+            n_samples_out = int(counters[_SLOT["samples"]])
+            arena_out = int(counters[_SLOT["arena"]])
+            ok = True
+            if n_cells_out > self.cap_cells:
+                self.cap_cells = _grow(self.cap_cells, n_cells_out)
+                self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+                self.grown["cells"] += 1
+                ok = False
+            if n_samples_out > self.cap_samples:
+                new_cap = _grow(self.cap_samples, n_samples_out)
+                self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
+                                                new_cap * self.sdt.itemsize, "sample")
+                self.cap_samples = new_cap
+                self.grown["samples"] += 1
+                ok = False
+            if arena_out > self.cap_out:
+                self.cap_out = _grow(self.cap_out, arena_out)
+                self.arena_out = self._buffer(self.cap_out * rows, "tape arena")
+                self.grown["arena"] += 1
+                ok = False
+            if ok:
+                return counters
+
     def run(self):
         import pyopencl as cl
 
-        queue = self.ctx.queue
         tape = self.scene.packed.tape
-        check_allocation(self.ctx, self.cap_arena * tape.itemsize, "tape arena")
-        arena = np.zeros(self.cap_arena, dtype=tape.dtype)
-        arena[:len(tape)] = tape
-        self.arena = upload(self.ctx, arena, writable=True)
-        arena_used = len(tape)
+        self.arena_in, self.cap_in = upload(self.ctx, tape), len(tape)
+        self.cap_out = self.cap_arena
+        self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
         cells_in = upload(self.ctx, self.roots, writable=True)
         n_in = len(self.roots)
-        cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+        self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
-        counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
         kernel = cl.Kernel(self.prg, "classify")
         n_samples = 0
         level = 0
         while n_in > 0:
             if level >= self.max_levels:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
-            while True:
-                counters[:] = 0
-                counters[_SLOT["samples"]] = n_samples
-                counters[_SLOT["arena"]] = arena_used
-                # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
-                # checker does not see host writes into an existing buffer)
-                counters_buf = upload(self.ctx, counters, writable=True)
-                kernel(queue, launch_size(n_in), (WORK_GROUP,),
-                       self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
-                       cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
-                       self.arena, np.uint32(self.cap_arena), counters_buf,
-                       self.real.type(self.radius), self.real.type(self.floor))
-                cl.enqueue_copy(queue, counters, counters_buf)
-                n_cells_out = int(counters[_SLOT["cells"]])
-                n_samples_out = int(counters[_SLOT["samples"]])
-                arena_out = int(counters[_SLOT["arena"]])
-                ok = True
-                if n_cells_out > self.cap_cells:
-                    self.cap_cells = _grow(self.cap_cells, n_cells_out)
-                    cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
-                    self.grown["cells"] += 1
-                    ok = False
-                if n_samples_out > self.cap_samples:
-                    new_cap = _grow(self.cap_samples, n_samples_out)
-                    self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
-                                                    new_cap * self.sdt.itemsize, "sample")
-                    self.cap_samples = new_cap
-                    self.grown["samples"] += 1
-                    ok = False
-                if arena_out > self.cap_arena:
-                    new_cap = _grow(self.cap_arena, arena_out)
-                    self.arena = self._grown_copy(self.arena, arena_used * tape.itemsize,
-                                                  new_cap * tape.itemsize, "tape arena")
-                    self.cap_arena = new_cap
-                    self.grown["arena"] += 1
-                    ok = False
-                if ok:
-                    break
+            counters = self._level(kernel, cells_in, n_in, n_samples)
+            n_cells_out = int(counters[_SLOT["cells"]])
+            n_samples_out = int(counters[_SLOT["samples"]])
             for name in _SUMMED:
                 self.totals[name] += int(counters[_SLOT[name]])
             self.levels.append({
                 "cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples,
                 "tape_mean": int(counters[_SLOT["tape_rows"]]) / n_in, "tape_max": int(counters[_SLOT["tape_max"]]),
+                "arena_rows": int(counters[_SLOT["arena"]]),
             })
+            self.arena_peak = max(self.arena_peak, int(counters[_SLOT["arena"]]))
+            self.finisher.run(self.samples, n_samples, n_samples_out - n_samples, self.arena_in)
             n_samples = n_samples_out
-            arena_used = arena_out
             self.progress.level(level, n_in, n_samples, n_cells_out)
-            cells_in, cells_out = cells_out, cells_in
+            cells_in, self.cells_out = self.cells_out, cells_in
             # the old input buffer becomes the next output: make sure it is large enough
-            if self.cap_cells * self.cdt.itemsize > cells_out.size:
-                cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+            if self.cap_cells * self.cdt.itemsize > self.cells_out.size:
+                self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+            self.arena_in, self.arena_out = self.arena_out, self.arena_in
+            self.cap_in, self.cap_out = self.cap_out, self.cap_in
             n_in = n_cells_out
             level += 1
         self.progress.done()
         self.n_samples = n_samples
-        self.arena_used = arena_used
         self.raw = np.zeros(n_samples, dtype=self.sdt)
         if n_samples:
-            cl.enqueue_copy(queue, self.raw, self.samples)
+            cl.enqueue_copy(self.ctx.queue, self.raw, self.samples)
         self.totals["buffer_growths"] = dict(self.grown)
-        self.totals["arena_rows"] = arena_used
+        self.totals["arena_rows"] = self.arena_peak
 
 
-def _finish(ctx, prg, scene, frames_rec, tasks, sub, tape, packed, radius, capacity) -> Samples:
-    """Clip programs, signs, normals and primitives on the device; clip programs deduplicated."""
-    import pyopencl as cl
+class _Finisher:
+    """The finish pass (``finish.cl``), run after each level on the samples it emitted: clip
+    programs, signs, normals and primitives; the per-level outputs are appended on the host and
+    equal clip programs deduplicated at the end (:func:`dedupe_programs`)."""
 
-    n = sub.n_samples
-    real = np.dtype(packed.real)
-    if n == 0:
-        return Samples.empty(radius, tape, packed, {})
-    q = ctx.queue
-    normals = np.zeros((n, 3), dtype=real)
-    ints = {k: np.zeros(n, dtype=np.int32) for k in ("signs", "primitives", "clip_first", "clip_count")}
-    bufs = {k: sub._buffer(a.nbytes, "sample output") for k, a in ints.items()}
-    nb = sub._buffer(normals.nbytes, "normal")
-    cap = tuple(capacity or ())
-    rows = scene.packed.tape.itemsize
-    cap_clip = max(2 * len(packed.tape), int(cap[3])) if len(cap) > 3 else max(n, 1 << 14)
-    counters = np.zeros(2, dtype=np.uint32)
-    kernel = cl.Kernel(prg, "finish")
-    grown = 0
-    while True:
-        clip_buf = sub._buffer(cap_clip * rows, "clip")
-        counters[:] = 0
-        counters_buf = upload(ctx, counters, writable=True)
-        kernel(q, launch_size(n), (WORK_GROUP,), scene.quadrics, upload(ctx, frames_rec), upload(ctx, tasks),
-               sub.samples, np.int32(n), sub.arena, clip_buf, np.uint32(cap_clip), counters_buf,
-               *scene.colour_args(), nb, bufs["signs"], bufs["primitives"], bufs["clip_first"], bufs["clip_count"])
-        cl.enqueue_copy(q, counters, counters_buf)
-        if int(counters[0]) <= cap_clip:
-            break
-        cap_clip = _grow(cap_clip, int(counters[0]))
-        grown += 1
-    cl.enqueue_copy(q, normals, nb)
-    for k, a in ints.items():
-        cl.enqueue_copy(q, a, bufs[k])
-    used = int(counters[0])
-    clip = np.zeros(used, dtype=packed.tape.dtype)
-    if used:
-        cl.enqueue_copy(q, clip, clip_buf)
-    clip_ops = np.asarray(clip.view(np.int32).reshape(-1, 4))
-    first, count, ops = dedupe_programs(clip_ops, ints["clip_first"], ints["clip_count"])
-    raw = sub.raw
-    return Samples(
-        positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
-        normals=np.asarray(normals, dtype=np.float64),
-        radii=np.array(raw["radius"], dtype=np.float64),
-        quadrics=tasks["quadric"][raw["task"]].astype(np.int32),
-        signs=ints["signs"],
-        primitives=ints["primitives"],
-        clip_first=first,
-        clip_count=count,
-        clip_ops=ops,
-        radius=radius,
-        tape=tape,
-        packed=packed,
-        stats={"finish_prune_evaluations": int(counters[1]), "clip_buffer_growths": grown},
-    )
+    def __init__(self, ctx, prg, scene, frames_rec, tasks, packed, capacity):
+        import pyopencl as cl
+
+        self.ctx, self.scene, self.packed = ctx, scene, packed
+        self.real = np.dtype(packed.real)
+        self.kernel = cl.Kernel(prg, "finish")
+        self.frames, self.tasks = upload(ctx, frames_rec), upload(ctx, tasks)
+        cap = tuple(capacity or ())
+        self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else 1 << 14
+        self.clip_buf = None
+        self.parts = []
+        self.clip_rows = 0
+        self.evals = 0
+        self.grown = 0
+
+    def run(self, samples, first, n, arena):
+        """Finish raw samples [first, first + n) whose cells' tapes are in ``arena``."""
+        import pyopencl as cl
+
+        if n == 0:
+            return
+        q = self.ctx.queue
+        out = {"normals": np.zeros((n, 3), dtype=self.real)}
+        out.update({k: np.zeros(n, dtype=np.int32) for k in ("signs", "primitives", "clip_first", "clip_count")})
+        bufs = {k: device_buffer(self.ctx, a.nbytes, "sample output") for k, a in out.items()}
+        counters = np.zeros(2, dtype=np.uint32)
+        rows = self.packed.tape.itemsize
+        while True:
+            if self.clip_buf is None:
+                self.clip_buf = device_buffer(self.ctx, self.cap_clip * rows, "clip")
+            counters[:] = 0
+            counters_buf = upload(self.ctx, counters, writable=True)
+            self.kernel(q, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames, self.tasks,
+                        samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
+                        counters_buf, *self.scene.colour_args(), bufs["normals"], bufs["signs"],
+                        bufs["primitives"], bufs["clip_first"], bufs["clip_count"])
+            cl.enqueue_copy(q, counters, counters_buf)
+            if int(counters[0]) <= self.cap_clip:
+                break
+            self.cap_clip = _grow(self.cap_clip, int(counters[0]))
+            self.clip_buf = None
+            self.grown += 1
+        for k, a in out.items():
+            cl.enqueue_copy(q, a, bufs[k])
+        used = int(counters[0])
+        clip = np.zeros(used, dtype=self.packed.tape.dtype)
+        if used:
+            cl.enqueue_copy(q, clip, self.clip_buf)
+        out["clip_ops"] = np.asarray(clip.view(np.int32).reshape(-1, 4))
+        out["clip_first"] = out["clip_first"] + self.clip_rows
+        self.clip_rows += used
+        self.evals += int(counters[1])
+        self.parts.append(out)
+
+    def samples(self, sub, tape, radius) -> Samples:
+        """All finished samples as :class:`Samples` (positions from the raw buffer)."""
+        packed = self.packed
+        if not self.parts:
+            return Samples.empty(radius, tape, packed, {})
+        cat = {k: np.concatenate([p[k] for p in self.parts]) for k in self.parts[0]}
+        first, count, ops = dedupe_programs(cat["clip_ops"], cat["clip_first"], cat["clip_count"])
+        raw = sub.raw
+        return Samples(
+            positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
+            normals=np.asarray(cat["normals"], dtype=np.float64),
+            radii=np.array(raw["radius"], dtype=np.float64),
+            quadrics=sub.task_quadrics[raw["task"]].astype(np.int32),
+            signs=cat["signs"],
+            primitives=cat["primitives"],
+            clip_first=first,
+            clip_count=count,
+            clip_ops=ops,
+            radius=radius,
+            tape=tape,
+            packed=packed,
+            stats={"finish_prune_evaluations": self.evals, "clip_buffer_growths": self.grown},
+        )
 
 
 def dedupe_programs(rows, first, count):
-    """Equal clip programs stored once: (first, count, rows) over a compact row buffer."""
+    """Equal clip programs stored once: (first, count, rows) over a compact row buffer.  Programs
+    of one length are compared as byte strings (a void view of their rows: one sort of keys
+    instead of a lexicographic sort over columns)."""
     first = first.copy()
     count = count.copy()
+    rows = np.ascontiguousarray(rows, dtype=np.int32)
     out = [np.zeros((0, 4), dtype=np.int32)]
     used = 0
     for c in np.unique(count[count > 0]):
         sel = np.flatnonzero(count == c)
         idx = first[sel, None] + np.arange(c)[None, :]
-        progs = rows[idx].reshape(len(sel), 4 * c)
-        uniq, inverse = np.unique(progs, axis=0, return_inverse=True)
-        out.append(uniq.reshape(-1, 4))
+        progs = np.ascontiguousarray(rows[idx].reshape(len(sel), 4 * c))
+        keys = progs.view(np.dtype((np.void, progs.itemsize * 4 * int(c)))).ravel()
+        _, keep, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        out.append(progs[keep].reshape(-1, 4))
         first[sel] = used + c * np.asarray(inverse).reshape(-1)
-        used += len(uniq) * c
+        used += len(keep) * c
     first[count == 0] = 0
     return first.astype(np.int32), count.astype(np.int32), np.concatenate(out).astype(np.int32)

@@ -109,6 +109,14 @@ inline int tape_self_polarity(__global const tape_op *t, int n, int self_q)
 typedef struct {
     real3 c, a0, a1, a2;
     real rho;
+    /* optional (on_patch != 0; zero-initialized otherwise): the points of the sampled quadric
+     * in the region are a heightfield patch p(x, y) = pc + x ui + y uj + (t(x, y) - t_c) uk,
+     * |x| <= hx, |y| <= hy (cell coordinates from its center), slopes dt/dx in sx, dt/dy in sy
+     * (intervals) and p in the box above; pruning for a decision over the patch may use it */
+    int on_patch;
+    real3 pc, ui, uj, uk;
+    real hx, hy;
+    real2 sx, sy;
 } prune_region;
 
 #define ST_F 0
@@ -119,6 +127,9 @@ typedef struct {
 #define ST_TAPE(s) ((s) & 3)
 #define ST_MINUS(s) (((s) >> 2) & 3)
 #define ST_PLUS(s) (((s) >> 4) & 3)
+/* bit 6: the register's pruned value depends on a leaf of self_q; without it both sides agree
+ * at every point of the region (no surface of self_q there), even where the value is live */
+#define ST_SELF 64
 
 inline int st_and(int x, int y) { return (x == ST_F || y == ST_F) ? ST_F : (x == ST_T && y == ST_T) ? ST_T : ST_LIVE; }
 inline int st_or(int x, int y) { return (x == ST_T || y == ST_T) ? ST_T : (x == ST_F && y == ST_F) ? ST_F : ST_LIVE; }
@@ -141,46 +152,76 @@ inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, con
     return d >= reach ? ST_F : d <= -reach ? ST_T : ST_LIVE;
 }
 
-/* Does pruning over g drop a row?  It does iff some leaf not on self_q keeps one sign over g
- * (that leaf's row goes); stops at the first such leaf. */
-inline bool tape_prune_shrinks(__global const tape_op *t, int n, __global const quadric_rec *qs,
-                               const prune_region *g, int self_q, uint *evals)
+/* interval product and the interval of grad Q . u over the box (c + sum_m u_m a_m): the gradient
+ * 2 (A p + w) is linear in p, so grad Q . u = 2 ((A u) . p + w . u) has the exact range
+ * value(c) +- 2 sum_m |(A u) . a_m| */
+inline real2 interval_mul(real2 a, real2 b)
 {
-    for (int k = 0; k < n; ++k) {
-        tape_op o = t[k];
-        if (o.op != OP_LEAF || o.a == self_q) continue;
-        ++*evals;
-        if (leaf_over_region(qs, o.a, o.b, g) != ST_LIVE) return true;
-    }
-    return false;
+    real p0 = a.x * b.x, p1 = a.x * b.y, p2 = a.y * b.x, p3 = a.y * b.y;
+    return (real2)(fmin(fmin(p0, p1), fmin(p2, p3)), fmax(fmax(p0, p1), fmax(p2, p3)));
 }
 
-/* Prune tape t (n rows) over region g with self_q substituted.
- * Returns the decision: +1 both sides known and equal over the region (no surface of self_q in
- * it), -1 known and different (all of self_q in it is surface), 0 otherwise.
- * If `out` is not null (capacity n + 1 rows) the pruned tape is written there: a forward pass
- * (constants folded, aliases become COPY rows) writes rows from the front, a backward pass
- * (liveness over registers) keeps the rows whose result is read and packs them at the end;
- * *first (offset in `out`) and *count give the result.  A constant tape is one CONST row.
- * *evals counts the leaves tested against the region. */
-inline int tape_prune(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
-                      int self_q, __global tape_op *out, int *first, int *count, uint *evals)
+inline real2 gradient_along(quadric Q, real3 u, const prune_region *g)
+{
+    real3 Au = quadric_Ap(Q, u);
+    real v = 2 * (dot(Au, g->c) + dot(quadric_minus_b(Q), u));
+    real e = 2 * (fabs(dot(Au, g->a0)) + fabs(dot(Au, g->a1)) + fabs(dot(Au, g->a2)));
+    return (real2)(v - e, v + e);
+}
+
+/* The state of leaf (q, sign) over a heightfield patch by the mean value form: f(x, y) =
+ * sign Q(p(x, y)) has f(x, y) - f(0, 0) = grad f(xi) . (x, y) for a xi in the cell, and
+ * df/dx = grad Q . ui + t_x grad Q . uk lies in G_i + S_x G_k (interval arithmetic with signs:
+ * G_* from gradient_along, S_x the slope interval), likewise y.  So f lies in
+ * f(pc) +- (max |df/dx| hx + max |df/dy| hy) over the patch: the bound is first-order exact in
+ * the derivative, so a cell at distance D from the curve Q = 0 is decided once D exceeds
+ * O(h^2), where the box and ball tests need D of the order of the cell's size h.  The rounding
+ * slack covers Q(pc) and pc's own error. */
+inline int leaf_over_patch(__global const quadric_rec *qs, int q, int sign, const prune_region *g)
+{
+    quadric Q = quadric_load(qs, q);
+    real2 gk = gradient_along(Q, g->uk, g);
+    real2 fx = gradient_along(Q, g->ui, g) + interval_mul(g->sx, gk);
+    real2 fy = gradient_along(Q, g->uj, g) + interval_mul(g->sy, gk);
+    real spread = fmax(fabs(fx.x), fabs(fx.y)) * g->hx + fmax(fabs(fy.x), fabs(fy.y)) * g->hy;
+    real v = sign * quadric_value(Q, g->pc);
+    __global const real *c = qs[q].coef;
+    real cs = 0;
+    for (int m = 0; m < 10; ++m) cs += fabs(c[m]);
+    real pl = 1 + length(g->pc) + length(g->a0) + length(g->a1) + length(g->a2);
+    spread += ROUNDING_ULPS * REAL_EPS * (4 * cs * pl * pl + length(quadric_gradient(Q, g->pc)) * pl);
+    if (!isfinite(spread)) return ST_LIVE;
+    return v > spread ? ST_F : v < -spread ? ST_T : ST_LIVE;
+}
+
+/* The forward pass of pruning t (n rows) over g with self_q substituted: leaves of one sign over
+ * g become constants, constants are folded (TRUE absorbs OR, FALSE absorbs AND, the neutral
+ * operand drops out and the result becomes a COPY of the other).  Rows that stay are written to
+ * out[0..*m) when out is not null and counted in *m either way (each input row gives at most one
+ * row, so *m <= n); *last is the output register of the last row kept (-1: none).  Returns the
+ * root's packed state.  *evals counts the leaves tested against the region. */
+inline uchar prune_forward(__global const tape_op *t, int n, __global const quadric_rec *qs,
+                           const prune_region *g, int self_q, __global tape_op *out, int *m, int *last,
+                           uint *evals)
 {
     uchar st[TAPE_REGS];
-    int m = 0;
     bool write = out != 0;
+    int k_out = 0, lst = -1;
     for (int k = 0; k < n; ++k) {
         tape_op o = t[k];
+        tape_op keep = o;
+        bool kept = false;
         if (o.op == OP_LEAF) {
             if (o.a == self_q) {
-                st[o.out] = o.b > 0 ? ST_PACK(ST_LIVE, ST_T, ST_F) : ST_PACK(ST_LIVE, ST_F, ST_T);
-                if (write) out[m++] = o;
-                continue;
+                st[o.out] = (o.b > 0 ? ST_PACK(ST_LIVE, ST_T, ST_F) : ST_PACK(ST_LIVE, ST_F, ST_T)) | ST_SELF;
+                kept = true;
+            } else {
+                ++*evals;
+                int s = leaf_over_region(qs, o.a, o.b, g);
+                if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g);
+                st[o.out] = ST_PACK(s, s, s);
+                kept = s == ST_LIVE;
             }
-            ++*evals;
-            int s = leaf_over_region(qs, o.a, o.b, g);
-            st[o.out] = ST_PACK(s, s, s);
-            if (s == ST_LIVE && write) out[m++] = o;
         } else if (o.op == OP_AND || o.op == OP_OR) {
             uchar sa = st[o.a], sb = st[o.b];
             bool is_and = o.op == OP_AND;
@@ -192,34 +233,83 @@ inline int tape_prune(__global const tape_op *t, int n, __global const quadric_r
             } else if (ST_TAPE(sa) == neutral || ST_TAPE(sb) == neutral) {
                 int src = ST_TAPE(sa) == neutral ? o.b : o.a;
                 int ts = ST_TAPE(st[src]);
-                if (ts == ST_LIVE && src != o.out && write) out[m++] = (tape_op){OP_COPY, o.out, src, 0};
-                st[o.out] = ST_PACK(ts, mm, pp);
+                kept = ts == ST_LIVE && src != o.out;
+                keep = (tape_op){OP_COPY, o.out, src, 0};
+                st[o.out] = ST_PACK(ts, mm, pp) | (st[src] & ST_SELF);
             } else {
-                if (write) out[m++] = o;
-                st[o.out] = ST_PACK(ST_LIVE, mm, pp);
+                kept = true;
+                st[o.out] = ST_PACK(ST_LIVE, mm, pp) | ((sa | sb) & ST_SELF);
             }
         } else if (o.op == OP_COPY) {
             st[o.out] = st[o.a];
-            if (ST_TAPE(st[o.a]) == ST_LIVE && o.a != o.out && write) out[m++] = o;
+            kept = ST_TAPE(st[o.a]) == ST_LIVE && o.a != o.out;
         } else {
             st[o.out] = o.a ? ST_PACK(ST_T, ST_T, ST_T) : ST_PACK(ST_F, ST_F, ST_F);
         }
+        if (kept) {
+            if (write) out[k_out] = keep;
+            ++k_out;
+            lst = o.out;
+        }
     }
+    *m = k_out;
+    *last = lst;
+    return st[t[n - 1].out];
+}
+
+/* The decision of a root state: +1 both sides known and equal (no surface of self_q in the
+ * region), -1 known and different (all of self_q in it is surface), 0 otherwise. */
+inline int prune_decision(uchar s)
+{
+    return (ST_MINUS(s) == ST_LIVE || ST_PLUS(s) == ST_LIVE) ? 0 : ST_MINUS(s) == ST_PLUS(s) ? 1 : -1;
+}
+
+/* The constant of a root state: 0 FALSE, 1 TRUE, -1 not constant. */
+inline int prune_constant(uchar s) { return ST_TAPE(s) == ST_LIVE ? -1 : ST_TAPE(s) == ST_T; }
+
+/* Membership bits (as tape_member: bit 0 the negative side of self_q, bit 1 the positive
+ * side) of a decided root state: they hold at every point of the region. */
+inline uint prune_member_bits(uchar s) { return (ST_MINUS(s) == ST_T ? 1u : 0u) | (ST_PLUS(s) == ST_T ? 2u : 0u); }
+
+/* Rows that tape_prune_write writes for (t, g, self_q): the forward pass's rows plus a root
+ * COPY if the last one does not define the root; 1 for a constant tape.  Reserving exactly
+ * this many rows stores a pruned tape as what pruning keeps, never the parent's length.
+ * *state is the root's packed state (prune_decision, prune_constant, prune_member_bits). */
+inline int tape_prune_rows(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
+                           int self_q, uchar *state, uint *evals)
+{
+    int m, last;
+    uchar s = prune_forward(t, n, qs, g, self_q, 0, &m, &last, evals);
+    *state = s;
+    if (prune_constant(s) >= 0) return 1;
+    return m + (last != t[n - 1].out);
+}
+
+/* Prune tape t (n rows) over region g with self_q substituted; returns the decision
+ * (prune_decision).  If `out` is not null the pruned tape is written there, within the first
+ * tape_prune_rows(...) rows (at most n + 1): the forward pass writes rows from the front, a
+ * backward pass (liveness over registers) keeps the rows whose result is read and packs them at
+ * the end of that span; *first (offset in `out`) and *count give the result.  A constant tape
+ * is one CONST row.  *evals counts the leaves tested against the region. */
+inline int tape_prune(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
+                      int self_q, __global tape_op *out, int *first, int *count, uint *evals)
+{
+    int m, last;
     int root = t[n - 1].out;
-    uchar s = st[root];
-    int decided = (ST_MINUS(s) == ST_LIVE || ST_PLUS(s) == ST_LIVE) ? 0 : ST_MINUS(s) == ST_PLUS(s) ? 1 : -1;
-    if (!write) return decided;
+    uchar s = prune_forward(t, n, qs, g, self_q, out, &m, &last, evals);
+    int decided = prune_decision(s);
+    if (out == 0) return decided;
     if (ST_TAPE(s) != ST_LIVE) {
-        out[n] = (tape_op){OP_CONST, root, ST_TAPE(s) == ST_T, 0};
-        *first = n;
+        out[0] = (tape_op){OP_CONST, root, ST_TAPE(s) == ST_T, 0};
+        *first = 0;
         *count = 1;
         return decided;
     }
-    if (m == 0 || out[m - 1].out != root) out[m++] = (tape_op){OP_COPY, root, root, 0};
+    if (last != root) out[m++] = (tape_op){OP_COPY, root, root, 0};
     uchar needed[TAPE_REGS];
     for (int r = 0; r < TAPE_REGS; ++r) needed[r] = 0;
     needed[root] = 1;
-    int w = n + 1; /* rows are packed downwards from the end of the n + 1 reserved rows */
+    int w = m; /* rows are packed downwards from the end of the forward rows (w > k always) */
     for (int k = m - 1; k >= 0; --k) {
         tape_op o = out[k];
         if (!needed[o.out]) continue;
@@ -233,8 +323,24 @@ inline int tape_prune(__global const tape_op *t, int n, __global const quadric_r
         out[--w] = o;
     }
     *first = w;
-    *count = n + 1 - w;
+    *count = m - w;
     return decided;
+}
+
+/* The pruned tape into exactly the rows tape_prune_rows counted (`state` from it): a constant
+ * tape is written as its CONST row without the forward pass (whose rows would not fit). */
+inline void tape_prune_write(__global const tape_op *t, int n, __global const quadric_rec *qs,
+                             const prune_region *g, int self_q, uchar state, __global tape_op *out, int *first,
+                             int *count, uint *evals)
+{
+    int k = prune_constant(state);
+    if (k >= 0) {
+        out[0] = (tape_op){OP_CONST, t[n - 1].out, k, 0};
+        *first = 0;
+        *count = 1;
+        return;
+    }
+    tape_prune(t, n, qs, g, self_q, out, first, count, evals);
 }
 
 #endif
