@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constants import INSTANCE_REGS
 from .memory import upload
 
 from ..model.quadric import Quadric, affine
@@ -99,6 +100,8 @@ class PackedScene:
     owners: np.ndarray  # OWNER_DTYPE per quadric
     owner_list: np.ndarray  # int32
     n_regs: int
+    instance_tape: np.ndarray  # TAPE_OP_DTYPE rows of the instance program (primitives.h)
+    instance_rows: int  # its length; 0: none (or it needs more than INSTANCE_REGS registers)
 
 
 def pack(tape, real=np.float64, origin=None) -> PackedScene:
@@ -129,9 +132,13 @@ def pack(tape, real=np.float64, origin=None) -> PackedScene:
         owners["first"][qi] = len(owner_list)
         owners["count"][qi] = len(insts)
         owner_list.extend(insts)
+    program = getattr(tape, "instance_program", None)
+    usable = program is not None and program[1] <= INSTANCE_REGS and len(program[0])
+    inst = tape_rows(program[0] if usable else np.zeros((1, 4)))
     return PackedScene(
         real, origin, q, local, tape_rows(tape.ops), prims,
         np.array(lits, dtype=np.int32).reshape(-1, 2), owners, np.array(owner_list, dtype=np.int32), tape.n_regs,
+        inst, len(inst) if usable else 0,
     )
 
 
@@ -146,7 +153,9 @@ class SceneBuffers:
         self.prim_literals = upload(context, packed.prim_literals)
         self.owners = upload(context, packed.owners)
         self.owner_list = upload(context, packed.owner_list)
+        self.instance_tape = upload(context, packed.instance_tape)
 
     def colour_args(self):
-        """The buffers of ``primitive_at`` (cl/include/primitives.h), in its argument order."""
-        return (self.owners, self.owner_list, self.prims, self.prim_literals)
+        """The arguments of ``primitive_at`` (cl/include/primitives.h), in its order."""
+        return (self.owners, self.owner_list, self.prims, self.prim_literals, self.instance_tape,
+                np.int32(self.packed.instance_rows))
