@@ -241,3 +241,33 @@ def test_flush_inlay_top_shows_the_inlay(cl_context):
     cam = Camera.look_at((0.5, 0, 8), (0.5, 0, 0), up=(0, 1, 0), fov=10, width=32, height=24)
     img = raytrace(tape, cam, device=cl_context)
     assert img.mask.all() and np.all(img.primitives == 2)
+
+
+def column_of_spheres(n=220, seed=3):
+    """n spheres along the z axis, bored through: from the axis one tile sees them all."""
+    rng = np.random.default_rng(seed)
+    spheres = [clcsg.sphere(0.5, center=(*rng.uniform(-0.25, 0.25, 2), 0.35 * k), color=tuple(rng.uniform(0, 1, 3)))
+               for k in range(n)]
+    return clcsg.union(*spheres) - clcsg.cylinder(200, 0.12, center=(0, 0, 40))
+
+
+INSIDE_COLUMN = (0.3, 0.0, 10.0)
+
+
+def test_hundreds_of_leaves_per_tile_match_the_oracle(cl_context):
+    """200+ leaves in one tile's tape, from outside and from inside the bore, per pixel
+    against the oracle."""
+    shape = column_of_spheres()
+    tape = clcsg.Scene(shape).compile()
+    views = [Camera.look_at((0.05, -0.08, -4), (0, 0, 10), fov=20, width=48, height=36),
+             Camera.look_at((0.02, 0.01, 20.0), (0.1, 0.05, 60), fov=70, width=48, height=36),
+             Camera.look_at((3, -2, 30), (0, 0, 38), fov=40, width=48, height=36),
+             Camera.look_at(INSIDE_COLUMN, (0.3, 0.5, 14), fov=70, width=48, height=36)]
+    assert clcsg.contains(shape, INSIDE_COLUMN)
+    leaves = []
+    for cam in views:
+        img = raytrace(tape, cam, device=cl_context)
+        ref = compare(img, shape, tape, cam)
+        assert ref.mask.mean() > 0.15
+        leaves.append(img.stats["tile_leaves_max"])
+    assert max(leaves) >= 200, leaves

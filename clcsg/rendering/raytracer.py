@@ -128,12 +128,13 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
         rng = ((-(-ntx // 4) * 4, -(-nty // 4) * 4), (4, 4))  # a fixed group shape, as PIXEL_GROUP
         ev = kernel(prg, "prune_tiles")(q, *rng, scene.quadrics, scene.tape, np.int32(n), view_buf, *bound, arena,
                                         np.uint32(caps[0]), cbuf, tiles, tile_z)
-        cl.enqueue_copy(q, counters[:3], cbuf, wait_for=[ev])
+        cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
         return (arena, ev), [int(counters[0])]
 
     (tile_arena, ev_tiles), _ = _grown(run_tiles, [max(nt * min(n + 1, 64), 4 * (n + 1))])
     tile_rows = int(counters[2])
-    stats = {"tile_tape_mean": tile_rows / nt, "prune_evaluations": int(counters[1])}
+    stats = {"tile_tape_mean": tile_rows / nt, "tile_leaves_max": int(counters[3]),
+             "prune_evaluations": int(counters[1])}
     work = -(-nt * SLABS // 64) * 64
     tiles_sum = tile_rows + nt
 

@@ -47,6 +47,9 @@ __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op
     tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
     atomic_add(&counters[1], evals);
     atomic_add(&counters[2], (uint)count);
+    uint leaves = 0;
+    for (int k = 0; k < count; ++k) leaves += arena[base + first + k].op == OP_LEAF;
+    atomic_max(&counters[3], leaves);
     tiles[tile] = (int2)((int)base + first, count);
 }
 
