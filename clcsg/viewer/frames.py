@@ -100,24 +100,27 @@ def fitted_view(samples, width, height) -> dict:
     return view_of(Camera.fit(subject, _side(width, "width"), _side(height, "height")))
 
 
-def render(context, model, camera, method: str = "splat", aa: int = 1):
+def render(context, model, camera, method: str = "splat", aa: int = 1, complete: bool = True):
     """The :class:`~clcsg.Image` of ``model`` from ``camera``: ``method`` ``"splat"`` (its
-    samples, device buffers uploaded once per model) or ``"raytrace"`` (its tape)."""
+    samples, device buffers uploaded once per model) or ``"raytrace"`` (its tape).
+    ``complete=False``: a frame for the page (splats: colour and ids read back, no depth or
+    primitives; supersampled ids from a subpixel, no extra plain render)."""
     from ..rendering.raytracer import trace
-    from ..rendering.splat import rasterize
+    from ..rendering.splat import OUTPUTS, rasterize
     from ..rendering.supersample import supersample
     from ..rendering.view import Shading
 
     shading = Shading()
     if method == "splat":
         def at(cam):
-            return rasterize(context, model.samples, cam, shading, stats=False)
+            return rasterize(context, model.samples, cam, shading, stats=False,
+                             read=OUTPUTS if complete else ("rgba", "ids"))
     elif method == "raytrace":
         def at(cam):
             return trace(context, model.tape, cam, shading)
     else:
         raise UsageError(f"method must be 'splat' or 'raytrace', got {method!r}")
-    return supersample(at, camera, aa, shading.gamma)
+    return supersample(at, camera, aa, shading.gamma, centre=complete)
 
 
 def raytrace_camera(model, camera, budget: float = RAYTRACE_BUDGET) -> Camera:
@@ -164,7 +167,7 @@ def frame(context, model, request: dict, aa: int = 1) -> tuple[bytes, dict]:
         cam = raytrace_camera(model, cam)
         if aa == 1 and request.get("quality") == "rest" and (cam.width, cam.height) == full:
             aa = _exact_rest_aa(model, cam)
-    img = render(context, model, cam, method, aa)
+    img = render(context, model, cam, method, aa, complete=False)
     t1 = time.perf_counter()
     if method == "raytrace":
         model.raytrace_rate = (t1 - t0) / (cam.width * cam.height * aa * aa)
