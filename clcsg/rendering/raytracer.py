@@ -1,11 +1,15 @@
-"""The exact CSG ray tracer on the tape (``raytrace.cl``): the reference renderer.
+"""The exact CSG ray tracer on the tape (``tiles.cl``, ``raytrace.cl``): the reference renderer.
 
 :func:`raytrace` compiles a scene (or takes the tape of :class:`~clcsg.sampling.samples.Samples`)
-and traces one ray per pixel: the tape is first pruned per 16 x 16 tile over the part of the
-tile's frustum inside the scene bound (so a ray tests only the leaves near it), then every
-root along the ray is tried in depth order until one is on the CSG surface (the membership
-with the root's quadric substituted differs between its two sides).  Exact from any eye
-position, inside the solid included.
+and traces one ray per pixel.  The tape is first pruned per 16 x 16 tile over the part of the
+tile's frustum inside the scene bound, then per depth slab of the tile (:data:`SLABS` equal
+slabs, each pruned from its tile's tape, its leaves renumbered to its own quadric list), so a
+ray meets only the leaves near the stretch it walks.  Per ray and slab, front to back, each
+listed quadric is solved once; its roots classify its sign along the whole ray, and the roots
+in the slab are visited in depth order until one is on the CSG surface (the membership with
+the root's quadric substituted differs between its two sides, the other leaves taken from the
+classification).  Exact from any eye position, inside the solid included; the cost per ray is
+the slab's quadrics plus one tape pass per visited root, not roots x leaves.
 """
 
 from __future__ import annotations
