@@ -122,13 +122,13 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     tiles = device_buffer(context, 8 * nt, "tile tapes", True)
     tile_z = device_buffer(context, 2 * np.dtype(real).itemsize * nt, "tile depths", True)
     slabs = device_buffer(context, 16 * nt * SLABS, "slab tapes", True)
-    counters = np.zeros(5, dtype=np.uint32)
+    counters = np.zeros(6, dtype=np.uint32)
 
     def run_tiles(caps):
         # from host memory: Oclgrind's uninitialized-value checker loses rows written into a
         # fresh buffer and read back by the same work-item
         arena = upload(context, np.zeros(caps[0], dtype=TAPE_OP_DTYPE), writable=True)
-        cbuf = upload(context, np.zeros(5, dtype=np.uint32), writable=True)
+        cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
         rng = ((-(-ntx // 4) * 4, -(-nty // 4) * 4), (4, 4))  # a fixed group shape, as PIXEL_GROUP
         ev = kernel(prg, "prune_tiles")(q, *rng, scene.quadrics, scene.tape, np.int32(n), view_buf, *bound, arena,
                                         np.uint32(caps[0]), cbuf, tiles, tile_z)
@@ -139,20 +139,21 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     tile_rows = int(counters[2])
     stats = {"tile_tape_mean": tile_rows / nt, "tile_leaves_max": int(counters[3]),
              "prune_evaluations": int(counters[1])}
-    work = -(-nt * SLABS // 64) * 64
-    tiles_sum = tile_rows + nt
+    work = -(-nt // 64) * 64
+    scratch = upload(context, np.zeros(tile_rows + nt + 1, dtype=TAPE_OP_DTYPE), writable=True)
 
     def run_slabs(caps):
         arena = upload(context, np.zeros(caps[0], dtype=TAPE_OP_DTYPE), writable=True)
         qlist = upload(context, np.zeros(caps[1], dtype=np.int32), writable=True)
-        cbuf = upload(context, np.zeros(5, dtype=np.uint32), writable=True)
+        cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
         ev = kernel(prg, "prune_slabs")(q, (work,), (64,), scene.quadrics, tile_arena, tiles, tile_z, view_buf,
-                                        *bound, np.int32(nt), arena, np.uint32(caps[0]), qlist, np.uint32(caps[1]),
-                                        cbuf, slabs)
+                                        *bound, np.int32(nt), scratch, np.uint32(tile_rows + nt + 1), arena,
+                                        np.uint32(caps[0]), qlist, np.uint32(caps[1]), cbuf, slabs)
         cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
         return (arena, qlist, ev), [int(counters[0]), int(counters[1])]
 
-    (arena, qlist, ev_slabs), _ = _grown(run_slabs, [SLABS * tiles_sum + 4 * (n + 1), SLABS * tiles_sum + n])
+    guess = tile_rows + 16 * nt + n  # slab tapes are short; the overflow protocol grows the rest
+    (arena, qlist, ev_slabs), _ = _grown(run_slabs, [guess, guess])
     stats.update(slab_tape_mean=int(counters[3]) / (nt * SLABS), slab_quadrics_max=int(counters[4]),
                  prune_evaluations=stats["prune_evaluations"] + int(counters[2]))
     return (arena, qlist, tile_z, slabs), int(counters[4]), (ev_tiles, ev_slabs), stats

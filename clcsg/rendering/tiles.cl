@@ -8,10 +8,11 @@
  * scaled to z0 and z1); the tape pruned over that box cut by the scene bound is written to the
  * tile arena, and [z0, z1] to the tile's depth range.
  *
- * prune_slabs: one work-item per (tile, slab): the tile's range split into SLABS equal depth
- * slabs, the tile's tape pruned over each slab's frustum box; its leaves are renumbered to the
- * slab's own quadric list (leaf row a = index into that list), so the ray kernel can keep one
- * ray-quadric solve per listed quadric in private memory.
+ * prune_slabs: one work-item per tile: the tile's range split into SLABS equal depth slabs, the
+ * tile's tape pruned over each slab's frustum box (in a scratch block) and copied compactly to
+ * the slab arena; its leaves are renumbered to the slab's own quadric list (leaf row a = index
+ * into that list), so the ray kernel can keep one ray-quadric solve per listed quadric in
+ * private memory.
  *
  * Both follow the sampler's overflow protocol: rows reserved with an atomic add and written
  * only below the capacity; the host grows the buffers and re-runs.
@@ -68,37 +69,53 @@ inline int slab_quadrics(__global tape_op *rows, int n, __global int *qlist)
     return nq;
 }
 
-/* slabs[tile * SLABS + s] = (first row, rows, first listed quadric, quadrics); rows = 0 where
- * the slab misses the bound or the solid has no surface in it. */
+/* Slab s of a tile: its tape pruned from the tile's tape t (n rows) into scratch (n + 1 rows),
+ * then copied compactly to the slab arena with its own quadric list.  Returns the record
+ * (first row, rows, first listed quadric, quadrics); rows = 0 where the slab misses the bound
+ * or the solid has no surface in it (or the arena is full: the host sees it in the counters). */
+inline int4 prune_slab(__global const quadric_rec *qs, __global const tape_op *t, int n, const prune_region *g,
+                       __global tape_op *scratch, __global tape_op *arena, uint cap_arena, __global int *qlist,
+                       uint cap_qlist, __global volatile uint *counters)
+{
+    uint evals = 0;
+    int first, count;
+    tape_prune(t, n, qs, g, -1, scratch, &first, &count, &evals);
+    atomic_add(&counters[2], evals);
+    if (count == 1 && scratch[first].op == OP_CONST) return (int4)(0);
+    uint base = atomic_add(&counters[0], (uint)count);
+    uint qbase = atomic_add(&counters[1], (uint)count);
+    if (base + (uint)count > cap_arena || qbase + (uint)count > cap_qlist) return (int4)(0);
+    for (int k = 0; k < count; ++k) arena[base + k] = scratch[first + k];
+    int nq = slab_quadrics(arena + base, count, qlist + qbase);
+    atomic_add(&counters[3], (uint)count);
+    atomic_max(&counters[4], (uint)nq);
+    return (int4)((int)base, count, (int)qbase, nq);
+}
+
+/* One work-item per tile: slabs[tile * SLABS + s] for its SLABS slabs (prune_slab), through a
+ * scratch block of the tile tape's length + 1 rows reserved in `scratch`. */
 __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op *tile_arena,
                           __global const int2 *tiles, __global const real2 *tile_z,
                           __global const view_rec *view, real3 blo, real3 bhi, int n_tiles,
-                          __global tape_op *arena, uint cap_arena, __global int *qlist, uint cap_qlist,
-                          __global volatile uint *counters, __global int4 *slabs)
+                          __global tape_op *scratch, uint cap_scratch, __global tape_op *arena, uint cap_arena,
+                          __global int *qlist, uint cap_qlist, __global volatile uint *counters,
+                          __global int4 *slabs)
 {
-    int gid = get_global_id(0);
-    if (gid >= n_tiles * SLABS) return;
-    int tile = gid / SLABS, s = gid % SLABS;
+    int tile = get_global_id(0);
+    if (tile >= n_tiles) return;
+    for (int s = 0; s < SLABS; ++s) slabs[tile * SLABS + s] = (int4)(0);
     int ntx = (view->width + TILE - 1) / TILE;
     int2 tt = tiles[tile];
-    real2 z = tile_z[tile];
-    slabs[gid] = (int4)(0);
     __global const tape_op *tape = tile_arena + tt.x;
     int n = tt.y;
     if (n == 0 || (n == 1 && tape[0].op == OP_CONST)) return;
-    real2 zs = slab_range(z, s);
-    prune_region g;
-    if (!tile_box(view, tile % ntx, tile / ntx, zs.x, zs.y, blo, bhi, &g)) return;
-    uint evals = 0;
-    uint base = atomic_add(&counters[0], (uint)(n + 1));
-    uint qbase = atomic_add(&counters[1], (uint)n);
-    if (base + (uint)(n + 1) > cap_arena || qbase + (uint)n > cap_qlist) return;
-    int first, count;
-    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
-    if (count == 1 && arena[base + first].op == OP_CONST) return;
-    int nq = slab_quadrics(arena + base + first, count, qlist + qbase);
-    atomic_add(&counters[2], evals);
-    atomic_add(&counters[3], (uint)count);
-    atomic_max(&counters[4], (uint)nq);
-    slabs[gid] = (int4)((int)base + first, count, (int)qbase, nq);
+    uint sbase = atomic_add(&counters[5], (uint)(n + 1));
+    if (sbase + (uint)(n + 1) > cap_scratch) return;
+    for (int s = 0; s < SLABS; ++s) {
+        real2 zs = slab_range(tile_z[tile], s);
+        prune_region g;
+        if (!tile_box(view, tile % ntx, tile / ntx, zs.x, zs.y, blo, bhi, &g)) continue;
+        slabs[tile * SLABS + s] = prune_slab(qs, tape, n, &g, scratch + sbase, arena, cap_arena, qlist, cap_qlist,
+                                             counters);
+    }
 }
