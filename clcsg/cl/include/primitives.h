@@ -26,12 +26,16 @@
  * (clcsg/cl/records.py passes its buffers in this order). */
 #define PRIMITIVE_TABLE                                                                       \
     __global const owner_rec *owners, __global const int *owner_list, __global const prim_rec *prims, \
-        __global const int2 *prim_lits, __global const tape_op *inst_tape, int inst_rows
-#define PRIMITIVE_TABLE_ARGS owners, owner_list, prims, prim_lits, inst_tape, inst_rows
+        __global const int2 *prim_lits, __global const real4 *prim_box, __global const tape_op *inst_tape, \
+        int inst_rows
+#define PRIMITIVE_TABLE_ARGS owners, owner_list, prims, prim_lits, prim_box, inst_tape, inst_rows
 
-/* Instance pi's membership at p on quadric q, two bits as tape_member (closed: Q = 0 inside). */
+/* Instance pi's membership at p on quadric q, two bits as tape_member (closed: Q = 0 inside).
+ * Outside the instance's padded box (prim_box: lo, hi) it is 0 without evaluating a literal. */
 inline uint instance_sides(PRIMITIVE_TABLE, __global const quadric_rec *qs, int pi, int q, real3 p)
 {
+    real4 lo = prim_box[2 * pi], hi = prim_box[2 * pi + 1];
+    if (any(p < lo.xyz) || any(p > hi.xyz)) return 0;
     prim_rec pr = prims[pi];
     uint m = 3;
     for (int l = 0; l < pr.lit_count && m; ++l) {
