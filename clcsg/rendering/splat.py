@@ -149,20 +149,11 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
 
     covered = int((ids >= 0).sum())
     st = {
-        "method": "splat",
-        "device": context.info.describe(),
-        "precision": "double" if real == np.float64 else "float",
-        "width": W,
-        "height": H,
-        "samples": n,
-        "radius": float(samples.radius),
-        "surface_aligned": bool(surface_aligned),
-        "backface_culling": culling,
-        "covered_pixels": covered,
-        "splat_s": event_seconds(events[-1]) if n else 0.0,
-        "resolve_s": event_seconds(ev_resolve),
-        "build_s": t_built - t_build,
-        "total_s": t_end - t_start,
+        "method": "splat", "device": context.info.describe(), "precision": "double" if real == np.float64 else "float",
+        "width": W, "height": H, "samples": n, "radius": float(samples.radius),
+        "surface_aligned": bool(surface_aligned), "backface_culling": culling, "covered_pixels": covered,
+        "splat_s": event_seconds(events[-1]) if n else 0.0, "resolve_s": event_seconds(ev_resolve),
+        "build_s": t_built - t_build, "total_s": t_end - t_start,
     }
     if culling_note:
         st["backface_culling_note"] = culling_note
