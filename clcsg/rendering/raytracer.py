@@ -161,8 +161,8 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
 
 def local_quadrics(n: int) -> int:
     """The ray kernel's private list size for slabs of up to ``n`` quadrics: a power of two
-    (one kernel build per size), at least 8."""
-    return max(8, 1 << max(0, int(n) - 1).bit_length())
+    (one kernel build per size), at least 64 (so a view that moves does not rebuild it)."""
+    return max(64, 1 << max(0, int(n) - 1).bit_length())
 
 
 def trace(context, tape, camera, shading: Shading | None = None, precision="auto", origin=None) -> Image:
