@@ -7,11 +7,13 @@ solid's silhouette (a 96-pixel-wide exact ray tracing) spans ~90% of the image (
 150, tree shape).  Times are OpenCL profiling-event times of the kernels (best of several runs;
 counters off), so they exclude sampling, uploads and program builds: for the splats the splat
 pass plus the resolve/shading pass, for the ray tracer its per-tile pruning pass
-(``prune_s``) plus the tracing pass.  Beside them: the ray tracer's mean pruned tape
+(``prune_s``: tile and depth-slab tapes) plus the tracing pass.  Beside them: the ray tracer's mean pruned tape
 length per 16x16 tile (``tile_tape_mean``) and prune evaluations, the process CPU time of the
 whole calls (which other processes on a shared machine do not distort), and the overdraw
 (fragments per covered pixel, from a separate run with counters on) with surface-aligned
-bounds and back-face culling each on and off (paper section 6.1, Fig. 13).
+bounds and back-face culling each on and off (paper section 6.1, Fig. 13).  Last, a 1080p
+splat frame of the gear against a kernel that only writes the frame's four buffers
+(``bench/kernels/frame_write.cl``), on the same device (``frame_floor``).
 
 The ray tracer's cost grows with the tape, so the DNF shape is compared with the tree shape
 at 320x180 only (the same image either way), and a resolution sweep (480x270 ... 3840x2160)
@@ -129,6 +131,49 @@ def model_row(ctx, m, W, H, repeats, shapes_res=SHAPE_RES, gallery=False, dnf=Tr
     return row
 
 
+def write_floor(ctx, W, H, repeats=5) -> dict:
+    """The best kernel time and process CPU time of writing a W x H frame's four outputs once
+    (bench/kernels/frame_write.cl), with the renderers' pixel work-group shape."""
+    import numpy as np
+    import pyopencl as cl
+
+    from clcsg.cl.programs import event_seconds
+    from clcsg.rendering.raytracer import pixel_range
+
+    with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "kernels", "frame_write.cl")) as f:
+        prg = cl.Program(ctx.ctx, f.read()).build()
+    bufs = [cl.Buffer(ctx.ctx, cl.mem_flags.WRITE_ONLY, W * H * 4) for _ in range(4)]
+    best, cpu = float("inf"), float("inf")
+    for _ in range(repeats + 1):
+        c0 = time.process_time()
+        ev = prg.write_frame(ctx.queue, *pixel_range(W, H), *bufs, np.int32(W), np.int32(H))
+        ev.wait()
+        cpu = min(cpu, time.process_time() - c0)
+        best = min(best, event_seconds(ev))
+    return {"seconds": best, "cpu_seconds": cpu}
+
+
+def frame_floor(ctx, repeats, model="gear", size=FULL_HD) -> dict:
+    """A 1080p splat frame (kernels: splat pass + resolve pass) of the gear against a kernel
+    that only writes the frame's buffers, on the same device; kernel and process CPU times."""
+    m = next(x for x in zoo.MODELS if x.name == model)
+    scene = clcsg.Scene(m.build(), source=m.name)
+    tree = scene.compile("tree")
+    cam = fit_to_silhouette(tree, *size, m.direction, ctx=ctx)
+    s = clcsg.sample(scene, diagonal(tree.bound) * zoo.SIZES["medium"], device=ctx, progress=False)
+    clcsg.render(s, cam.resized(64, 36), device=ctx, stats=False)  # build
+    t, st = time_render(clcsg.render, s, cam, ctx, max(repeats, 3), stats=False)
+    floor = write_floor(ctx, *size)
+    row = {"model": model, "width": size[0], "height": size[1], "samples": len(s), "splat_s": t,
+           "splat_pass_s": st["splat_s"], "resolve_pass_s": st["resolve_s"], "frame_cpu_s": st["cpu_seconds"],
+           "write_s": floor["seconds"], "write_cpu_s": floor["cpu_seconds"],
+           "frame_over_write": t / floor["seconds"] if floor["seconds"] > 0 else None}
+    print(f"{model} {size[0]}x{size[1]}: splat frame {1e3 * t:.1f} ms (splat {1e3 * st['splat_s']:.1f}, resolve "
+          f"{1e3 * st['resolve_s']:.1f}), buffer write {1e3 * floor['seconds']:.2f} ms: "
+          f"{fmt(row['frame_over_write'], '.0f', 1, 'x')}", flush=True)
+    return row
+
+
 def resolution_sweep(ctx, repeats) -> list[dict]:
     out = []
     for m in zoo.MODELS:
@@ -160,9 +205,10 @@ def run(quick=False, device=None, gallery=False):
                       quick=quick)
             for m in zoo.MODELS]
     sweep = [] if quick else resolution_sweep(ctx, repeats)
+    floor = frame_floor(ctx, repeats)
     env = load.into(environment(ctx))
     payload = {"environment": env, "quick": bool(quick), "method": " ".join(__doc__.split()), "resolution": [W, H],
-               "rows": rows, "resolution_sweep": sweep,
+               "rows": rows, "resolution_sweep": sweep, "frame_floor": floor,
                "paper": "Trettner & Kobbelt 2021, Table 2 (medium size): rendering on an RTX 2080 Ti"}
     path = write("render", payload)
     print()
@@ -197,6 +243,14 @@ def table(payload) -> str:
         lines.append(f"| {r['model']} | {1e3 * t['seconds']:.1f} | {fmt(t['tile_tape_mean'], '.1f')} | "
                      f"{fmt(d.get('seconds'), '.1f', 1e3, none='not run (--quick)')} | "
                      f"{fmt(d.get('tile_tape_mean'), '.1f')} | {fmt(ratio, '.2f', 1, 'x')} |")
+    f = payload.get("frame_floor")
+    if f:
+        lines += ["", f"A {f['width']}x{f['height']} splat frame of the {f['model']} against a kernel that only writes "
+                  "the frame's four buffers (ms; process CPU in brackets)", "",
+                  "| splat pass | resolve pass | frame | buffer write | frame / write |", "|---|---|---|---|---|",
+                  f"| {1e3 * f['splat_pass_s']:.1f} | {1e3 * f['resolve_pass_s']:.1f} | {1e3 * f['splat_s']:.1f} "
+                  f"[{1e3 * f['frame_cpu_s']:.0f}] | {1e3 * f['write_s']:.2f} [{1e3 * f['write_cpu_s']:.1f}] | "
+                  f"{fmt(f['frame_over_write'], '.0f', 1, 'x')} |"]
     if payload.get("resolution_sweep"):
         lines += ["", "Render time against resolution (medium splat size; ms)", "",
                   "| model | resolution | splat | ray tracer | ray tracer / splat | same, CPU time |",

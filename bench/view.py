@@ -19,7 +19,9 @@ and 400x300 while dragging (JPEG).  Per frame, best of several runs:
   transfer), best of a few reloads.
 
 Resting frames are measured without the supersampled follow-up (the server's
-``rest_budget`` is 0); ``aa2_ms`` is the 2 x 2 supersampled 800x600 render alone.
+``rest_budget`` is 0); ``aa2_ms`` is the 2 x 2 supersampled 800x600 render alone.  ``exact``:
+the exact ray tracer's resting 800x600 frames through ``frames.frame`` (the first at full size,
+the next supersampled when the first says it fits).
 ``--quick``: fewer repeats and reloads.
 """
 
@@ -52,7 +54,7 @@ def frame_times(ctx, model, view, quality, repeats) -> dict:
     best, encode_ms = None, float("inf")
     for _ in range(repeats):
         c0, t0 = time.process_time(), time.perf_counter()
-        img = frames.render(ctx, model, cam)
+        img = frames.render(ctx, model, cam, complete=False)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         t1 = time.perf_counter()
         data = frames.encode(img.rgba, "jpeg" if quality == "drag" else "png")
@@ -129,6 +131,25 @@ async def _served(session, view, repeats, reloads) -> dict:
     return out
 
 
+def exact_frames(ctx, model, view) -> dict:
+    """The exact ray tracer's resting 800x600 frames the viewer's way (``frames.frame``): the
+    first (full size, plain: nothing to predict from), then the next (supersampled when the
+    first says it fits); wall and process CPU times, size kept or reduced, aa."""
+    from clcsg.viewer import frames
+
+    w, h = SIZES["rest"]
+    req = {"view": view, "width": w, "height": h, "method": "raytrace", "quality": "rest", "id": 0}
+    frames.render(ctx, model, frames.camera_of(view, 64, 48), "raytrace")  # kernels
+    out = {}
+    for key in ("first", "next"):
+        c0, t0 = time.process_time(), time.perf_counter()
+        _, header = frames.frame(ctx, model, req)
+        out[key] = {"ms": 1e3 * (time.perf_counter() - t0), "cpu_ms": 1e3 * (time.process_time() - c0),
+                    "width": header["width"], "height": header["height"], "reduced": header["reduced"],
+                    "aa": header["aa"]}
+    return out
+
+
 def model_row(ctx, m, tmp, repeats, reloads) -> dict:
     from clcsg.viewer import frames
     from clcsg.viewer.session import Session
@@ -146,8 +167,9 @@ def model_row(ctx, m, tmp, repeats, reloads) -> dict:
         frame_times(ctx, model, view, quality, 1)  # kernels for this size
         row[quality] = frame_times(ctx, model, view, quality, repeats)
     t0 = time.perf_counter()
-    frames.render(ctx, model, frames.camera_of(view, *SIZES["rest"]), aa=2)
+    frames.render(ctx, model, frames.camera_of(view, *SIZES["rest"]), aa=2, complete=False)
     row["aa2_ms"] = 1e3 * (time.perf_counter() - t0)
+    row["exact"] = exact_frames(ctx, model, view)
     served = asyncio.run(_served(session, view, repeats, reloads))
     for quality in ("rest", "drag"):
         row[quality].update(served[quality])
@@ -155,7 +177,8 @@ def model_row(ctx, m, tmp, repeats, reloads) -> dict:
     r, d = row["rest"], row["drag"]
     print(f"{m.name}: 800x600 {r['render_ms']:.0f} ms (+{r['encode_ms']:.0f} PNG, round trip {r['roundtrip_ms']:.0f}), "
           f"400x300 {d['render_ms']:.0f} ms (+{d['encode_ms']:.0f} JPEG, round trip {d['roundtrip_ms']:.0f}), "
-          f"reload to frame {row['reload_ms'] / 1e3:.2f} s", flush=True)
+          f"reload to frame {row['reload_ms'] / 1e3:.2f} s; exact 800x600 {row['exact']['first']['ms']:.0f} ms, "
+          f"then {row['exact']['next']['ms']:.0f} ms at aa {row['exact']['next']['aa']}", flush=True)
     return row
 
 
@@ -190,4 +213,13 @@ def table(payload) -> str:
                       f"{f['render_cpu_ms']:.0f}", f"{f['encode_ms']:.1f}", fmt(f.get("roundtrip_ms"), ".0f")]
         cells += [f"{r['aa2_ms']:.0f}", f"{r['reload_ms'] / 1e3:.2f} s"]
         lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "Exact (ray traced) resting frames at 800x600, the viewer's way (ms; process CPU in brackets)", "",
+              "| model | first frame (plain) | size | next frame | size, aa |", "|---|---|---|---|---|"]
+    for r in payload["rows"]:
+        e = r.get("exact")
+        if not e:
+            continue
+        a, b = e["first"], e["next"]
+        lines.append(f"| {r['model']} | {a['ms']:.0f} [{a['cpu_ms']:.0f}] | {a['width']}x{a['height']} | "
+                     f"{b['ms']:.0f} [{b['cpu_ms']:.0f}] | {b['width']}x{b['height']}, aa {b['aa']} |")
     return "\n".join(lines)

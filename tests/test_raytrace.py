@@ -188,3 +188,86 @@ def test_float_precision_close_to_double(cl_context):
     assert (img.mask != ref.mask).mean() < 0.01
     both = img.mask & ref.mask
     assert np.median(np.abs(img.depth[both] - ref.depth[both]) / ref.depth[both]) < 1e-5
+
+
+def colour_scenes():
+    """Scenes whose colours the "first boundary that holds the point" rule gets wrong: flush
+    inlays, faces shared by three primitives, a coloured cutter; and two cubes side by side."""
+    grey, red, green, blue = (0.6, 0.6, 0.6), (1, 0, 0), (0, 1, 0), (0, 0, 1)
+    plate = clcsg.box((4, 4, 1), color=grey)
+    box_inlay = (plate - clcsg.box((2, 1.5, 1), center=(0.5, 0, 0.3))) | clcsg.box((2, 1.5, 0.6), center=(0.5, 0, 0.2), color=red)
+    round_inlay = (plate - clcsg.cylinder(1, 0.8, center=(-0.6, 0.4, 0.4))) | clcsg.cylinder(0.8, 0.8, center=(-0.6, 0.4, 0.1), color=blue)
+    three = (clcsg.box((2, 2, 1), center=(-0.5, 0, 0), color=red) | clcsg.box((2, 2, 1), center=(0.5, 0.3, 0), color=green)
+             | clcsg.box((2, 2, 1), center=(0, -0.4, 0), color=blue))
+    cutter = clcsg.box(2, color=grey) - clcsg.cylinder(3, 0.6, color=red) - clcsg.sphere(0.5, center=(1, 1, 1), color=green)
+    side_by_side = clcsg.box(1.0, color=red) | clcsg.box(1.0, center=(1.0, 0, 0), color=blue)
+    return {"box_inlay": box_inlay, "round_inlay": round_inlay, "three_coplanar": three,
+            "coloured_cutter": cutter, "cubes_side_by_side": side_by_side}
+
+
+COLOUR_SCENES = colour_scenes()
+#: per scene: instances (tree order) that must be visible from above
+COLOUR_VISIBLE = {"box_inlay": {0, 2}, "round_inlay": {0, 2}, "three_coplanar": {0, 1, 2},
+                  "coloured_cutter": {0, 1, 2}, "cubes_side_by_side": {0, 1}}
+
+
+def colour_views(tape):
+    c = 0.5 * (tape.bound[0] + tape.bound[1])
+    return [Camera.look_at(c + (0.4, -2.5, 6), c, fov=50, width=W, height=H),
+            Camera.look_at(c + (5, 3, 4), c, fov=45, width=W, height=H)]
+
+
+@pytest.mark.parametrize("name", sorted(COLOUR_SCENES))
+def test_visible_primitive_colours(cl_context, name):
+    """Per pixel against the oracle's rule: the first instance that bounds the solid."""
+    shape = COLOUR_SCENES[name]
+    tape = clcsg.Scene(shape).compile()
+    seen = set()
+    for cam in colour_views(tape):
+        img = raytrace(tape, cam, device=cl_context)
+        compare(img, shape, tape, cam)
+        seen |= set(np.unique(img.primitives[img.mask]).tolist())
+        for k, inst in enumerate(tape.instances):  # a pixel shows its primitive's colour
+            lit = img.mask & (img.primitives == k)
+            rgb = img.rgba[lit][:, :3].astype(float)
+            if len(rgb) and max(inst.color[:3]) - min(inst.color[:3]) > 0.5:
+                assert np.argmax(rgb.mean(axis=0)) == int(np.argmax(inst.color[:3]))
+    assert COLOUR_VISIBLE[name] <= seen, f"visible instances {sorted(seen)}"
+
+
+def test_flush_inlay_top_shows_the_inlay(cl_context):
+    shape = COLOUR_SCENES["box_inlay"]
+    tape = clcsg.Scene(shape).compile()
+    cam = Camera.look_at((0.5, 0, 8), (0.5, 0, 0), up=(0, 1, 0), fov=10, width=32, height=24)
+    img = raytrace(tape, cam, device=cl_context)
+    assert img.mask.all() and np.all(img.primitives == 2)
+
+
+def column_of_spheres(n=220, seed=3):
+    """n spheres along the z axis, bored through: from the axis one tile sees them all."""
+    rng = np.random.default_rng(seed)
+    spheres = [clcsg.sphere(0.5, center=(*rng.uniform(-0.25, 0.25, 2), 0.35 * k), color=tuple(rng.uniform(0, 1, 3)))
+               for k in range(n)]
+    return clcsg.union(*spheres) - clcsg.cylinder(200, 0.12, center=(0, 0, 40))
+
+
+INSIDE_COLUMN = (0.3, 0.0, 10.0)
+
+
+def test_hundreds_of_leaves_per_tile_match_the_oracle(cl_context):
+    """200+ leaves in one tile's tape, from outside and from inside the bore, per pixel
+    against the oracle."""
+    shape = column_of_spheres()
+    tape = clcsg.Scene(shape).compile()
+    views = [Camera.look_at((0.05, -0.08, -4), (0, 0, 10), fov=20, width=48, height=36),
+             Camera.look_at((0.02, 0.01, 20.0), (0.1, 0.05, 60), fov=70, width=48, height=36),
+             Camera.look_at((3, -2, 30), (0, 0, 38), fov=40, width=48, height=36),
+             Camera.look_at(INSIDE_COLUMN, (0.3, 0.5, 14), fov=70, width=48, height=36)]
+    assert clcsg.contains(shape, INSIDE_COLUMN)
+    leaves = []
+    for cam in views:
+        img = raytrace(tape, cam, device=cl_context)
+        ref = compare(img, shape, tape, cam)
+        assert ref.mask.mean() > 0.15
+        leaves.append(img.stats["tile_leaves_max"])
+    assert max(leaves) >= 200, leaves

@@ -425,15 +425,31 @@ def test_page_in_headless_chromium(tmp_path, cl_context):
         driver.quit()
 
 
-def test_slow_ray_tracing_is_traced_smaller(tmp_path, cl_context):
+def test_exact_frames_full_size_and_antialiased_at_rest(tmp_path, cl_context):
+    """The first exact frame is traced at full size; later ones are predicted from the last
+    one: full size and supersampled at rest while they fit, smaller only past the budget."""
     from clcsg.viewer import frames
     from clcsg.viewer.session import Session
 
     scene = tmp_path / "part.json"
     clcsg.save(PART, scene)
     model = Session(scene, cl_context).load()
-    cam = frames.camera_of(frames.fitted_view(model.samples, 160, 120), 160, 120)
-    assert frames.raytrace_camera(cl_context, model, cam) is cam  # a fast view keeps its size
-    small = frames.raytrace_camera(cl_context, model, cam, budget=1e-9)
-    assert (small.width, small.height) == (160 // frames.PROBE, 120 // frames.PROBE)
+    view = frames.fitted_view(model.samples, 160, 120)
+    cam = frames.camera_of(view, 160, 120)
+    assert model.raytrace_rate is None and frames.raytrace_camera(model, cam) is cam
+    req = {"view": view, "width": 160, "height": 120, "method": "raytrace", "quality": "rest", "id": 1}
+    _, first = frames.frame(cl_context, model, req)
+    assert (first["width"], first["height"]) == (160, 120) and not first["reduced"] and first["aa"] == 1
+    assert model.raytrace_rate > 0
+    model.raytrace_rate = 1e-8  # a fast ray tracer: full size, the rest frame supersampled
+    _, rest = frames.frame(cl_context, model, req)
+    assert not rest["reduced"] and rest["aa"] == max(frames.REST_AA)
+    _, drag = frames.frame(cl_context, model, {**req, "quality": "drag"})
+    assert drag["aa"] == 1 and not drag["reduced"]
+    model.raytrace_rate = 1.0  # far past the budget: the smallest size
+    small = frames.raytrace_camera(model, cam)
+    assert (small.width, small.height) == (160 // frames.MIN_SCALE, 120 // frames.MIN_SCALE)
     assert np.allclose(small.eye, cam.eye) and small.fov == cam.fov
+    _, reduced = frames.frame(cl_context, model, req)
+    assert reduced["reduced"] and reduced["aa"] == 1
+

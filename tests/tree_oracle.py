@@ -219,13 +219,16 @@ class _Tree:
             return V
         return V, 2.0 * np.sqrt(np.maximum(X @ self.gkeys[cols].T, 0.0))
 
-    def evaluate(self, L):
+    def evaluate(self, L, switched=None):
         """Membership from the literal table L (n, 2U): column u is ``K_u <= 0``, U + u is
-        ``K_u >= 0``; one pass over the program, slots freed after their last use."""
+        ``K_u >= 0``; one pass over the program, slots freed after their last use.
+        ``switched``: (instance, row mask): that instance's membership complemented there."""
         vals = [None] * self.nslots
         for op, out, args, free in self.program:
             if op == "prim":
                 v = L[:, self.cols[args]].all(axis=1)
+                if switched is not None and switched[0] == args:
+                    v ^= switched[1]
             elif op == "none":
                 v = np.zeros(len(L), dtype=bool)
             elif op == "not":
@@ -305,6 +308,39 @@ class _Tree:
             out[(out < 0) & ok] = i
         return out
 
+    def bounding_carrier(self, P, k, tol=0.0):
+        """The colour rule: the first instance (tree order) carrying table quadric k whose other
+        literals hold (as :meth:`first_carrier`) and whose membership, complemented on one
+        side of K_k with the other literals substituted as in :meth:`sides`, changes the
+        solid's membership on that side; where none does, :meth:`first_carrier`."""
+        first = self.first_carrier(P, k, tol)
+        out = np.full(len(P), -1, dtype=np.int64)
+        carriers = self.carriers.get(int(k), []) if k >= 0 else []
+        if len(carriers) < 2 or not len(P):
+            return first
+        step = max(256, _CELLS // max(self.U, 1))
+        for a in range(0, len(P), step):
+            p = P[a : a + step]
+            V = self.values(p)
+            lim = tol * self.values(p, grad=True)[1] if tol > 0 else np.zeros_like(V)
+            le, ge = V <= 0.0, V >= 0.0
+            tables = []
+            for side in (True, False):  # K_k's negative side, then its positive side
+                L = np.concatenate([le, ge], axis=1)
+                L[:, k], L[:, self.U + k] = side, not side
+                tables.append((L, self.evaluate(L)))
+            o = out[a : a + step]
+            for i in carriers:
+                other = self.lits[i][self.lits[i][:, 0] != k]
+                holds = (other[:, 1] * V[:, other[:, 0]] <= lim[:, other[:, 0]]).all(axis=1) & (o < 0)
+                if not holds.any():
+                    continue
+                changed = np.zeros(len(p), dtype=bool)
+                for L, plain in tables:
+                    changed |= self.evaluate(L, (i, holds)) != plain
+                o[holds & changed] = i
+        return np.where(out >= 0, out, first)
+
     def line_roots(self, o, d, positive, bound=None, tol=0.0):
         """Roots of every table quadric along lines o + t d that lie on the boundary of an
         instance carrying it: (line, t, k, point, first carrier)."""
@@ -323,6 +359,7 @@ class _Tree:
                     idx, P = idx[inb], P[inb]
                 prim = self.first_carrier(P, k, tol)
                 keep = prim >= 0
+                prim[keep] = self.bounding_carrier(P[keep], k, tol)
                 parts.append((idx[keep], t[idx[keep]], np.full(keep.sum(), k), P[keep], prim[keep]))
         if not parts:
             z = np.zeros(0, dtype=np.int64)
@@ -412,14 +449,16 @@ def on_surface(shape, points, quadric_matrices, tol=0.0) -> np.ndarray:
 
 def primitive_at(shape, points, quadric_matrix, tol=0.0) -> np.ndarray:
     """For points on K: the first instance (tree order) that has a quadric canonically equal
-    to K and whose other quadrics hold (``Q <= tol |grad Q|``); -1 if none."""
+    to K, whose other quadrics hold (``Q <= tol |grad Q|``) and which bounds the solid there
+    (complementing its membership on one side of K changes the solid's on that side); where
+    none bounds it, the first that holds the point; -1 if none holds it."""
     t = _tree(shape)
     P, sh = _points(points)
     k = _ids(t, quadric_matrix, len(P))
     out = np.full(len(P), -1, dtype=np.int64)
     for u in np.unique(k[k >= 0]):
         sel = np.flatnonzero(k == u)
-        out[sel] = t.first_carrier(P[sel], u, float(tol))
+        out[sel] = t.bounding_carrier(P[sel], u, float(tol))
     return out.reshape(sh)
 
 

@@ -25,6 +25,10 @@ SPLAT_COUNTERS = (
 #: (REAL_EPS on the device, float64's on the host reference)
 ROUNDING_ULPS = 64
 
+#: registers of the instance program's interpreter (cl/include/primitives.h); a scene whose
+#: instance program needs more falls back to the first instance whose boundary holds a point
+INSTANCE_REGS = 32
+
 #: the framebuffer word of a pixel no fragment reached (depth bits << 32 | index)
 EMPTY_KEY = 0xFFFFFFFFFFFFFFFF
 
@@ -42,5 +46,6 @@ def defines() -> dict:
     d.update(_slots("SC", "SAMPLER_COUNTERS", SAMPLER_COUNTERS))
     d.update(_slots("PC", "SPLAT_COUNTERS", SPLAT_COUNTERS))
     d["ROUNDING_ULPS"] = ROUNDING_ULPS
+    d["INSTANCE_REGS"] = INSTANCE_REGS
     d["EMPTY_KEY"] = f"0x{EMPTY_KEY:016x}UL"
     return d

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constants import INSTANCE_REGS, ROUNDING_ULPS
 from .memory import upload
 
 from ..model.quadric import Quadric, affine
@@ -99,6 +100,9 @@ class PackedScene:
     owners: np.ndarray  # OWNER_DTYPE per quadric
     owner_list: np.ndarray  # int32
     n_regs: int
+    prim_boxes: np.ndarray  # (P, 2, 4) real: per instance its box (lo, hi), padded; empty: lo > hi
+    instance_tape: np.ndarray  # TAPE_OP_DTYPE rows of the instance program (primitives.h)
+    instance_rows: int  # its length; 0: none (or it needs more than INSTANCE_REGS registers)
 
 
 def pack(tape, real=np.float64, origin=None) -> PackedScene:
@@ -129,10 +133,32 @@ def pack(tape, real=np.float64, origin=None) -> PackedScene:
         owners["first"][qi] = len(owner_list)
         owners["count"][qi] = len(insts)
         owner_list.extend(insts)
+    boxes = instance_boxes(tape, origin, real)
+    program = getattr(tape, "instance_program", None)
+    usable = program is not None and program[1] <= INSTANCE_REGS and len(program[0])
+    inst = tape_rows(program[0] if usable else np.zeros((1, 4)))
     return PackedScene(
         real, origin, q, local, tape_rows(tape.ops), prims,
         np.array(lits, dtype=np.int32).reshape(-1, 2), owners, np.array(owner_list, dtype=np.int32), tape.n_regs,
+        boxes, inst, len(inst) if usable else 0,
     )
+
+
+def instance_boxes(tape, origin, real) -> np.ndarray:
+    """Per instance its bounding box in device coordinates, padded by the rounding margin of
+    the precision at the scene's scale (points computed on its boundary stay inside); an
+    instance that is provably empty gets an empty box (lo = +inf, hi = -inf)."""
+    bound = np.asarray(tape.bound, dtype=np.float64)
+    scale = float(np.abs(bound).max(initial=0.0)) + float(np.linalg.norm(bound[1] - bound[0])) + 1.0
+    pad = ROUNDING_ULPS * float(np.finfo(real).eps) * scale
+    out = np.zeros((max(len(tape.instances), 1), 2, 4), dtype=real)
+    out[:, 0, :3], out[:, 1, :3] = np.inf, -np.inf
+    for k, inst in enumerate(tape.instances):
+        if inst.box is not None:
+            with np.errstate(invalid="ignore"):
+                out[k, 0, :3] = np.asarray(inst.box[0], dtype=np.float64) - origin - pad
+                out[k, 1, :3] = np.asarray(inst.box[1], dtype=np.float64) - origin + pad
+    return out
 
 
 class SceneBuffers:
@@ -146,7 +172,10 @@ class SceneBuffers:
         self.prim_literals = upload(context, packed.prim_literals)
         self.owners = upload(context, packed.owners)
         self.owner_list = upload(context, packed.owner_list)
+        self.instance_tape = upload(context, packed.instance_tape)
+        self.prim_boxes = upload(context, packed.prim_boxes)
 
     def colour_args(self):
-        """The buffers of ``primitive_at`` (cl/include/primitives.h), in its argument order."""
-        return (self.owners, self.owner_list, self.prims, self.prim_literals)
+        """The arguments of ``primitive_at`` (cl/include/primitives.h), in its order."""
+        return (self.owners, self.owner_list, self.prims, self.prim_literals, self.prim_boxes, self.instance_tape,
+                np.int32(self.packed.instance_rows))

@@ -126,6 +126,8 @@ class Tape:
     shape: str = "tree"  # or "dnf"
     stats: dict = field(default_factory=dict)
     empty: bool = False
+    #: the CSG over the instances (:mod:`clcsg.compile.instance_program`): (ops, registers)
+    instance_program: tuple | None = None
 
     @property
     def n_quadrics(self) -> int:
@@ -458,6 +460,9 @@ def compile_shape(shape: Shape, user_bound=None, source: str = "scene", table: Q
     depth, dnf_terms = _depth_and_terms(b, root)
     bound, empty = scene_bound(shape, instances, root, user_bound, source)
     tape = Tape(ops, n_regs, table.matrices(), instances, bound, "tree", empty=empty or root == _FALSE)
+    from .instance_program import instance_program
+
+    tape.instance_program = instance_program(shape, instances)
     tape.stats = _tape_stats(tape, depth=depth, dnf_terms=dnf_terms)
     return tape
 
@@ -526,4 +531,5 @@ def compile_scene(scene, normal_form: str = "tree", term_limit: int | None = Non
     tape = dnf_tape(dnf, tree.instances, tree.bound, table.matrices())
     tape.stats.update({f"dnf_{k}": v for k, v in dnf.stats.items()})
     tape.empty = tape.empty or tree.empty
+    tape.instance_program = tree.instance_program
     return tape

@@ -1,78 +1,118 @@
-/* Exact CSG ray tracer on the tape (the reference every render is tested against), with the
- * tape pruned per screen tile (driven by clcsg/rendering/raytracer.py).
+/* Exact CSG ray tracer on the tape (the reference every render is tested against), over the
+ * tile and depth-slab tapes of tiles.cl (driven by clcsg/rendering/raytracer.py).
  *
- * prune_tiles: one work-item per TILE x TILE pixel tile.  The tile's rays, between the depths
- * at which they can meet the scene bound, fill the frustum hull of 8 points (the tile's corner
- * directions d, whose forward component is 1, scaled to the depth range [z0, z1]); the tape
- * pruned over that box cut by the scene bound is written to the tile arena (overflow: the host
- * grows it and re-runs).
+ * One work-item per pixel, ray e + t v (unit v, forward component c = v.f > 0).  The slabs of
+ * the pixel's tile are walked front to back; in slab s (depths [za, zb], rays t in
+ * [za / c, zb / c] inside the scene bound, where the slab's tape is exact) each listed quadric
+ * is solved against the ray once, Q(e + t v) = a t^2 + 2 h t + c with roots r1 <= r2, which
+ * classifies the whole ray: the sign of Q at any t is sign(a) outside [r1, r2] and -sign(a)
+ * inside (a double root: sign(a) but 0 at it), sign(h) (t - r) for a line (a = 0), sign(c)
+ * without roots, 0 exactly at a root.  The roots in the slab are then visited in increasing t
+ * (all roots at one t are tried): a root t on quadric q is a hit iff the slab tape's
+ * membership with q substituted differs between q's two sides, the other leaves being their
+ * signs at t from the classification (no quadric is evaluated again), i.e. e + t v is on the
+ * CSG surface.  No 1-D interval CSG beyond that and no "outside view" assumption: views from
+ * inside the solid are exact.  The winning depth is refined by one more solve from the hit
+ * point (accurate in float as well).  Outputs depth (+inf on background), quadric and
+ * primitive ids and RGBA8 shaded with shade.h, in the hit primitive's colour.
  *
- * raytrace: one work-item per pixel, ray e + t v (unit v).  Walk the roots of the tile tape's
- * leaves in increasing t > 0 inside the scene bound (where the tile's pruned tape is exact;
- * the solid lies in the bound) (the next root is the smallest one past the current; roots at
- * the same t are all tried): a root t on quadric q is a hit iff the tape's membership at
- * p = e + t v with q substituted differs between q's two sides, i.e. p is on the CSG
- * surface.  No 1-D interval CSG and no "outside view" assumption: views from inside the solid
- * are exact.  The winning depth is refined by one more solve from the hit point (accurate in
- * float as well).  Outputs depth (+inf on background), quadric and primitive ids and RGBA8
- * shaded with shade.h from the quadric's normal, in the hit primitive's colour.
+ * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
  */
-#include "tape.h"
+#include "tiles.h"
 #include "pixel.h"
 
-#ifndef TILE
-#error "TILE (the tile size in pixels) is set by the driver, clcsg/rendering/raytracer.py"
+#ifndef LOCAL_QUADRICS
+#error "LOCAL_QUADRICS is set by the driver, clcsg/rendering/raytracer.py"
 #endif
 
-__kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
-                          __global const view_rec *view, real3 blo, real3 bhi,
-                          __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
-                          __global int2 *tiles)
+/* One quadric along the ray: roots r1 <= r2 and how its sign follows (bits 0-1: 0 constant,
+ * 1 line, 2 parabola, 3 zero along the whole ray; bit 2: the leading sign is negative). */
+typedef struct {
+    real r1[LOCAL_QUADRICS], r2[LOCAL_QUADRICS];
+    uchar kind[LOCAL_QUADRICS];
+} ray_roots;
+
+inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
 {
-    int tx = get_global_id(0), ty = get_global_id(1);
-    int ntx = (view->width + TILE - 1) / TILE, nty = (view->height + TILE - 1) / TILE;
-    if (tx >= ntx || ty >= nty) return;
-    real3 e = view_eye(view), fw = vload3(0, view->forward);
-    /* depth range of the bound along the forward axis */
-    real z0 = INFINITY, z1 = -INFINITY;
-    for (int m = 0; m < 8; ++m) {
-        real3 c = (real3)((m & 1) ? bhi.x : blo.x, (m & 2) ? bhi.y : blo.y, (m & 4) ? bhi.z : blo.z);
-        real z = dot(c - e, fw);
-        z0 = fmin(z0, z);
-        z1 = fmax(z1, z);
+    real a = dot(v, quadric_Ap(q, v));
+    real h = dot(v, quadric_Ap(q, e) + quadric_minus_b(q));
+    real c = quadric_value(q, e);
+    int nr = quadric_intersect(q, e, v, r1, r2);
+    if (nr == 0) {
+        *r1 = *r2 = INFINITY;
+        return c != 0 ? (c < 0 ? 4 : 0) : (a != 0 ? (a < 0 ? 4 : 0) : 3);
     }
-    z0 = fmax(z0, (real)0);
-    int tile = ty * ntx + tx;
-    if (!(z1 > 0)) {
-        tiles[tile] = (int2)(0, 0);
-        return;
+    if (a == 0) return h != 0 ? (h < 0 ? 5 : 1) : 3;
+    return a < 0 ? 6 : 2;
+}
+
+/* sign of Q_m(e + t v) from the classification */
+inline int ray_sign(const ray_roots *rr, int m, real t)
+{
+    uchar k = rr->kind[m];
+    int s = (k & 4) ? -1 : 1;
+    real r1 = rr->r1[m], r2 = rr->r2[m];
+    switch (k & 3) {
+    case 0: return s;
+    case 3: return 0;
+    case 1: return t == r1 ? 0 : t > r1 ? s : -s;
+    default: return (t == r1 || t == r2) ? 0 : ((t > r1) == (t > r2)) ? s : -s;
     }
-    int i0 = ty * TILE, i1 = min(i0 + TILE, view->height) - 1;
-    int j0 = tx * TILE, j1 = min(j0 + TILE, view->width) - 1;
-    real3 lo = (real3)(INFINITY), hi = (real3)(-INFINITY);
-    for (int m = 0; m < 4; ++m) {
-        int i = (m & 1) ? i1 : i0, j = (m & 2) ? j1 : j0;
-        real3 d = vload3(0, view->d00) + (real)j * vload3(0, view->dx) + (real)i * vload3(0, view->dy);
-        real3 p0 = e + z0 * d, p1 = e + z1 * d;
-        lo = fmin(lo, fmin(p0, p1));
-        hi = fmax(hi, fmax(p0, p1));
+}
+
+/* Membership bits of a slab tape (leaves renumbered: a = listed quadric) at ray depth t with
+ * listed quadric self substituted (tape_member's convention). */
+inline uint slab_member(__global const tape_op *t, int n, const ray_roots *rr, real tt, int self)
+{
+    uchar r[TAPE_REGS];
+    for (int k = 0; k < n; ++k) {
+        tape_op o = t[k];
+        if (o.op == OP_LEAF) {
+            if (o.a == self)
+                r[o.out] = o.b > 0 ? 1 : 2;
+            else
+                r[o.out] = o.b * ray_sign(rr, o.a, tt) <= 0 ? 3 : 0;
+        } else if (o.op == OP_AND) {
+            r[o.out] = r[o.a] & r[o.b];
+        } else if (o.op == OP_OR) {
+            r[o.out] = r[o.a] | r[o.b];
+        } else if (o.op == OP_COPY) {
+            r[o.out] = r[o.a];
+        } else {
+            r[o.out] = o.a ? 3 : 0;
+        }
     }
-    lo = fmax(lo, blo);
-    hi = fmin(hi, bhi);
-    if (any(lo > hi)) {
-        tiles[tile] = (int2)(0, 0);
-        return;
+    return r[t[n - 1].out];
+}
+
+/* The first root in [ta, tb] on the CSG surface of slab tape t (quadrics ql, nq of them):
+ * returns the listed index of its quadric (-1: none) and writes its depth. */
+inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, int n, __global const int *ql,
+                    int nq, real3 e, real3 v, real ta, real tb, ray_roots *rr, real *depth)
+{
+    for (int m = 0; m < nq; ++m)
+        rr->kind[m] = ray_classify(quadric_load(qs, ql[m]), e, v, &rr->r1[m], &rr->r2[m]);
+    real t_cur = ta;
+    bool first = ta > 0; /* a root exactly at ta is visited (not one at the eye) */
+    for (;;) {
+        real t_next = INFINITY;
+        for (int m = 0; m < nq; ++m) {
+            real a = rr->r1[m], b = rr->r2[m];
+            if ((a > t_cur || (first && a == t_cur)) && a < t_next) t_next = a;
+            if ((b > t_cur || (first && b == t_cur)) && b < t_next) t_next = b;
+        }
+        if (!(t_next <= tb)) return -1;
+        for (int m = 0; m < nq; ++m) {
+            if (rr->r1[m] != t_next && rr->r2[m] != t_next) continue;
+            uint bits = slab_member(t, n, rr, t_next, m);
+            if (bits == 1 || bits == 2) {
+                *depth = t_next;
+                return m;
+            }
+        }
+        t_cur = t_next;
+        first = false;
     }
-    real3 h = (real)0.5 * (hi - lo);
-    prune_region g = {(real)0.5 * (lo + hi), (real3)(h.x, 0, 0), (real3)(0, h.y, 0), (real3)(0, 0, h.z), 0};
-    uint evals = 0;
-    uint base = atomic_add(&counters[0], (uint)(n + 1));
-    if (base + (uint)(n + 1) > cap_arena) return;
-    int first, count;
-    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
-    atomic_add(&counters[1], evals);
-    atomic_add(&counters[2], (uint)count);
-    tiles[tile] = (int2)((int)base + first, count);
 }
 
 /* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses) */
@@ -84,73 +124,51 @@ inline real2 ray_box(real3 e, real3 v, real3 lo, real3 hi)
     return (real2)(fmax(fmax(tn.x, tn.y), tn.z), fmin(fmin(tf.x, tf.y), tf.z));
 }
 
-__kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, real3 blo, real3 bhi,
-                       __global const int2 *tiles, PRIMITIVE_TABLE, __global const view_rec *view,
-                       PIXEL_OUTPUTS)
+/* The refined depth: solve again from the hit, Q(p0 + tau v) = 0 with p0 = e + t v, and take
+ * the root nearest 0 (Q(p0) is tiny there: as accurate as the splats' near-sample solve). */
+inline real refine_depth(quadric q, real3 e, real3 v, real t)
+{
+    real tau[2];
+    int nr = quadric_intersect(q, e + t * v, v, &tau[0], &tau[1]);
+    if (nr > 0) {
+        real d = (nr > 1 && fabs(tau[1]) < fabs(tau[0])) ? tau[1] : tau[0];
+        if (fabs(d) < 1e-3 * t) t += d;
+    }
+    return t;
+}
+
+__kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
+                       real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
+                       PRIMITIVE_TABLE, __global const view_rec *view, PIXEL_OUTPUTS)
 {
     int i, j;
     int pix = pixel_index(view, &i, &j);
     if (pix < 0) return;
-    int ntx = (view->width + TILE - 1) / TILE;
-    int2 tt = tiles[(i / TILE) * ntx + j / TILE];
-    __global const tape_op *tape = arena + tt.x;
-    int n = tt.y;
-    real3 e = view_eye(view);
-    real3 v = view_ray(view, i, j);
-
-    real best = INFINITY;
-    int best_q = -1;
-    /* the tile's tape is exact only inside the tile's region: the roots inside the bound */
+    int tile = (i / TILE) * ((view->width + TILE - 1) / TILE) + j / TILE;
+    real3 e = view_eye(view), v = view_ray(view, i, j);
+    real c = dot(v, vload3(0, view->forward));
     real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
     real2 seg = ray_box(e, v, blo - slack, bhi + slack);
-    real t_cur = fmax(seg.x, (real)0);
-    t_cur = t_cur > 0 ? t_cur * (1 - 4 * REAL_EPS) : 0; /* a root exactly at the entry is kept */
-    bool searching = n > 0 && !(n == 1 && tape[0].op == OP_CONST) && seg.x <= seg.y;
-    while (searching) {
-        /* the smallest root past t_cur over the tape's leaves */
-        real t_next = INFINITY;
-        for (int k = 0; k < n; ++k) {
-            tape_op o = tape[k];
-            if (o.op != OP_LEAF) continue;
-            real r[2];
-            int nr = quadric_intersect(quadric_load(qs, o.a), e, v, &r[0], &r[1]);
-            for (int m = 0; m < nr; ++m)
-                if (r[m] > t_cur && r[m] < t_next) t_next = r[m];
-        }
-        if (!isfinite(t_next) || t_next > seg.y) break;
-        real3 p = e + t_next * v;
-        for (int k = 0; k < n && best_q < 0; ++k) {
-            tape_op o = tape[k];
-            if (o.op != OP_LEAF) continue;
-            real r[2];
-            int nr = quadric_intersect(quadric_load(qs, o.a), e, v, &r[0], &r[1]);
-            bool at = (nr > 0 && r[0] == t_next) || (nr > 1 && r[1] == t_next);
-            if (!at) continue;
-            uint bits = tape_member(tape, n, qs, p, o.a);
-            if (bits == 1 || bits == 2) {
-                best = t_next;
-                best_q = o.a;
-            }
-        }
-        if (best_q >= 0) break;
-        t_cur = t_next;
+    seg.x = fmax(seg.x, (real)0);
+    ray_roots rr;
+    real best = INFINITY;
+    int best_q = -1;
+    for (int s = 0; s < SLABS && best_q < 0 && seg.x <= seg.y; ++s) {
+        int4 sl = slabs[tile * SLABS + s];
+        if (sl.y == 0) continue;
+        real2 zs = slab_range(tile_z[tile], s);
+        real ta = fmax(seg.x, zs.x / c), tb = fmin(seg.y, zs.y / c);
+        if (s == 0) ta = seg.x; /* the end slabs reach the eye or the bound's entry and exit */
+        if (s == SLABS - 1) tb = seg.y;
+        if (ta > tb) continue;
+        int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, e, v, ta, tb, &rr, &best);
+        if (m >= 0) best_q = qlist[sl.z + m];
     }
-
     pixel_out out = PIXEL_OUT;
     if (best_q < 0) {
         pixel_miss(out, view, pix);
         return;
     }
-    /* refine the depth by solving again from the hit, Q(p0 + tau v) = 0, p0 = e + best v, and
-     * taking the root nearest 0: Q(p0) is then tiny and the roots are as accurate as the splat
-     * renderer's near-sample solve (matters in float; a no-op up to rounding in double) */
-    quadric q = quadric_load(qs, best_q);
-    real3 p0 = e + best * v;
-    real tau[2];
-    int nr = quadric_intersect(q, p0, v, &tau[0], &tau[1]);
-    if (nr > 0) {
-        real d = (nr > 1 && fabs(tau[1]) < fabs(tau[0])) ? tau[1] : tau[0];
-        if (fabs(d) < 1e-3 * best) best += d;
-    }
+    best = refine_depth(quadric_load(qs, best_q), e, v, best);
     pixel_hit(out, view, pix, PRIMITIVE_TABLE_ARGS, qs, best_q, e + best * v, best, v);
 }

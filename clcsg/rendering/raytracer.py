@@ -1,11 +1,15 @@
-"""The exact CSG ray tracer on the tape (``raytrace.cl``): the reference renderer.
+"""The exact CSG ray tracer on the tape (``tiles.cl``, ``raytrace.cl``): the reference renderer.
 
 :func:`raytrace` compiles a scene (or takes the tape of :class:`~clcsg.sampling.samples.Samples`)
-and traces one ray per pixel: the tape is first pruned per 16 x 16 tile over the part of the
-tile's frustum inside the scene bound (so a ray tests only the leaves near it), then every
-root along the ray is tried in depth order until one is on the CSG surface (the membership
-with the root's quadric substituted differs between its two sides).  Exact from any eye
-position, inside the solid included.
+and traces one ray per pixel.  The tape is first pruned per 16 x 16 tile over the part of the
+tile's frustum inside the scene bound, then per depth slab of the tile (:data:`SLABS` equal
+slabs, each pruned from its tile's tape, its leaves renumbered to its own quadric list), so a
+ray meets only the leaves near the stretch it walks.  Per ray and slab, front to back, each
+listed quadric is solved once; its roots classify its sign along the whole ray, and the roots
+in the slab are visited in depth order until one is on the CSG surface (the membership with
+the root's quadric substituted differs between its two sides, the other leaves taken from the
+classification).  Exact from any eye position, inside the solid included; the cost per ray is
+the slab's quadrics plus one tape pass per visited root, not roots x leaves.
 """
 
 from __future__ import annotations
@@ -17,13 +21,15 @@ import numpy as np
 from ..cl.device import choose_real, context_of
 from ..cl.programs import build, event_seconds, kernel
 from ..cl.memory import device_buffer, upload
-from ..cl.records import SceneBuffers, pack
+from ..cl.records import TAPE_OP_DTYPE, SceneBuffers, pack
 from ..errors import UsageError
 from .camera import Camera
 from .image import Image
 from .view import Shading, pack_view
 
 TILE = 16
+#: depth slabs per tile, each with its own pruned tape
+SLABS = 8
 #: fixed work-group shape of the per-pixel kernels (raytrace, resolve): PoCL compiles a kernel
 #: variant per work-group size, so one chosen by the runtime per image size would cost a
 #: compilation (about half a second) at every new size, e.g. each time a viewer window resizes
@@ -80,6 +86,85 @@ def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 
     return supersample(lambda c: trace(ctx, tape, c, shade, precision), cam, aa, shade.gamma)
 
 
+def _grown(run, caps):
+    """The sampler's overflow protocol: ``run(caps)`` returns the rows each buffer needed; it is
+    re-run with larger buffers until all fit.  Returns the last result and the caps."""
+    while True:
+        result, need = run(caps)
+        if all(n <= c for n, c in zip(need, caps)):
+            return result, caps
+        caps = [max(c, n + n // 2) for c, n in zip(caps, need)]
+
+
+def _bound_args(tape, packed, real):
+    """The scene bound in device coordinates as real3 kernel arguments, padded by the rounding
+    that moving the quadrics to the origin leaves (a hit on a face of the bound stays in it)."""
+    import pyopencl as cl
+
+    pad = 1e-9 * (float(np.abs(tape.bound).max()) + float(np.linalg.norm(tape.bound[1] - tape.bound[0])))
+    lo = (tape.bound[0] - packed.origin - pad).astype(real)
+    hi = (tape.bound[1] - packed.origin + pad).astype(real)
+    real3 = cl.cltypes.double3 if real == np.float64 else cl.cltypes.float3
+    return (np.array([(lo[0], lo[1], lo[2], 0)], dtype=real3)[0], np.array([(hi[0], hi[1], hi[2], 0)], dtype=real3)[0])
+
+
+def prune_tiles(context, scene, view_buf, bound, width, height, real):
+    """The tile tapes, then the depth-slab tapes of every tile (tiles.cl).  Returns the buffers
+    of the ray kernel (slab arena, quadric lists, tile depth ranges, slab records), the largest
+    slab quadric list, the kernel events and counters."""
+    import pyopencl as cl
+
+    q = context.queue
+    prg = build(context, "rendering/tiles.cl", {"TAPE_REGS": scene.packed.n_regs, "TILE": TILE, "SLABS": SLABS},
+                real)
+    ntx, nty = -(-width // TILE), -(-height // TILE)
+    nt, n = ntx * nty, len(scene.packed.tape)
+    tiles = device_buffer(context, 8 * nt, "tile tapes", True)
+    tile_z = device_buffer(context, 2 * np.dtype(real).itemsize * nt, "tile depths", True)
+    slabs = device_buffer(context, 16 * nt * SLABS, "slab tapes", True)
+    counters = np.zeros(6, dtype=np.uint32)
+
+    def run_tiles(caps):
+        # from host memory: Oclgrind's uninitialized-value checker loses rows written into a
+        # fresh buffer and read back by the same work-item
+        arena = upload(context, np.zeros(caps[0], dtype=TAPE_OP_DTYPE), writable=True)
+        cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
+        rng = ((-(-ntx // 4) * 4, -(-nty // 4) * 4), (4, 4))  # a fixed group shape, as PIXEL_GROUP
+        ev = kernel(prg, "prune_tiles")(q, *rng, scene.quadrics, scene.tape, np.int32(n), view_buf, *bound, arena,
+                                        np.uint32(caps[0]), cbuf, tiles, tile_z)
+        cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
+        return (arena, ev), [int(counters[0])]
+
+    (tile_arena, ev_tiles), _ = _grown(run_tiles, [max(nt * min(n + 1, 64), 4 * (n + 1))])
+    tile_rows = int(counters[2])
+    stats = {"tile_tape_mean": tile_rows / nt, "tile_leaves_max": int(counters[3]),
+             "prune_evaluations": int(counters[1])}
+    work = -(-nt // 64) * 64
+    scratch = upload(context, np.zeros(tile_rows + nt + 1, dtype=TAPE_OP_DTYPE), writable=True)
+
+    def run_slabs(caps):
+        arena = upload(context, np.zeros(caps[0], dtype=TAPE_OP_DTYPE), writable=True)
+        qlist = upload(context, np.zeros(caps[1], dtype=np.int32), writable=True)
+        cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
+        ev = kernel(prg, "prune_slabs")(q, (work,), (64,), scene.quadrics, tile_arena, tiles, tile_z, view_buf,
+                                        *bound, np.int32(nt), scratch, np.uint32(tile_rows + nt + 1), arena,
+                                        np.uint32(caps[0]), qlist, np.uint32(caps[1]), cbuf, slabs)
+        cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
+        return (arena, qlist, ev), [int(counters[0]), int(counters[1])]
+
+    guess = tile_rows + 16 * nt + n  # slab tapes are short; the overflow protocol grows the rest
+    (arena, qlist, ev_slabs), _ = _grown(run_slabs, [guess, guess])
+    stats.update(slab_tape_mean=int(counters[3]) / (nt * SLABS), slab_quadrics_max=int(counters[4]),
+                 prune_evaluations=stats["prune_evaluations"] + int(counters[2]))
+    return (arena, qlist, tile_z, slabs), int(counters[4]), (ev_tiles, ev_slabs), stats
+
+
+def local_quadrics(n: int) -> int:
+    """The ray kernel's private list size for slabs of up to ``n`` quadrics: a power of two
+    (one kernel build per size), at least 64 (so a view that moves does not rebuild it)."""
+    return max(64, 1 << max(0, int(n) - 1).bit_length())
+
+
 def trace(context, tape, camera, shading: Shading | None = None, precision="auto", origin=None) -> Image:
     """Ray trace ``tape`` from ``camera`` on ``context``."""
     import pyopencl as cl
@@ -96,44 +181,20 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     prims = np.empty((H, W), dtype=np.int32)
     rgba = np.empty((H, W, 4), dtype=np.uint8)
     outs = [device_buffer(context, a.nbytes, "image", False, "render a smaller image") for a in (depth, ids, prims, rgba)]
+    bound = _bound_args(tape, packed, real)
     t_build = time.perf_counter()
-    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE}
+    bufs, nq_max, prune_events, prune_stats = prune_tiles(context, scene, view_buf, bound, W, H, real)
+    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "LOCAL_QUADRICS": local_quadrics(nq_max)}
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()
-
-    # per-tile pruning, with the overflow protocol of the sampler's arena
-    ntx, nty = -(-W // TILE), -(-H // TILE)
-    n = len(packed.tape)
-    # padded by the rounding that moving the quadrics to the origin leaves (relative to the
-    # world coordinates): a hit on a face of the bound must stay inside it
-    pad = 1e-9 * (float(np.abs(tape.bound).max()) + float(np.linalg.norm(tape.bound[1] - tape.bound[0])))
-    lo = (tape.bound[0] - packed.origin - pad).astype(real)
-    hi = (tape.bound[1] - packed.origin + pad).astype(real)
-    real3 = cl.cltypes.double3 if real == np.float64 else cl.cltypes.float3
-    blo = np.array([(lo[0], lo[1], lo[2], 0)], dtype=real3)[0]
-    bhi = np.array([(hi[0], hi[1], hi[2], 0)], dtype=real3)[0]
-    tiles = upload(context, np.zeros(2 * ntx * nty, dtype=np.int32), writable=True)
-    counters = np.zeros(3, dtype=np.uint32)
-    cap = max(ntx * nty * min(n + 1, 64), 4 * (n + 1))
-    while True:
-        # from host memory: Oclgrind's uninitialized-value checker loses rows written into a
-        # fresh buffer and read back by the same work-item
-        arena = upload(context, np.zeros(cap, dtype=packed.tape.dtype), writable=True)
-        counters[:] = 0
-        counters_buf = upload(context, counters, writable=True)  # host data, not a write into a used buffer
-        tile_range = ((-(-ntx // 4) * 4, -(-nty // 4) * 4), (4, 4))  # a fixed group shape, as PIXEL_GROUP
-        ev_prune = kernel(prg, "prune_tiles")(q, *tile_range, scene.quadrics, scene.tape, np.int32(n), view_buf,
-                                              blo, bhi, arena, np.uint32(cap), counters_buf, tiles)
-        cl.enqueue_copy(q, counters, counters_buf, wait_for=[ev_prune])
-        if int(counters[0]) <= cap:
-            break
-        cap = int(counters[0]) + int(counters[0]) // 2
-    ev = kernel(prg, "raytrace")(q, *pixel_range(W, H), scene.quadrics, arena, blo, bhi, tiles, *scene.colour_args(),
-                                 view_buf, *outs)
+    arena, qlist, tile_z, slabs = bufs
+    ev = kernel(prg, "raytrace")(q, *pixel_range(W, H), scene.quadrics, arena, qlist, *bound, tile_z, slabs,
+                                 *scene.colour_args(), view_buf, *outs)
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev])
     q.finish()
     t_end = time.perf_counter()
+    prune_s = sum(event_seconds(e) for e in prune_events)
     stats = {
         "method": "raytrace",
         "normal_form": tape.shape,
@@ -142,12 +203,12 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
         "width": W,
         "height": H,
         "quadrics": tape.n_quadrics,
-        "tape_instructions": int(n),
-        "tile_tape_mean": int(counters[2]) / (ntx * nty),
-        "prune_evaluations": int(counters[1]),
+        "tape_instructions": int(len(packed.tape)),
+        "slabs": SLABS,
+        **prune_stats,
         "covered_pixels": int((ids >= 0).sum()),
-        "prune_s": event_seconds(ev_prune),
-        "kernel_s": event_seconds(ev) + event_seconds(ev_prune),
+        "prune_s": prune_s,
+        "kernel_s": event_seconds(ev) + prune_s,
         "build_s": t_built - t_build,
         "total_s": t_end - t_start,
     }

@@ -82,9 +82,14 @@ def eye_inside(tape, eye) -> bool:
     return bool(contains(tape.ops, tape.quadrics, np.asarray(eye, dtype=np.float64).reshape(1, 3))[0])
 
 
+#: the per-pixel outputs of a render, in kernel order (:class:`~clcsg.rendering.image.Image`)
+OUTPUTS = ("depth", "ids", "primitives", "rgba")
+
+
 def rasterize(context, samples, camera, shading=None, precision="auto", surface_aligned=True,
-              backface_culling=True, stats=True) -> Image:
-    """Render ``samples`` from ``camera`` on ``context``."""
+              backface_culling=True, stats=True, read=OUTPUTS) -> Image:
+    """Render ``samples`` from ``camera`` on ``context``; ``read``: the outputs copied back
+    (others are None in the Image; ``rgba`` and ``ids`` always)."""
     import pyopencl as cl
 
     require_int64_atomics(context, "the splat renderer (64-bit atom_min depth test)")
@@ -132,28 +137,23 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     ev_resolve = kernel(resolve_prg, "resolve")(
         q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, *outs,
         wait_for=events[-1:])
-    for a, b in zip((depth, ids, prims, rgba), outs):
-        cl.enqueue_copy(q, a, b, wait_for=[ev_resolve])
+    wanted = set(read) | {"ids", "rgba"}
+    for name, a, b in zip(OUTPUTS, (depth, ids, prims, rgba), outs):
+        if name in wanted:
+            cl.enqueue_copy(q, a, b, wait_for=[ev_resolve])
+    depth = depth if "depth" in wanted else None
+    prims = prims if "primitives" in wanted else None
     cl.enqueue_copy(q, counters, cnt_buf, wait_for=events[-1:])
     q.finish()
     t_end = time.perf_counter()
 
     covered = int((ids >= 0).sum())
     st = {
-        "method": "splat",
-        "device": context.info.describe(),
-        "precision": "double" if real == np.float64 else "float",
-        "width": W,
-        "height": H,
-        "samples": n,
-        "radius": float(samples.radius),
-        "surface_aligned": bool(surface_aligned),
-        "backface_culling": culling,
-        "covered_pixels": covered,
-        "splat_s": event_seconds(events[-1]) if n else 0.0,
-        "resolve_s": event_seconds(ev_resolve),
-        "build_s": t_built - t_build,
-        "total_s": t_end - t_start,
+        "method": "splat", "device": context.info.describe(), "precision": "double" if real == np.float64 else "float",
+        "width": W, "height": H, "samples": n, "radius": float(samples.radius),
+        "surface_aligned": bool(surface_aligned), "backface_culling": culling, "covered_pixels": covered,
+        "splat_s": event_seconds(events[-1]) if n else 0.0, "resolve_s": event_seconds(ev_resolve),
+        "build_s": t_built - t_build, "total_s": t_end - t_start,
     }
     if culling_note:
         st["backface_culling_note"] = culling_note

@@ -57,13 +57,15 @@ def downsample(rgba: np.ndarray, n: int, gamma: float = 2.2) -> np.ndarray:
     return out
 
 
-def supersample(render_at, camera, aa: int, gamma: float = 2.2) -> Image:
+def supersample(render_at, camera, aa: int, gamma: float = 2.2, centre: bool = True) -> Image:
     """The image of ``camera`` with ``aa`` x ``aa`` supersampling.
 
     ``render_at(camera) -> Image`` renders one view (the splat renderer or the ray tracer on
-    fixed samples and options).  ``aa = 1`` is a plain render.  ``Image.stats`` are the
-    supersampled render's, with ``aa``, ``width`` / ``height`` of the result and
-    ``supersample_s`` (the whole call).
+    fixed samples and options).  ``aa = 1`` is a plain render.  Depth and ids are those of the
+    pixel centres: for even ``aa`` a plain render of them, unless ``centre`` is False (then the
+    subpixel just below and right of the centre: a frame that only shows the colours).
+    ``Image.stats`` are the supersampled render's, with ``aa``, ``width`` / ``height`` of the
+    result and ``supersample_s`` (the whole call).
     """
     n = check_aa(aa, camera.width, camera.height)
     if n == 1:
@@ -72,9 +74,10 @@ def supersample(render_at, camera, aa: int, gamma: float = 2.2) -> Image:
     W, H = camera.width, camera.height
     big = render_at(camera.resized(W * n, H * n))
     rgba = downsample(big.rgba, n, gamma)
-    if n % 2:
+    if n % 2 or not centre:
         c = n // 2
-        depth, ids = big.depth[c::n, c::n].copy(), big.ids[c::n, c::n].copy()
+        depth = None if big.depth is None else big.depth[c::n, c::n].copy()
+        ids = big.ids[c::n, c::n].copy()
         prims = None if big.primitives is None else big.primitives[c::n, c::n].copy()
     else:
         plain = render_at(camera)

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..rendering.camera import Camera
+from ..rendering.supersample import MAX_SUBPIXELS, check_aa
 
 #: the largest frame side the page may ask for
 MAX_SIDE = 4096
@@ -32,14 +33,14 @@ MAX_ELEVATION = 89.5
 #: JPEG quality of the frames sent while dragging
 JPEG_QUALITY = 85
 #: seconds a resting frame may spend on supersampling (its aa is the largest that fits)
-REST_BUDGET = 0.4
+REST_BUDGET = 1.0
 #: the resting frame's supersampling factors, tried from the largest
 REST_AA = (3, 2)
-#: seconds an exact ray traced frame may take: past it the frame is traced at a smaller size
-#: (the tree ray tracer takes minutes for a large view of a complex solid)
+#: seconds an exact ray traced frame may take: past it (predicted from the model's last exact
+#: frame) the frame is traced at a smaller size
 RAYTRACE_BUDGET = 2.0
-#: the probe that estimates the ray tracer's time has 1/PROBE of each side
-PROBE = 16
+#: a reduced exact frame keeps at least 1/MIN_SCALE of each side
+MIN_SCALE = 16
 
 
 def _number(view, key, lo=-math.inf, hi=math.inf) -> float:
@@ -99,47 +100,48 @@ def fitted_view(samples, width, height) -> dict:
     return view_of(Camera.fit(subject, _side(width, "width"), _side(height, "height")))
 
 
-def render(context, model, camera, method: str = "splat", aa: int = 1):
+def render(context, model, camera, method: str = "splat", aa: int = 1, complete: bool = True):
     """The :class:`~clcsg.Image` of ``model`` from ``camera``: ``method`` ``"splat"`` (its
-    samples, device buffers uploaded once per model) or ``"raytrace"`` (its tape)."""
+    samples, device buffers uploaded once per model) or ``"raytrace"`` (its tape).
+    ``complete=False``: a frame for the page (splats: colour and ids read back, no depth or
+    primitives; supersampled ids from a subpixel, no extra plain render)."""
     from ..rendering.raytracer import trace
-    from ..rendering.splat import rasterize
+    from ..rendering.splat import OUTPUTS, rasterize
     from ..rendering.supersample import supersample
     from ..rendering.view import Shading
 
     shading = Shading()
     if method == "splat":
         def at(cam):
-            return rasterize(context, model.samples, cam, shading, stats=False)
+            return rasterize(context, model.samples, cam, shading, stats=False,
+                             read=OUTPUTS if complete else ("rgba", "ids"))
     elif method == "raytrace":
         def at(cam):
             return trace(context, model.tape, cam, shading)
     else:
         raise UsageError(f"method must be 'splat' or 'raytrace', got {method!r}")
-    return supersample(at, camera, aa, shading.gamma)
+    return supersample(at, camera, aa, shading.gamma, centre=complete)
 
 
-def raytrace_camera(context, model, camera, budget: float = RAYTRACE_BUDGET) -> Camera:
+def raytrace_camera(model, camera, budget: float = RAYTRACE_BUDGET) -> Camera:
     """``camera``, or the same view at the largest smaller size whose exact ray tracing should
-    fit ``budget`` seconds.  The prediction is a fixed cost (a 1-pixel trace, timed after a
-    first one that builds the program) plus a cost per pixel (a probe at 1/PROBE of each
-    side)."""
+    fit ``budget`` seconds, predicted from the model's last exact frame (its seconds per
+    pixel); the first exact frame of a model is traced at full size."""
+    rate = getattr(model, "raytrace_rate", None)
     w, h = camera.width, camera.height
-    probe = camera.resized(max(1, w // PROBE), max(1, h // PROBE))
-    one = camera.resized(1, 1)
-    times = []
-    for cam in (one, one, probe):
-        t0 = time.perf_counter()
-        render(context, model, cam, "raytrace")
-        times.append(time.perf_counter() - t0)
-    fixed = times[1]
-    per_pixel = max(times[2] - fixed, 0.0) / max(probe.width * probe.height - 1, 1)
-    if fixed + per_pixel * w * h <= budget:
+    if not rate or rate * w * h <= budget:
         return camera
-    # timing noise can make the probe no slower than one pixel: then only the fixed cost is
-    # known, and past the budget the smallest (probe) size is the answer
-    scale = math.sqrt(max(budget - fixed, 0.0) / per_pixel / (w * h)) if per_pixel > 0 else 0.0
-    return camera.resized(max(probe.width, int(w * scale)), max(probe.height, int(h * scale)))
+    scale = math.sqrt(budget / (rate * w * h))
+    if scale >= 0.9:  # timing noise: not worth a smaller frame
+        return camera
+    return camera.resized(max(1, w // MIN_SCALE, int(w * scale)), max(1, h // MIN_SCALE, int(h * scale)))
+
+
+def _exact_rest_aa(model, camera, budget: float = REST_BUDGET) -> int:
+    """The supersampling of a resting exact frame: :func:`rest_aa` of its predicted time."""
+    rate = getattr(model, "raytrace_rate", None)
+    aa = rest_aa(1e3 * rate * camera.width * camera.height, budget) if rate else 1
+    return aa if camera.width * camera.height * aa * aa <= MAX_SUBPIXELS else 1
 
 
 def encode(rgba: np.ndarray, fmt: str) -> bytes:
@@ -164,9 +166,13 @@ def frame(context, model, request: dict, aa: int = 1) -> tuple[bytes, dict]:
     method = request.get("method", "splat")
     full = (cam.width, cam.height)
     if method == "raytrace":
-        cam = raytrace_camera(context, model, cam)
-    img = render(context, model, cam, method, aa)
+        cam = raytrace_camera(model, cam)
+        if aa == 1 and request.get("quality") == "rest" and (cam.width, cam.height) == full:
+            aa = _exact_rest_aa(model, cam)
+    img = render(context, model, cam, method, aa, complete=False)
     t1 = time.perf_counter()
+    if method == "raytrace":
+        model.raytrace_rate = (t1 - t0) / (cam.width * cam.height * aa * aa)
     fmt = "jpeg" if request.get("quality") == "drag" else "png"
     data = encode(img.rgba, fmt)
     t2 = time.perf_counter()
@@ -218,8 +224,6 @@ def download(context, model, query, kind: str) -> tuple[bytes, str]:
     except ValueError:
         raise UsageError("view: not valid JSON") from None
     cam = camera_of(view, query.get("width"), query.get("height"))
-    from ..rendering.supersample import check_aa
-
     aa = check_aa(_side(query.get("aa", 1), "aa"), cam.width, cam.height)
     img = render(context, model, cam, query.get("method", "splat"), aa)
     if kind == "png":

@@ -1,0 +1,121 @@
+/* The exact ray tracer's spatial structure (driven by clcsg/rendering/raytracer.py): the tape
+ * pruned per screen tile, then per depth slab of each tile, so a ray meets only the leaves near
+ * the part of it being walked (far parts of the solid do not ride along with near ones).
+ *
+ * prune_tiles: one work-item per TILE x TILE pixel tile.  The tile's rays, between the depths
+ * z0, z1 (along the view's forward axis) at which they can meet the scene bound, fill the
+ * frustum hull of 8 points (the tile's corner directions d, whose forward component is 1,
+ * scaled to z0 and z1); the tape pruned over that box cut by the scene bound is written to the
+ * tile arena, and [z0, z1] to the tile's depth range.
+ *
+ * prune_slabs: one work-item per tile: the tile's range split into SLABS equal depth slabs, the
+ * tile's tape pruned over each slab's frustum box (in a scratch block) and copied compactly to
+ * the slab arena; its leaves are renumbered to the slab's own quadric list (leaf row a = index
+ * into that list), so the ray kernel can keep one ray-quadric solve per listed quadric in
+ * private memory.
+ *
+ * Both follow the sampler's overflow protocol: rows reserved with an atomic add and written
+ * only below the capacity; the host grows the buffers and re-runs.
+ */
+#include "tiles.h"
+
+__kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
+                          __global const view_rec *view, real3 blo, real3 bhi,
+                          __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
+                          __global int2 *tiles, __global real2 *tile_z)
+{
+    int tx = get_global_id(0), ty = get_global_id(1);
+    int ntx = (view->width + TILE - 1) / TILE, nty = (view->height + TILE - 1) / TILE;
+    if (tx >= ntx || ty >= nty) return;
+    real3 e = view_eye(view), fw = vload3(0, view->forward);
+    real z0 = INFINITY, z1 = -INFINITY; /* depth range of the bound along the forward axis */
+    for (int m = 0; m < 8; ++m) {
+        real3 c = (real3)((m & 1) ? bhi.x : blo.x, (m & 2) ? bhi.y : blo.y, (m & 4) ? bhi.z : blo.z);
+        real z = dot(c - e, fw);
+        z0 = fmin(z0, z);
+        z1 = fmax(z1, z);
+    }
+    z0 = fmax(z0, (real)0);
+    int tile = ty * ntx + tx;
+    tiles[tile] = (int2)(0, 0);
+    tile_z[tile] = (real2)(z0, z1);
+    prune_region g;
+    if (!(z1 > 0) || !tile_box(view, tx, ty, z0, z1, blo, bhi, &g)) return;
+    uint evals = 0;
+    uint base = atomic_add(&counters[0], (uint)(n + 1));
+    if (base + (uint)(n + 1) > cap_arena) return;
+    int first, count;
+    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
+    atomic_add(&counters[1], evals);
+    atomic_add(&counters[2], (uint)count);
+    uint leaves = 0;
+    for (int k = 0; k < count; ++k) leaves += arena[base + first + k].op == OP_LEAF;
+    atomic_max(&counters[3], leaves);
+    tiles[tile] = (int2)((int)base + first, count);
+}
+
+/* Renumber the leaves of rows [0, n) to an own list of quadrics (written to qlist, at most n);
+ * returns the list's length. */
+inline int slab_quadrics(__global tape_op *rows, int n, __global int *qlist)
+{
+    int nq = 0;
+    for (int k = 0; k < n; ++k) {
+        if (rows[k].op != OP_LEAF) continue;
+        int q = rows[k].a, m = 0;
+        while (m < nq && qlist[m] != q) ++m;
+        if (m == nq) qlist[nq++] = q;
+        rows[k].a = m;
+    }
+    return nq;
+}
+
+/* Slab s of a tile: its tape pruned from the tile's tape t (n rows) into scratch (n + 1 rows),
+ * then copied compactly to the slab arena with its own quadric list.  Returns the record
+ * (first row, rows, first listed quadric, quadrics); rows = 0 where the slab misses the bound
+ * or the solid has no surface in it (or the arena is full: the host sees it in the counters). */
+inline int4 prune_slab(__global const quadric_rec *qs, __global const tape_op *t, int n, const prune_region *g,
+                       __global tape_op *scratch, __global tape_op *arena, uint cap_arena, __global int *qlist,
+                       uint cap_qlist, __global volatile uint *counters)
+{
+    uint evals = 0;
+    int first, count;
+    tape_prune(t, n, qs, g, -1, scratch, &first, &count, &evals);
+    atomic_add(&counters[2], evals);
+    if (count == 1 && scratch[first].op == OP_CONST) return (int4)(0);
+    uint base = atomic_add(&counters[0], (uint)count);
+    uint qbase = atomic_add(&counters[1], (uint)count);
+    if (base + (uint)count > cap_arena || qbase + (uint)count > cap_qlist) return (int4)(0);
+    for (int k = 0; k < count; ++k) arena[base + k] = scratch[first + k];
+    int nq = slab_quadrics(arena + base, count, qlist + qbase);
+    atomic_add(&counters[3], (uint)count);
+    atomic_max(&counters[4], (uint)nq);
+    return (int4)((int)base, count, (int)qbase, nq);
+}
+
+/* One work-item per tile: slabs[tile * SLABS + s] for its SLABS slabs (prune_slab), through a
+ * scratch block of the tile tape's length + 1 rows reserved in `scratch`. */
+__kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op *tile_arena,
+                          __global const int2 *tiles, __global const real2 *tile_z,
+                          __global const view_rec *view, real3 blo, real3 bhi, int n_tiles,
+                          __global tape_op *scratch, uint cap_scratch, __global tape_op *arena, uint cap_arena,
+                          __global int *qlist, uint cap_qlist, __global volatile uint *counters,
+                          __global int4 *slabs)
+{
+    int tile = get_global_id(0);
+    if (tile >= n_tiles) return;
+    for (int s = 0; s < SLABS; ++s) slabs[tile * SLABS + s] = (int4)(0);
+    int ntx = (view->width + TILE - 1) / TILE;
+    int2 tt = tiles[tile];
+    __global const tape_op *tape = tile_arena + tt.x;
+    int n = tt.y;
+    if (n == 0 || (n == 1 && tape[0].op == OP_CONST)) return;
+    uint sbase = atomic_add(&counters[5], (uint)(n + 1));
+    if (sbase + (uint)(n + 1) > cap_scratch) return;
+    for (int s = 0; s < SLABS; ++s) {
+        real2 zs = slab_range(tile_z[tile], s);
+        prune_region g;
+        if (!tile_box(view, tile % ntx, tile / ntx, zs.x, zs.y, blo, bhi, &g)) continue;
+        slabs[tile * SLABS + s] = prune_slab(qs, tape, n, &g, scratch + sbase, arena, cap_arena, qlist, cap_qlist,
+                                             counters);
+    }
+}

@@ -1,0 +1,47 @@
+/* Tiles and depth slabs of the exact ray tracer, shared by its pruning kernels (tiles.cl) and
+ * the ray kernel (raytrace.cl). */
+#ifndef CLCSG_TILES_H
+#define CLCSG_TILES_H
+#include "tape.h"
+#include "shade.h"
+
+#ifndef TILE
+#error "TILE (the tile size in pixels) is set by the driver, clcsg/rendering/raytracer.py"
+#endif
+#ifndef SLABS
+#error "SLABS (depth slabs per tile) is set by the driver, clcsg/rendering/raytracer.py"
+#endif
+
+/* Depth range [za, zb] of slab s of a tile's range z = [z0, z1] (equal slabs; the last ends
+ * at z1 exactly, so the slabs cover the range). */
+inline real2 slab_range(real2 z, int s)
+{
+    real dz = (z.y - z.x) / SLABS;
+    return (real2)(z.x + s * dz, s + 1 == SLABS ? z.y : z.x + (s + 1) * dz);
+}
+
+/* The box around the frustum of tile (tx, ty) between depths z0 and z1, cut by [blo, bhi];
+ * false if they do not meet. */
+inline bool tile_box(__global const view_rec *view, int tx, int ty, real z0, real z1, real3 blo, real3 bhi,
+                     prune_region *g)
+{
+    real3 e = view_eye(view);
+    int i0 = ty * TILE, i1 = min(i0 + TILE, view->height) - 1;
+    int j0 = tx * TILE, j1 = min(j0 + TILE, view->width) - 1;
+    real3 lo = (real3)(INFINITY), hi = (real3)(-INFINITY);
+    for (int m = 0; m < 4; ++m) {
+        int i = (m & 1) ? i1 : i0, j = (m & 2) ? j1 : j0;
+        real3 d = vload3(0, view->d00) + (real)j * vload3(0, view->dx) + (real)i * vload3(0, view->dy);
+        real3 p0 = e + z0 * d, p1 = e + z1 * d;
+        lo = fmin(lo, fmin(p0, p1));
+        hi = fmax(hi, fmax(p0, p1));
+    }
+    lo = fmax(lo, blo);
+    hi = fmin(hi, bhi);
+    if (any(lo > hi)) return false;
+    real3 h = (real)0.5 * (hi - lo);
+    *g = (prune_region){(real)0.5 * (lo + hi), (real3)(h.x, 0, 0), (real3)(0, h.y, 0), (real3)(0, 0, h.z), 0};
+    return true;
+}
+
+#endif
