@@ -12,6 +12,7 @@ from itertools import combinations
 
 import numpy as np
 
+from ..model.csg import _vec3
 from ..model.quadric import Quadric, frame_z_to
 from .term_bounds import FAR, term_box
 
@@ -352,3 +353,75 @@ def primitive_box(quadrics, region=None):
     return literals_box([(q, 1) for q in quadrics], region)
 
 
+
+
+def kind_boxes(nodes, matrices):
+    """Exact boxes (lo, hi) (n, 3) of primitives ``nodes`` under affine ``matrices`` (n, 4, 4)
+    in closed form, padded as :func:`literals_box` pads, for boxes, spheres, ellipsoids,
+    finite cylinders and cone frusta (in numpy batches per kind), and a mask of the rows
+    computed (the other kinds: use :func:`primitive_box`).
+
+    Under x -> L x + t a box's half-extents are |L| s / 2; an ellipsoid's along x_k the norm of
+    row k of L diag(radii); a disc of radius r normal to the unit axis w (a cylinder's or a
+    frustum's end) has half-extent r sqrt(|L_k|^2 - (L_k . w)^2) along x_k, and a cylinder or
+    frustum is the convex hull of its two end discs."""
+    n = len(nodes)
+    m = np.asarray(matrices, dtype=np.float64).reshape(n, 4, 4)
+    lin, t = m[:, :3, :3], m[:, :3, 3]
+    lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+    by_kind: dict = {}
+    for k, node in enumerate(nodes):
+        by_kind.setdefault(node.kind, []).append(k)
+    for kind, rows in by_kind.items():
+        rows = np.array(rows)
+        params = [nodes[k].params for k in rows]
+        if kind == "box":
+            s = np.array([_vec3(p.get("size", 1.0), "box size") for p in params])
+            c = np.array([_vec3(p.get("center", (0, 0, 0)), "box center") for p in params])
+            half = 0.5 * np.einsum("nij,nj->ni", np.abs(lin[rows]), s)
+            mid = np.einsum("nij,nj->ni", lin[rows], c) + t[rows]
+            lo[rows], hi[rows] = mid - half, mid + half
+        elif kind in ("sphere", "ellipsoid"):
+            key = "radius" if kind == "sphere" else "radii"
+            r = np.array([_vec3(p.get(key, 1.0), "radii") for p in params])
+            c = np.array([_vec3(p.get("center", (0, 0, 0)), "center") for p in params])
+            a = lin[rows] * r[:, None, :]
+            half = np.sqrt((a * a).sum(axis=2))
+            mid = np.einsum("nij,nj->ni", lin[rows], c) + t[rows]
+            lo[rows], hi[rows] = mid - half, mid + half
+        elif kind in ("cylinder", "cone"):
+            lo[rows], hi[rows] = _frusta_boxes(kind, params, lin[rows], t[rows])
+    done = np.isin(np.array([node.kind for node in nodes]), list(_CLOSED_FORM)) if n else np.zeros(0, bool)
+    size = 1.0 + np.abs(np.where(done[:, None], np.concatenate([lo, hi], axis=1), 0.0)).max(axis=1, initial=0.0)
+    pad = _FEASIBLE * size
+    return lo - pad[:, None], hi + pad[:, None], done
+
+
+_CLOSED_FORM = ("box", "sphere", "ellipsoid", "cylinder", "cone")
+
+
+def _frusta_boxes(kind, params, lin, t):
+    """Boxes of finite cylinders or cone frusta (the hull of their two end discs)."""
+    h = np.array([float(p.get("height", 1.0)) for p in params])
+    if kind == "cylinder":
+        r = np.array([float(p.get("radius", 1.0)) for p in params])
+        r1 = r2 = r
+    else:
+        r1 = np.array([float(p.get("r1", 1.0)) for p in params])
+        r2 = np.array([float(p.get("r2", 0.0)) for p in params])
+    w = np.array([_vec3(p.get("axis", (0, 0, 1)), "axis") for p in params])
+    w = w / np.linalg.norm(w, axis=1)[:, None]
+    c = np.array([_vec3(p.get("center", (0, 0, 0)), "center") for p in params])
+    lw = np.einsum("nij,nj->ni", lin, w)
+    half = np.sqrt(np.maximum((lin * lin).sum(axis=2) - lw * lw, 0.0))
+    mid = np.einsum("nij,nj->ni", lin, c) + t
+    e1, e2 = mid - 0.5 * h[:, None] * lw, mid + 0.5 * h[:, None] * lw
+    lo = np.minimum(e1 - r1[:, None] * half, e2 - r2[:, None] * half)
+    hi = np.maximum(e1 + r1[:, None] * half, e2 + r2[:, None] * half)
+    return lo, hi
+
+
+def kind_box(node, matrix):
+    """:func:`kind_boxes` of one primitive: (lo, hi), or None for a kind without a closed form."""
+    lo, hi, done = kind_boxes([node], np.asarray(matrix, dtype=np.float64)[None])
+    return (lo[0], hi[0]) if done[0] else None
