@@ -149,6 +149,9 @@ class Tape:
     shape: str = "tree"  # or "dnf"
     stats: dict = field(default_factory=dict)
     empty: bool = False
+    #: (builder, root, {expression: [(instance, negated)]}) of a tree tape: the expression DAG
+    #: the tape was emitted from, for pruning it per region (:mod:`clcsg.compile.root_tapes`)
+    dag: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_quadrics(self) -> int:
@@ -342,9 +345,10 @@ def _instance_boxes(instances: list, table: QuadricTable) -> None:
             inst.box = term_box(quads)
 
 
-def _expression(shape: Shape, world: _WorldLiterals, b: _Builder) -> int:
+def _expression(shape: Shape, world: _WorldLiterals, b: _Builder, prims: list | None = None) -> int:
     """The root expression id of ``shape`` (iterative post-order walk, memoized on
-    (node, transform, negated))."""
+    (node, transform, negated)); ``prims`` collects (node id, transform bytes, negated,
+    expression) of every primitive."""
     memo: dict = {}
     stack = [(shape, np.eye(4), False, False)]
     while stack:
@@ -359,6 +363,8 @@ def _expression(shape: Shape, world: _WorldLiterals, b: _Builder) -> int:
             else:
                 memo[key] = b.combine(_AND, [b.leaf(q, s) for q, s in lits])
             _pair(b, memo, key)
+            if prims is not None:
+                prims.append(key + (memo[key],))
             continue
         kind, kids = _children(node, m, neg)
         keys = [(id(c), cm.tobytes(), cn) for c, cm, cn in kids]
@@ -520,13 +526,25 @@ def compile_shape(shape: Shape, user_bound=None, source: str = "scene", table: Q
     world = _WorldLiterals(table, source)
     instances = instances_of(shape, table, source, world)
     b = _Builder()
-    root = _expression(shape, world, b)
+    prim_keys: list = []
+    root = _expression(shape, world, b, prim_keys)
     ops, n_regs = _emit(b, root)
     depth, dnf_terms = _depth_and_terms(b, root)
     bound, empty = scene_bound(shape, instances, root, user_bound, source)
-    tape = Tape(ops, n_regs, table.matrices(), instances, bound, "tree", empty=empty or root == _FALSE)
+    tape = Tape(ops, n_regs, table.matrices(), instances, bound, "tree", empty=empty or root == _FALSE,
+                dag=(b, root, _primitive_expressions(instances, prim_keys)))
     tape.stats = _tape_stats(tape, depth=depth, dnf_terms=dnf_terms)
     return tape
+
+
+def _primitive_expressions(instances, prim_keys) -> dict:
+    """expression id -> [(instance index, negated)] of the primitives' expressions."""
+    index = {(id(i.node), i.matrix.tobytes()): i.index for i in instances}
+    out: dict = {}
+    for node_id, m, neg, e in prim_keys:
+        if e not in (_TRUE, _FALSE):
+            out.setdefault(e, []).append((index[(node_id, m)], neg))
+    return out
 
 
 def _tape_stats(tape: Tape, **extra) -> dict:

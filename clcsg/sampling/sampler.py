@@ -61,8 +61,9 @@ from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build
 from ..cl.memory import check_allocation, device_buffer, upload
-from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype
+from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
 from ..compile.frames import principal_frame
+from ..compile.root_tapes import root_tapes
 from ..compile.tape import OP_LEAF
 from ..errors import LimitError, UsageError
 from ..model.quadric import Quadric
@@ -113,9 +114,15 @@ def quadric_boxes(tape) -> dict:
     return out
 
 
-def root_tasks(tape, packed, frames):
-    """One task per (quadric, plane, sheet) and its root cell (holding the root tape)."""
-    tasks, cells = [], []
+def root_tasks(tape, packed, frames, radius: float = 0.0):
+    """One task per (quadric, plane, sheet) and its root cell, and the root tape rows.
+
+    Returns (tasks, cells, rows): ``rows`` (TAPE_OP_DTYPE) start the tape arena; they begin
+    with the full tape and continue with each quadric's root tape, pruned primitive by
+    primitive to what can matter within ``radius`` of the patches of that quadric's tasks
+    (:mod:`clcsg.compile.root_tapes`); each root cell's ``tape_first`` / ``tape_count`` point
+    at its quadric's tape."""
+    tasks, cells, regions = [], [], {}
     scale = float(np.abs(tape.bound).max(initial=1.0))
     for q, (lo, hi) in quadric_boxes(tape).items():
         lo, hi = lo - packed.origin, hi - packed.origin
@@ -137,11 +144,53 @@ def root_tasks(tape, packed, frames):
             for sheet in sheets:
                 tasks.append((q, k, sheet, 0, zlo, zhi))
                 cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0, 0, len(tape.ops)))
+                box = _patch_box(f, k, sheet, zlo, zhi) + packed.origin
+                grow = 1.01 * radius + 1e-6 * scale
+                old = regions.get(q)
+                lo_w, hi_w = box.min(axis=0) - grow, box.max(axis=0) + grow
+                regions[q] = (lo_w, hi_w) if old is None else (np.minimum(old[0], lo_w), np.maximum(old[1], hi_w))
+    spans, rows = root_tapes(tape, regions)
+    for c, (q, *_rest) in zip(range(len(cells)), tasks):
+        cells[c] = cells[c][:-2] + spans[q]
     t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
     for n, row in enumerate(tasks):
         t[n] = row
     c = np.array(cells, dtype=cell_dtype(packed.real)) if cells else np.zeros(0, cell_dtype(packed.real))
-    return t, c
+    return t, c, tape_rows(rows)
+
+
+def _quadratic_range(lam, beta, a, b):
+    """Range of lam x^2 + 2 beta x over [a, b]."""
+    xs = [a, b]
+    if lam != 0.0 and a < -beta / lam < b:
+        xs.append(-beta / lam)
+    v = [lam * x * x + 2.0 * beta * x for x in xs]
+    return min(v), max(v)
+
+
+def _patch_box(f, k, sheet, zlo, zhi) -> np.ndarray:
+    """Corners (8, 3), in device coordinates, of a local box holding every point of task
+    (plane k, sheet) of frame ``f`` over its root rectangle: R(x, y) = lam_i x^2 + 2 beta_i x +
+    lam_j y^2 + 2 beta_j y + gamma is separable, so its range over the rectangle is the sum of
+    two 1-D ranges, and the height is t = +-sqrt(-R / lam_k) or -R / (2 beta_k)."""
+    i, j = [m for m in range(3) if m != k]
+    ri = _quadratic_range(f.lam[i], f.beta[i], zlo[i], zhi[i])
+    rj = _quadratic_range(f.lam[j], f.beta[j], zlo[j], zhi[j])
+    r_lo, r_hi = ri[0] + rj[0] + f.gamma, ri[1] + rj[1] + f.gamma
+    if f.lam[k] != 0.0:
+        h = sorted((-r_lo / f.lam[k], -r_hi / f.lam[k]))
+        if h[1] < 0.0:
+            t = (0.0, 0.0)  # no surface over the rectangle: the kernel discards the root cell
+        else:
+            a, b = np.sqrt(max(h[0], 0.0)), np.sqrt(h[1])
+            t = (a, b) if sheet > 0 else (-b, -a)
+    else:
+        t = tuple(sorted((-r_lo / (2.0 * f.beta[k]), -r_hi / (2.0 * f.beta[k]))))
+    eps = 1e-9 * (1.0 + max(abs(t[0]), abs(t[1])))
+    lo, hi = zlo.copy(), zhi.copy()
+    lo[k], hi[k] = t[0] - eps, t[1] + eps
+    z = np.array([[(lo, hi)[(c >> m) & 1][m] for m in range(3)] for c in range(8)])
+    return f.center + z @ f.U.T
 
 
 def estimate_samples(tape, radius: float) -> int:
@@ -271,7 +320,7 @@ def sample(
     packed = pack(tape, real)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
     frames_rec = frame_records(frames, real)
-    tasks, roots = root_tasks(tape, packed, frames)
+    tasks, roots, root_rows = root_tasks(tape, packed, frames, radius)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
              "estimated_samples": est.samples,
@@ -284,7 +333,7 @@ def sample(
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     scene_buf = SceneBuffers(ctx, packed)
     sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity,
-                       estimate_samples(tape, radius), progress, max_levels)
+                       estimate_samples(tape, radius), progress, max_levels, root_rows)
     sub.run()
     t2 = time.perf_counter()
     timings["subdivide_s"] = t2 - t1 - timings["analyse_s"]
@@ -335,7 +384,7 @@ class _Subdivision:
     """The level loop: buffers, the overflow protocol, per-level statistics."""
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
-                 max_levels):
+                 max_levels, root_rows=None):
         self.ctx, self.prg, self.scene = ctx, prg, scene
         self.real = np.dtype(scene.packed.real)
         self.radius, self.floor = radius, floor
@@ -343,13 +392,17 @@ class _Subdivision:
         self.frames = upload(ctx, frames_rec)
         self.tasks = upload(ctx, tasks)
         self.roots = roots
+        # the arena starts with the root tapes (the full tape, then each quadric's)
+        self.root_rows = scene.packed.tape if root_rows is None else root_rows
         self.cdt = cell_dtype(self.real)
         self.sdt = raw_sample_dtype(self.real)
         tape = scene.packed.tape
         cap = tuple(capacity or ())
         self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(4 * len(roots), 4096)
         self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(2 * estimate, 4096)
-        self.cap_arena = max(len(tape) + 2, int(cap[2])) if len(cap) > 2 else max(64 * len(tape), 1 << 16)
+        base = len(self.root_rows)
+        self.cap_arena = (max(base + len(tape) + 2, int(cap[2])) if len(cap) > 2
+                          else max(64 * len(tape), base + 8 * len(tape), 1 << 16))
         self.progress = _Progress(progress, estimate, roots, floor, max_levels)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
@@ -377,9 +430,9 @@ class _Subdivision:
         tape = self.scene.packed.tape
         check_allocation(self.ctx, self.cap_arena * tape.itemsize, "tape arena")
         arena = np.zeros(self.cap_arena, dtype=tape.dtype)
-        arena[:len(tape)] = tape
+        arena[:len(self.root_rows)] = self.root_rows
         self.arena = upload(self.ctx, arena, writable=True)
-        arena_used = len(tape)
+        arena_used = len(self.root_rows)
         cells_in = upload(self.ctx, self.roots, writable=True)
         n_in = len(self.roots)
         cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
