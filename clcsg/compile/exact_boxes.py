@@ -295,21 +295,37 @@ def literals_box(literals, region=None, faces: bool = False):
     # cone around such a slab) proves nothing about compactness, and its size is not the
     # scene's
     finite = bool(np.all(np.abs(np.concatenate([lo, hi])) < 1e-3 * FAR))
-    n_planes = len(owner)
     face = np.empty((n, 2, 3))
     face[:, 0], face[:, 1] = np.inf, -np.inf
     if not quads:
-        if not finite:
-            return result((lo, hi))
-        X, _, _ = _candidates(None, N, D)
-        inside, _, on_p = _feasible(None, N, D, X)
-        if not inside.any():
-            return result((lo, hi))
-        box = meet(_box_of(X, inside), (lo, hi))
-        for col in range(n_planes):
-            face[owner[col]] = meet(_box_of(X, inside & on_p[:, col]), box)
-        return result(box, face)
-    box = (lo, hi)
+        return result(*_planes_box(N, D, owner, (lo, hi), finite, face))
+    box, exact = _quadrics_box(N, D, owner, quads, (lo, hi), finite, face)
+    if is_empty(box):
+        # the exact boxes of the parts do not meet
+        return result(None)
+    return result(box, face) if exact else result(box)
+
+
+def _planes_box(N, D, owner, polytope, finite, face):
+    """(box, face boxes or None) of a polytope of half-spaces only: the vertices' box, each
+    face's from the vertices on it (``face`` is filled in place)."""
+    if not finite:
+        return polytope, None
+    X, _, _ = _candidates(None, N, D)
+    inside, _, on_p = _feasible(None, N, D, X)
+    if not inside.any():
+        return polytope, None
+    box = meet(_box_of(X, inside), polytope)
+    for col in range(len(owner)):
+        face[owner[col]] = meet(_box_of(X, inside & on_p[:, col]), box)
+    return box, face
+
+
+def _quadrics_box(N, D, owner, quads, polytope, finite, face):
+    """(box, exact) of the set with quadratic literals ``quads``: each quadric cut by all the
+    half-spaces bounded exactly and the boxes intersected; ``exact`` (one quadric, bounded
+    exactly) when ``face`` has been filled with the face boxes."""
+    box = polytope
     single = len(quads) == 1
     exact_any = False
     for j, M in quads:
@@ -319,27 +335,21 @@ def literals_box(literals, region=None, faces: bool = False):
                 continue
         elif not single:
             # another quadric may be what bounds the set: add the polytope's box
-            bp = _split_literals(_box_literals((lo, hi)))
+            bp = _split_literals(_box_literals(polytope))
             NN, DD = np.vstack([N, bp[0]]), np.concatenate([D, bp[1]])
         X, con_q, con_p = _candidates(M, NN, DD)
         inside, on_q, on_p = _feasible(M, NN, DD, X)
         if not inside.any():
             continue
         exact_any = True
-        qbox = _box_of(X, inside)
-        box = meet(box, qbox)
+        box = meet(box, _box_of(X, inside))
         if single:
             on_q |= con_q
             on_p = on_p | con_p
             face[j] = meet(_box_of(X, inside & on_q), box)
-            for col in range(n_planes):
+            for col in range(len(owner)):
                 face[owner[col]] = meet(_box_of(X, inside & on_p[:, col]), box)
-    if is_empty(box):
-        # the exact boxes of the parts do not meet
-        return result(None)
-    if not (single and exact_any):
-        return result(box)
-    return result(box, face)
+    return box, single and exact_any
 
 
 def primitive_box(quadrics, region=None):
