@@ -431,6 +431,56 @@ def _frusta_boxes(kind, params, lin, t):
     return lo, hi
 
 
+def kind_face_boxes(nodes, matrices, lo, hi, done):
+    """Per primitive of :func:`kind_boxes` (``lo``, ``hi``, ``done`` its results) the boxes of
+    its faces, one per literal in the primitive's order ((k, 2, 3) arrays; None where
+    ``done`` is False): a box's faces are its six rectangles; a sphere's or ellipsoid's
+    surface, a cylinder's or frustum's side span the whole box; the caps are the end discs."""
+    out = [None] * len(nodes)
+    for k, node in enumerate(nodes):
+        if not done[k]:
+            continue
+        box = np.array([lo[k], hi[k]])
+        m = np.asarray(matrices[k], dtype=np.float64)
+        lin, t = m[:3, :3], m[:3, 3]
+        p = node.params
+        n_lits = len(node.quadrics())
+        if node.kind == "box":
+            s = _vec3(p.get("size", 1.0), "box size")
+            c = _vec3(p.get("center", (0, 0, 0)), "box center")
+            faces = []
+            for axis in range(3):
+                for side in (1, -1):  # the order of the box's literals: +e_k, then -e_k
+                    half = np.abs(lin) @ np.where(np.arange(3) == axis, 0.0, s / 2)
+                    mid = lin @ (c + side * s[axis] / 2 * np.eye(3)[axis]) + t
+                    faces.append((mid - half, mid + half))
+            out[k] = _padded(np.array(faces))
+        elif node.kind in ("cylinder", "cone") and n_lits == 3:
+            h = float(p.get("height", 1.0))
+            if node.kind == "cylinder" or float(p.get("r1", 1.0)) == float(p.get("r2", 0.0)):
+                r1 = r2 = float(p.get("radius", p.get("r1", 1.0)))
+            else:
+                r1, r2 = float(p.get("r1", 1.0)), float(p.get("r2", 0.0))
+            w = _vec3(p.get("axis", (0, 0, 1)), "axis")
+            w = w / np.linalg.norm(w)
+            lw = lin @ w
+            half = np.sqrt(np.maximum((lin * lin).sum(axis=1) - lw * lw, 0.0))
+            mid = lin @ _vec3(p.get("center", (0, 0, 0)), "center") + t
+            top, bottom = mid + 0.5 * h * lw, mid - 0.5 * h * lw
+            caps = np.array([(top - r2 * half, top + r2 * half), (bottom - r1 * half, bottom + r1 * half)])
+            out[k] = np.concatenate([box[None], _padded(caps)])
+        elif n_lits == 1:
+            out[k] = box[None]
+    return out
+
+
+def _padded(boxes):
+    """Boxes (k, 2, 3) padded as :func:`_box_of` pads."""
+    size = 1.0 + np.abs(boxes).reshape(len(boxes), -1).max(axis=1)
+    pad = _FEASIBLE * size[:, None]
+    return np.stack([boxes[:, 0] - pad, boxes[:, 1] + pad], axis=1)
+
+
 def kind_box(node, matrix):
     """:func:`kind_boxes` of one primitive: (lo, hi), or None for a kind without a closed form."""
     lo, hi, done = kind_boxes([node], np.asarray(matrix, dtype=np.float64)[None])

@@ -44,7 +44,7 @@ import numpy as np
 from ..errors import ParameterError, SceneError, UnboundedError
 from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.quadric import COEFFICIENT_INDEX, Quadric
-from .exact_boxes import kind_boxes
+from .exact_boxes import kind_boxes, kind_face_boxes
 from .term_bounds import term_box
 
 OP_LEAF, OP_AND, OP_OR, OP_COPY, OP_CONST = 0, 1, 2, 3, 4
@@ -135,6 +135,8 @@ class Instance:
     literals: list
     color: tuple
     box: tuple | None  # (lo, hi), None if provably empty
+    #: (n, 2, 3) per literal, the box of the primitive's face on it (closed-form kinds)
+    face_boxes: np.ndarray | None = None
 
 
 @dataclass
@@ -336,10 +338,13 @@ def _instance_boxes(instances: list, table: QuadricTable) -> None:
     """Set every instance's box (None if provably empty)."""
     if not instances:
         return
-    lo, hi, done = kind_boxes([i.node for i in instances], np.array([i.matrix for i in instances]))
-    for inst, l, h, ok in zip(instances, lo, hi, done):
+    nodes, mats = [i.node for i in instances], np.array([i.matrix for i in instances])
+    lo, hi, done = kind_boxes(nodes, mats)
+    faces = kind_face_boxes(nodes, mats, lo, hi, done)
+    for inst, l, h, ok, f in zip(instances, lo, hi, done, faces):
         if ok:
             inst.box = None if np.any(l > h) else (l, h)
+            inst.face_boxes = None if inst.box is None else f
         else:
             quads = [(Quadric.from_coefficients(table.coefs[q]), s) for q, s in inst.literals]
             inst.box = term_box(quads)
