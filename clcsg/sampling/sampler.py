@@ -118,11 +118,11 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     """One task per (quadric, plane, sheet) and its root cell, and the root tape rows.
 
     Returns (tasks, cells, rows): ``rows`` (TAPE_OP_DTYPE) start the tape arena; they begin
-    with the full tape and continue with each quadric's root tape, pruned primitive by
-    primitive to what can matter within ``radius`` of the patches of that quadric's tasks
+    with the full tape and continue with the quadrics' root tapes, pruned primitive by
+    primitive to what can matter within ``radius`` of the patches of the quadrics' tasks
     (:mod:`clcsg.compile.root_tapes`); each root cell's ``tape_first`` / ``tape_count`` point
     at its quadric's tape."""
-    tasks, cells, regions = [], [], {}
+    tasks = []
     scale = float(np.abs(tape.bound).max(initial=1.0))
     for q, (lo, hi) in quadric_boxes(tape).items():
         lo, hi = lo - packed.origin, hi - packed.origin
@@ -140,57 +140,84 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
                 sheets = (0,)
             else:
                 continue  # a cylinder along u_k: plane k owns no point
-            i, j = [m for m in range(3) if m != k]
             for sheet in sheets:
                 tasks.append((q, k, sheet, 0, zlo, zhi))
-                cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0, 0, len(tape.ops)))
-                box = _patch_box(f, k, sheet, zlo, zhi) + packed.origin
-                grow = 1.01 * radius + 1e-6 * scale
-                old = regions.get(q)
-                lo_w, hi_w = box.min(axis=0) - grow, box.max(axis=0) + grow
-                regions[q] = (lo_w, hi_w) if old is None else (np.minimum(old[0], lo_w), np.maximum(old[1], hi_w))
-    spans, rows = root_tapes(tape, regions)
-    for c, (q, *_rest) in zip(range(len(cells)), tasks):
-        cells[c] = cells[c][:-2] + spans[q]
     t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
     for n, row in enumerate(tasks):
         t[n] = row
-    c = np.array(cells, dtype=cell_dtype(packed.real)) if cells else np.zeros(0, cell_dtype(packed.real))
-    return t, c, tape_rows(rows)
+    c = np.zeros(len(tasks), dtype=cell_dtype(packed.real))
+    if not len(tasks):
+        return t, c, tape_rows(tape.ops)
+    zlo, zhi = t["zlo"].astype(np.float64), t["zhi"].astype(np.float64)
+    i = np.where(t["plane"] == 0, 1, 0)
+    j = np.where(t["plane"] == 2, 1, 2)
+    rows = np.arange(len(t))
+    c["x0"], c["y0"], c["x1"], c["y1"] = zlo[rows, i], zlo[rows, j], zhi[rows, i], zhi[rows, j]
+    c["d"] = np.nan
+    c["task"] = rows
+    regions = _task_regions(t, frames, packed.origin, 1.01 * radius + 1e-6 * scale)
+    spans, root_rows = root_tapes(tape, regions)
+    span = np.array([spans[int(q)] for q in t["quadric"]]).reshape(-1, 2)
+    c["tape_first"], c["tape_count"] = span[:, 0], span[:, 1]
+    return t, c, tape_rows(root_rows)
 
 
-def _quadratic_range(lam, beta, a, b):
-    """Range of lam x^2 + 2 beta x over [a, b]."""
-    xs = [a, b]
-    if lam != 0.0 and a < -beta / lam < b:
-        xs.append(-beta / lam)
-    v = [lam * x * x + 2.0 * beta * x for x in xs]
-    return min(v), max(v)
+def _quadratic_ranges(lam, beta, a, b):
+    """Range of lam x^2 + 2 beta x over [a, b] (arrays)."""
+    fa, fb = lam * a * a + 2.0 * beta * a, lam * b * b + 2.0 * beta * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.where(lam != 0.0, -beta / np.where(lam != 0.0, lam, 1.0), np.nan)
+    inside = (v > a) & (v < b)
+    fv = np.where(inside, lam * v * v + 2.0 * beta * v, fa)
+    return np.minimum(np.minimum(fa, fb), fv), np.maximum(np.maximum(fa, fb), fv)
 
 
-def _patch_box(f, k, sheet, zlo, zhi) -> np.ndarray:
-    """Corners (8, 3), in device coordinates, of a local box holding every point of task
-    (plane k, sheet) of frame ``f`` over its root rectangle: R(x, y) = lam_i x^2 + 2 beta_i x +
-    lam_j y^2 + 2 beta_j y + gamma is separable, so its range over the rectangle is the sum of
-    two 1-D ranges, and the height is t = +-sqrt(-R / lam_k) or -R / (2 beta_k)."""
-    i, j = [m for m in range(3) if m != k]
-    ri = _quadratic_range(f.lam[i], f.beta[i], zlo[i], zhi[i])
-    rj = _quadratic_range(f.lam[j], f.beta[j], zlo[j], zhi[j])
-    r_lo, r_hi = ri[0] + rj[0] + f.gamma, ri[1] + rj[1] + f.gamma
-    if f.lam[k] != 0.0:
-        h = sorted((-r_lo / f.lam[k], -r_hi / f.lam[k]))
-        if h[1] < 0.0:
-            t = (0.0, 0.0)  # no surface over the rectangle: the kernel discards the root cell
-        else:
-            a, b = np.sqrt(max(h[0], 0.0)), np.sqrt(h[1])
-            t = (a, b) if sheet > 0 else (-b, -a)
-    else:
-        t = tuple(sorted((-r_lo / (2.0 * f.beta[k]), -r_hi / (2.0 * f.beta[k]))))
-    eps = 1e-9 * (1.0 + max(abs(t[0]), abs(t[1])))
+def _task_regions(t, frames, origin, grow) -> dict:
+    """Per quadric, a world box holding every point of its tasks' patches grown by ``grow``.
+
+    Over task (plane k, sheet)'s root rectangle, R(x, y) = lam_i x^2 + 2 beta_i x + lam_j y^2
+    + 2 beta_j y + gamma is separable, so its range is the sum of two 1-D ranges, and the height
+    is t = +-sqrt(-R / lam_k) (eq. 7) or -R / (2 beta_k) (eq. 6): the patch lies in the local box
+    of the rectangle and that height range."""
+    n = len(t)
+    q, k, sheet = t["quadric"], t["plane"], t["sheet"]
+    lam = np.array([frames[int(u)].lam for u in q])
+    beta = np.array([frames[int(u)].beta for u in q])
+    gamma = np.array([frames[int(u)].gamma for u in q])
+    zlo, zhi = t["zlo"].astype(np.float64), t["zhi"].astype(np.float64)
+    r_lo, r_hi = gamma.copy(), gamma.copy()
+    for axis in range(3):
+        lo, hi = _quadratic_ranges(lam[:, axis], beta[:, axis], zlo[:, axis], zhi[:, axis])
+        other = k != axis
+        r_lo, r_hi = r_lo + np.where(other, lo, 0.0), r_hi + np.where(other, hi, 0.0)
+    rows = np.arange(n)
+    lk, bk = lam[rows, k], beta[rows, k]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        safe_l = np.where(lk != 0.0, lk, 1.0)
+        h1, h2 = -r_lo / safe_l, -r_hi / safe_l
+        h_lo, h_hi = np.minimum(h1, h2), np.maximum(h1, h2)
+        a, b = np.sqrt(np.maximum(h_lo, 0.0)), np.sqrt(np.maximum(h_hi, 0.0))
+        t_lo = np.where(sheet > 0, a, -b)
+        t_hi = np.where(sheet > 0, b, -a)
+        safe_b = np.where(bk != 0.0, 2.0 * bk, 1.0)
+        p1, p2 = -r_lo / safe_b, -r_hi / safe_b
+    t_lo = np.where(lk != 0.0, t_lo, np.minimum(p1, p2))
+    t_hi = np.where(lk != 0.0, t_hi, np.maximum(p1, p2))
+    eps = 1e-9 * (1.0 + np.maximum(np.abs(t_lo), np.abs(t_hi)))
     lo, hi = zlo.copy(), zhi.copy()
-    lo[k], hi[k] = t[0] - eps, t[1] + eps
-    z = np.array([[(lo, hi)[(c >> m) & 1][m] for m in range(3)] for c in range(8)])
-    return f.center + z @ f.U.T
+    lo[rows, k], hi[rows, k] = t_lo - eps, t_hi + eps
+    bits = np.array([[(c >> m) & 1 for m in range(3)] for c in range(8)], dtype=bool)
+    corners = np.where(bits[None], hi[:, None, :], lo[:, None, :])  # (n, 8, 3) local
+    U = np.array([frames[int(u)].U for u in q])
+    center = np.array([frames[int(u)].center for u in q])
+    world = center[:, None, :] + np.einsum("nij,ncj->nci", U, corners) + origin
+    wlo, whi = world.min(axis=1) - grow, world.max(axis=1) + grow
+    order = np.argsort(q, kind="stable")
+    qs = q[order]
+    starts = np.flatnonzero(np.concatenate([[True], qs[1:] != qs[:-1]]))
+    lo_q = np.minimum.reduceat(wlo[order], starts, axis=0)
+    hi_q = np.maximum.reduceat(whi[order], starts, axis=0)
+    return {int(u): (a, b) for u, a, b in zip(qs[starts], lo_q, hi_q)}
 
 
 def estimate_samples(tape, radius: float) -> int:
