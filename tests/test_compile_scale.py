@@ -18,7 +18,7 @@ from clcsg.cl.records import pack
 from clcsg.compile.bounds import tree_bounds
 from clcsg.compile.frames import principal_frame
 from clcsg.compile.interpret import contains, member
-from clcsg.compile.root_tapes import root_tapes
+from clcsg.compile.root_tapes import prune_root_tapes
 from clcsg.model.csg import Difference, Union
 from clcsg.model.quadric import Quadric
 from clcsg.model.scene import Scene
@@ -106,7 +106,7 @@ def test_root_tapes_are_exact_over_their_regions(scene):
     rng = np.random.default_rng(3)
     boxes = quadric_boxes(tape)
     regions = {q: (lo - 0.05, hi + 0.05) for q, (lo, hi) in boxes.items()}
-    spans, rows = root_tapes(tape, regions)
+    spans, rows = prune_root_tapes(tape, regions)
     pruned = [q for q, (first, _) in spans.items() if first > 0]
     assert len(pruned) > 0.8 * len(spans)
     for q in rng.choice(pruned, 25, replace=False):

@@ -138,7 +138,7 @@ MAX_NEAR = 400_000
 GROUP = 8
 
 
-def root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
+def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
     """Per quadric of ``regions`` ({quadric: (lo, hi) world box}) its root tape: ({quadric:
     (first, count)} into the returned rows (N, 4) int32, which start with the full tape).
 

@@ -63,7 +63,7 @@ from ..cl.programs import build
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
 from ..compile.frames import principal_frame
-from ..compile.root_tapes import root_tapes
+from ..compile.root_tapes import prune_root_tapes
 from ..compile.tape import OP_LEAF
 from ..errors import LimitError, UsageError
 from ..model.quadric import Quadric
@@ -156,7 +156,7 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     c["d"] = np.nan
     c["task"] = rows
     regions = _task_regions(t, frames, packed.origin, 1.01 * radius + 1e-6 * scale)
-    spans, root_rows = root_tapes(tape, regions)
+    spans, root_rows = prune_root_tapes(tape, regions)
     span = np.array([spans[int(q)] for q in t["quadric"]]).reshape(-1, 2)
     c["tape_first"], c["tape_count"] = span[:, 0], span[:, 1]
     return t, c, tape_rows(root_rows)
