@@ -39,6 +39,35 @@ def _segments(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return owner, np.arange(total) - starts[owner]
 
 
+def _flatten(kind, kids) -> list:
+    """Per inner node its operands with same-kind inner operands of a single parent inlined
+    (an AND of an AND is one AND: a chain of nested differences is one level, not a thousand);
+    None for the inlined nodes."""
+    n = len(kind)
+    n_parents = np.zeros(n, dtype=np.int64)
+    for ks in kids:
+        for k in ks:
+            n_parents[k] += 1
+    inlined = np.zeros(n, dtype=bool)
+    for i in range(n):
+        for k in kids[i]:
+            if kind[k] != LEAF and kind[k] == kind[i] and n_parents[k] == 1:
+                inlined[k] = True
+    out: list = [None] * n
+    for i in range(n):
+        if kind[i] == LEAF or inlined[i]:
+            continue
+        ops, stack = [], list(reversed(kids[i]))
+        while stack:
+            k = stack.pop()
+            if inlined[k]:
+                stack.extend(reversed(kids[k]))
+            else:
+                ops.append(k)
+        out[i] = ops
+    return out
+
+
 class SparseDistance:
     """Evaluator of one graph; see the module docstring.
 
@@ -61,18 +90,28 @@ class SparseDistance:
         self.n_absorbing = np.zeros(n, dtype=np.int64)
         height = np.zeros(n, dtype=np.int64)
         levels: dict = {}
+        flat = _flatten(self.kind, kids)
         for i in range(n):
             if self.kind[i] == LEAF:
                 self.default[i] = -np.inf if neg[i] else np.inf
                 continue
-            ks = np.asarray(kids[i], dtype=np.int64)
+            if flat[i] is None:
+                continue
+            ks = np.asarray(flat[i], dtype=np.int64)
             absorbing = np.inf if self.kind[i] == AND else -np.inf
             is_abs = self.default[ks] == absorbing
             self.n_absorbing[i] = int(is_abs.sum())
             self.default[i] = absorbing if self.n_absorbing[i] else -absorbing
             height[i] = 1 + (height[ks].max() if len(ks) else 0)
             levels.setdefault(int(height[i]), []).append((np.full(len(ks), i), ks, is_abs))
-        self.levels = [tuple(np.concatenate(parts) for parts in zip(*levels[h])) for h in sorted(levels)]
+        self.heights = sorted(levels)
+        self.levels = [tuple(np.concatenate(parts) for parts in zip(*levels[h])) for h in self.heights]
+        # the height of a node's last parent: its entries are dropped once that is done
+        self.last_use = np.full(n, np.iinfo(np.int64).max)
+        for h, (parents, kids, _) in zip(self.heights, self.levels):
+            self.last_use[kids] = h
+        if n:
+            self.last_use[self.root] = np.iinfo(np.int64).max
 
     def _leaf_entries(self, centers, half):
         """(node, box, value) of every box and leaf whose boxes meet."""
@@ -104,7 +143,9 @@ class SparseDistance:
         node, cell, val = self._leaf_entries(centers, half)
         keep = val != self.default[node]
         node, cell, val = node[keep], cell[keep], val[keep]
-        for parents, kids, is_abs in self.levels:
+        for h, (parents, kids, is_abs) in zip(self.heights, self.levels):
+            alive = self.last_use[node] >= h
+            node, cell, val = node[alive], cell[alive], val[alive]
             order = np.argsort(node, kind="stable")
             node, cell, val = node[order], cell[order], val[order]
             first = np.searchsorted(node, kids, "left")
