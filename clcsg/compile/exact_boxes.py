@@ -403,7 +403,9 @@ def kind_boxes(nodes, matrices):
             lo[rows], hi[rows] = _frusta_boxes(kind, params, lin[rows], t[rows])
     done = np.isin(np.array([node.kind for node in nodes]), list(_CLOSED_FORM)) if n else np.zeros(0, bool)
     size = 1.0 + np.abs(np.where(done[:, None], np.concatenate([lo, hi], axis=1), 0.0)).max(axis=1, initial=0.0)
-    pad = _FEASIBLE * size
+    # a box's sides are its planes: no padding, as literals_box meets a polytope's box with
+    # its vertices' (a face shared with a subtracted box must cut exactly)
+    pad = np.where(np.array([node.kind == "box" for node in nodes], dtype=bool), 0.0, _FEASIBLE * size)
     return lo - pad[:, None], hi + pad[:, None], done
 
 
@@ -454,7 +456,7 @@ def kind_face_boxes(nodes, matrices, lo, hi, done):
                     half = np.abs(lin) @ np.where(np.arange(3) == axis, 0.0, s / 2)
                     mid = lin @ (c + side * s[axis] / 2 * np.eye(3)[axis]) + t
                     faces.append((mid - half, mid + half))
-            out[k] = _padded(np.array(faces))
+            out[k] = np.array(faces)
         elif node.kind in ("cylinder", "cone") and n_lits == 3:
             h = float(p.get("height", 1.0))
             if node.kind == "cylinder" or float(p.get("r1", 1.0)) == float(p.get("r2", 0.0)):
