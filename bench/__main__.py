@@ -11,7 +11,9 @@ per second of ``clcsg batch`` on 1,000 random programs: one process, the local p
 examples and ``--programs N`` random programs run through the CLI), ``view`` (``clcsg view``'s frame
 times per zoo model at 800x600 and 400x300, where the time goes, and the first frame after a
 reload), ``mesh`` (``clcsg mesh`` against ``openscad -o part.stl`` and manifold3d: triangles,
-CPU time and measured error on the everyday parts and the zoo).  Each writes
+CPU time and measured error on the everyday parts and the zoo), ``compile`` (host compile, tree
+bounds and root tapes against the number of primitives: a perforated plate and a union of
+spheres, 100 to 5,000 primitives).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -21,7 +23,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh")
+PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile")
 
 
 def main(argv=None):

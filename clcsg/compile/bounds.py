@@ -14,8 +14,9 @@ import numpy as np
 
 from ..errors import SceneError, UnboundedError
 from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
-from ..model.quadric import ray_distance
-from .exact_boxes import empty_box, is_empty, literals_box, meet, primitive_box
+from ..model.quadric import Quadric
+from .exact_boxes import empty_box, is_empty, kind_boxes, literals_box, meet, primitive_box
+from .sparse_distance import SparseDistance
 
 # The graph is walked once (iteratively) into *instances*: a node under one accumulated world
 # transform M and one polarity (complements pushed to the leaves, De Morgan), memoized on
@@ -166,6 +167,15 @@ class _Graph:
         for i, ks in enumerate(self.kids):
             for k in ks:
                 self.parents[k].append(i)
+        self.leaf_ids = np.array([i for i, k in enumerate(self.kind) if k == _LEAF], dtype=np.int64)
+        self.inner = [i for i, k in enumerate(self.kind) if k != _LEAF]
+        self.kid_array = [np.asarray(k, dtype=np.int64) for k in self.kids]
+        # an AND's negated convex primitives: what may cut its box
+        self.cutters = {i: np.array([k for k in self.kids[i] if self.kind[k] == _LEAF and self.neg[k]
+                                     and self.node[k].kind in CONVEX_KINDS], dtype=np.int64)
+                        for i in self.inner if self.kind[i] == _AND}
+        self.edge_parent = np.array([i for i, ks in enumerate(self.kids) for _ in ks], dtype=np.int64)
+        self.edge_child = np.array([k for ks in self.kids for k in ks], dtype=np.int64)
 
     def _add(self, kind, kids, node, m, neg) -> int:
         self.kind.append(kind)
@@ -174,9 +184,6 @@ class _Graph:
         self.matrix.append(m)
         self.neg.append(neg)
         return len(self.kind) - 1
-
-
-_EVERYTHING = (np.full(3, -np.inf), np.full(3, np.inf))
 
 
 def _union_boxes(boxes):
@@ -260,10 +267,21 @@ def _cut_by_convex(box, mats, cutter_box):
     return lo, hi
 
 
+def _user_bound(user_bound, source):
+    if user_bound is None:
+        return None
+    ub = np.asarray(user_bound, dtype=np.float64)
+    if ub.shape != (2, 3) or not np.all(np.isfinite(ub)) or np.any(ub[1] <= ub[0]):
+        raise SceneError(f"{source}: bound must be two finite corners lo < hi, got {ub.tolist()}")
+    return ub[0], ub[1]
+
+
 def tree_bounds(shape, user_bound=None, source: str = "scene") -> TreeBounds:
     """Bound of the solid of ``shape`` computed on the CSG graph, and the boxes of its
     primitive instances (see the section comment: bottom-up / top-down passes over the
-    instances, no recursion, linear in the number of distinct (node, transform, polarity)).
+    instances, no recursion, linear in the number of distinct (node, transform, polarity):
+    the leaves of a pass are handled in one numpy batch, and the distance refinement evaluates
+    only the primitives near each cell, found in a bounding volume hierarchy).
 
     ``user_bound`` ((lo, hi) corners) is intersected with everything.  An unbounded solid
     without a user bound raises :class:`UnboundedError`; an empty one gives ``empty=True``
@@ -272,66 +290,17 @@ def tree_bounds(shape, user_bound=None, source: str = "scene") -> TreeBounds:
     """
     if not isinstance(shape, Shape):
         raise SceneError(f"{source}: expected a CSG shape, got {type(shape).__name__}")
-    ub = None
-    if user_bound is not None:
-        ub = np.asarray(user_bound, dtype=np.float64)
-        if ub.shape != (2, 3) or not np.all(np.isfinite(ub)) or np.any(ub[1] <= ub[0]):
-            raise SceneError(f"{source}: bound must be two finite corners lo < hi, got {ub.tolist()}")
-        ub = (ub[0], ub[1])
+    ub = _user_bound(user_bound, source)
     g = _Graph(shape, source)
-    n = len(g.kind)
     leaves = _Leaves(g, source)
-
-    region = [_EVERYTHING] * n
-    if ub is not None:
-        region[g.root] = ub
-    box = [_EVERYTHING] * n
-    passes = 0
-    for passes in range(1, MAX_PASSES + 1):
-        tightened = False
-        for i in range(n):
-            r = region[i]
-            if is_empty(r):
-                b = empty_box()
-            elif g.kind[i] == _LEAF:
-                b = leaves.box(i, r)
-            elif g.kind[i] == _OR:
-                b = _union_boxes([box[k] for k in g.kids[i]])
-            else:
-                b = r
-                for k in g.kids[i]:
-                    b = meet(b, box[k])
-                for k in g.kids[i]:
-                    if is_empty(b):
-                        break
-                    if g.kind[k] == _LEAF and g.neg[k]:
-                        b = leaves.cut(k, b)
-            b = _norm_box(meet(b, r))
-            b = _norm_box(meet(b, box[i]))  # never looser than before
-            if not _same(b, box[i]):
-                tightened = True
-            box[i] = b
-        if passes == MAX_PASSES or (passes > 1 and not tightened):
-            break
-        # top-down: the region of an instance is its box within the union of its parents'
-        new_region = [None] * n
-        for i in range(n - 1, -1, -1):
-            if i == g.root:
-                r = box[i] if ub is None else _norm_box(meet(box[i], ub))
-            else:
-                r = _norm_box(meet(box[i], _union_boxes([new_region[p] for p in g.parents[i]])))
-            new_region[i] = r
-        if passes > 1 and all(_same(a, b) for a, b in zip(new_region, region)):
-            break
-        region = new_region
-
-    root_box = box[g.root]
+    box, passes = _box_passes(g, leaves, ub)
+    root_box = (box[0][g.root], box[1][g.root])
     if ub is not None:
         root_box = _norm_box(meet(root_box, ub))
     refine_rounds = 0
     if not is_empty(root_box) and np.all(np.isfinite(root_box[0])) and np.all(np.isfinite(root_box[1])):
-        root_box, refine_rounds = _refine_by_distance(g, leaves, root_box)
-        box[g.root] = root_box
+        root_box, refine_rounds = _refine_by_distance(leaves.sparse_distance(), root_box)
+        box[0][g.root], box[1][g.root] = _norm_box(root_box)
     empty = is_empty(root_box)
     if not empty and not (np.all(np.isfinite(root_box[0])) and np.all(np.isfinite(root_box[1]))):
         axes = "".join(a for a, lo, hi in zip("xyz", root_box[0], root_box[1])
@@ -339,66 +308,214 @@ def tree_bounds(shape, user_bound=None, source: str = "scene") -> TreeBounds:
         raise UnboundedError(f"{source}: the solid is unbounded (no finite bound along {axes}); "
                              "intersect it with a box or give a bound")
     bound = np.zeros((2, 3)) if empty else np.array(root_box)
-    stats = {"instances": n, "primitive_instances": sum(k == _LEAF for k in g.kind), "passes": passes,
+    stats = {"instances": len(g.kind), "primitive_instances": len(leaves.ids), "passes": passes,
              "distance_rounds": refine_rounds}
     out = TreeBounds(bound, empty, None, stats)
     out._make_instances = lambda: _instances(g, leaves, box, ub, empty)
     return out
 
 
+def _normalize(lo, hi):
+    """Rows of (lo, hi) (n, 3) with every empty box as (inf, -inf)."""
+    bad = np.any(lo > hi, axis=1)
+    lo, hi = lo.copy(), hi.copy()
+    lo[bad], hi[bad] = np.inf, -np.inf
+    return lo, hi
+
+
+def _same_rows(a, b) -> np.ndarray:
+    """Per row, whether the (normalized) boxes a and b ((lo, hi) of (n, 3)) are equal to 1e-9."""
+    x = np.concatenate([a[0], a[1]], axis=1)
+    y = np.concatenate([b[0], b[1]], axis=1)
+    with np.errstate(invalid="ignore"):
+        d = np.abs(x - y)
+    d = np.where(np.isnan(d), 0.0, d)  # inf - inf: the same infinity
+    scale = 1.0 + np.abs(x)
+    scale = np.where(np.isfinite(scale), scale, 1.0)
+    return np.all(d <= 1e-9 * scale, axis=1)
+
+
+def _box_passes(g: _Graph, leaves: "_Leaves", ub):
+    """The bottom-up / top-down passes of the section comment: ((lo, hi) arrays of every
+    instance's box, number of bottom-up passes)."""
+    n = len(g.kind)
+    region = (np.full((n, 3), -np.inf), np.full((n, 3), np.inf))
+    if ub is not None:
+        region[0][g.root], region[1][g.root] = ub
+    box = (np.full((n, 3), -np.inf), np.full((n, 3), np.inf))
+    passes = 0
+    for passes in range(1, MAX_PASSES + 1):
+        new = _bottom_up(g, leaves, region, box)
+        tightened = not np.all(_same_rows(new, box))
+        box = new
+        if passes == MAX_PASSES or (passes > 1 and not tightened):
+            break
+        new_region = _top_down(g, box, ub)
+        if passes > 1 and np.all(_same_rows(new_region, region)):
+            break
+        region = new_region
+    return box, passes
+
+
+def _bottom_up(g: _Graph, leaves: "_Leaves", region, old):
+    """One bottom-up pass: every instance's box within its region, never looser than ``old``."""
+    lo, hi = old[0].copy(), old[1].copy()
+    ids = leaves.ids
+    b = leaves.boxes(region[0][ids], region[1][ids])
+    b = _normalize(np.maximum(b[0], region[0][ids]), np.minimum(b[1], region[1][ids]))
+    lo[ids], hi[ids] = _normalize(np.maximum(b[0], old[0][ids]), np.minimum(b[1], old[1][ids]))
+    for i in g.inner:
+        kids = g.kid_array[i]
+        if g.kind[i] == _OR:
+            blo = lo[kids].min(axis=0) if len(kids) else np.full(3, np.inf)
+            bhi = hi[kids].max(axis=0) if len(kids) else np.full(3, -np.inf)
+        else:
+            blo = np.max(np.vstack([region[0][i][None], lo[kids]]), axis=0)
+            bhi = np.min(np.vstack([region[1][i][None], hi[kids]]), axis=0)
+            if np.all(blo <= bhi):
+                blo, bhi = leaves.cut_by(g.cutters[i], (blo, bhi))
+        blo, bhi = np.maximum(blo, region[0][i]), np.minimum(bhi, region[1][i])
+        blo, bhi = _norm_box((np.maximum(blo, old[0][i]), np.minimum(bhi, old[1][i])))
+        lo[i], hi[i] = blo, bhi
+    return lo, hi
+
+
+def _top_down(g: _Graph, box, ub):
+    """The regions: an instance's box within the union of its parents' regions."""
+    n = len(g.kind)
+    lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+    for i in g.inner[::-1]:
+        if i == g.root:
+            r = (box[0][i], box[1][i]) if ub is None else meet((box[0][i], box[1][i]), ub)
+        else:
+            ps = g.parents[i]
+            r = meet((box[0][i], box[1][i]), (lo[ps].min(axis=0), hi[ps].max(axis=0)))
+        lo[i], hi[i] = _norm_box(r)
+    ulo, uhi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+    np.minimum.at(ulo, g.edge_child, lo[g.edge_parent])
+    np.maximum.at(uhi, g.edge_child, hi[g.edge_parent])
+    ids = g.leaf_ids
+    if len(g.kind) == 1:  # the root is a primitive
+        ulo[ids], uhi[ids] = (box[0][ids], box[1][ids]) if ub is None else (
+            np.maximum(box[0][ids], ub[0]), np.minimum(box[1][ids], ub[1]))
+    lo[ids], hi[ids] = _normalize(np.maximum(box[0][ids], ulo[ids]), np.minimum(box[1][ids], uhi[ids]))
+    return lo, hi
+
+
 class _Leaves:
-    """World quadrics of the leaf instances, their own boxes (computed when first needed) and
-    the box operations on them."""
+    """World quadrics of the leaf instances (one numpy batch), their own exact boxes and the
+    box operations on them."""
 
     def __init__(self, g: _Graph, source: str):
         self.g = g
-        self._quads: dict[int, tuple] = {}
-        self._mats: dict[int, np.ndarray] = {}
-        self._own: dict[int, tuple] = {}
-        self._cache: dict = {}
-        for i in range(len(g.kind)):
-            if g.kind[i] != _LEAF:
-                continue
+        self.ids = g.leaf_ids
+        mats, first, count, inv = [], [], [], {}
+        for i in self.ids:
             node, m = g.node[i], g.matrix[i]
-            try:
-                with np.errstate(over="raise", invalid="raise"):
-                    qs = tuple(q.transform(m) for q in node.quadrics())
-            except (ValueError, FloatingPointError, ArithmeticError):
-                raise SceneError(f"{source}: {node!r}: its quadric overflows float64 after the transforms "
-                                 "(sizes or offsets far too large)") from None
-            self._quads[i] = qs
+            k = m.tobytes()
+            if k not in inv:
+                inv[k] = np.linalg.inv(m)
+            first.append(len(mats))
+            count.append(len(node.quadrics()))
+            mats.extend((q.matrix, inv[k]) for q in node.quadrics())
+        q = np.array([a for a, _ in mats]).reshape(-1, 4, 4)
+        im = np.array([b for _, b in mats]).reshape(-1, 4, 4)
+        with np.errstate(all="ignore"):
+            w = np.einsum("nji,njk,nkl->nil", im, q, im)
+            w = 0.5 * (w + w.transpose(0, 2, 1))
+            bad = ~np.all(np.isfinite(w), axis=(1, 2))
+        if bad.any():
+            node = g.node[self.ids[np.searchsorted(np.cumsum(count), np.flatnonzero(bad)[0], "right")]]
+            raise SceneError(f"{source}: {node!r}: its quadric overflows float64 after the transforms "
+                             "(sizes or offsets far too large)")
+        self.world = w
+        self.first = dict(zip(self.ids.tolist(), first))
+        self.count = dict(zip(self.ids.tolist(), count))
+        self.first_array, self.count_array = np.array(first, dtype=np.int64), np.array(count, dtype=np.int64)
+        norms = np.linalg.norm(w, axis=(1, 2))
+        self.unit = w / np.where(norms > 0, norms, 1.0)[:, None, None]
+        n = len(g.kind)
+        self.own_lo, self.own_hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+        self._quads: dict[int, tuple] = {}
+        self._cache: dict = {}
+        if len(self.ids):
+            lo, hi, done = kind_boxes([g.node[i] for i in self.ids], np.array([g.matrix[i] for i in self.ids]))
+            self.own_lo[self.ids], self.own_hi[self.ids] = _normalize(lo, hi)
+            for i in self.ids[~done]:
+                self.own_lo[i], self.own_hi[i] = _norm_box(primitive_box(self.quads(i)))
+        self.convex = np.array([g.kind[i] == _LEAF and g.node[i].kind in CONVEX_KINDS for i in range(n)], dtype=bool)
+        self.single = np.array([self.count.get(i, 0) == 1 for i in range(n)], dtype=bool)
 
     def quads(self, i):
-        return self._quads[i]
+        qs = self._quads.get(i)
+        if qs is None:
+            f = self.first[i]
+            qs = self._quads[i] = tuple(Quadric(m) for m in self.world[f:f + self.count[i]])
+        return qs
 
     def mats(self, i):
-        m = self._mats.get(i)
-        if m is None:
-            m = self._mats[i] = np.array([q.matrix / np.linalg.norm(q.matrix) for q in self._quads[i]]).reshape(-1, 4, 4)
-        return m
+        f = self.first[i]
+        return self.unit[f:f + self.count[i]]
 
-    def distance(self, i, x):
-        """(n, N) conservative signed distances of leaf i's literals at ``x``: the batched
-        :meth:`Quadric.distance` (eqs. 8-12), with the eigenvalue ranges computed once."""
-        ev = self._eig.get(i) if hasattr(self, "_eig") else None
-        if ev is None:
-            if not hasattr(self, "_eig"):
-                self._eig = {}
-            lam = np.array([q.eigenvalue_range() for q in self._quads[i]]).reshape(-1, 2)
-            mats = np.array([q.matrix for q in self._quads[i]]).reshape(-1, 4, 4)
-            ev = self._eig[i] = (mats, lam[:, 0], lam[:, 1])
-        mats, lam_min, lam_max = ev
-        xh = np.concatenate([x, np.ones((len(x), 1))], axis=1)
-        mx = np.matmul(xh[None], mats.transpose(0, 2, 1))  # (n, N, 4): M x^ (M symmetric)
-        f = (mx * xh[None]).sum(axis=2)
-        g = 2.0 * np.sqrt((mx[:, :, :3] ** 2).sum(axis=2))
-        return ray_distance(f, g, lam_min[:, None], lam_max[:, None])
+    def sparse_distance(self) -> SparseDistance:
+        """The conservative distance of the graph over balls (:mod:`.sparse_distance`)."""
+        lam = np.linalg.eigvalsh(self.world[:, :3, :3]) if len(self.world) else np.zeros((0, 3))
+        g = self.g
+        return SparseDistance(g.kind, g.kids, g.neg, self.ids, self.first_array, self.count_array, self.world,
+                              lam[:, 0], lam[:, -1], self.own_lo[self.ids], self.own_hi[self.ids])
 
     def own(self, i):
         """The exact box of the primitive itself (not negated)."""
-        b = self._own.get(i)
-        if b is None:
-            b = self._own[i] = _norm_box(primitive_box(self._quads[i]))
+        return self.own_lo[i], self.own_hi[i]
+
+    def boxes(self, rlo, rhi):
+        """Boxes of the leaves' solids (negated where they are) within regions (rlo, rhi), one
+        row per leaf of ``ids``: the primitive's own box where the region holds it, the region
+        without the slabs inside a negated convex primitive, else the exact box within the
+        region (computed one by one: rare)."""
+        ids = self.ids
+        lo, hi = rlo.copy(), rhi.copy()
+        neg = np.array([self.g.neg[i] for i in ids], dtype=bool)
+        olo, ohi = self.own_lo[ids], self.own_hi[ids]
+        holds = np.all(rlo <= olo, axis=1) & np.all(ohi <= rhi, axis=1)
+        pos = ~neg & holds
+        lo[pos], hi[pos] = olo[pos], ohi[pos]
+        live = np.all(rlo <= rhi, axis=1)
+        finite = np.all(np.isfinite(rlo) & np.isfinite(rhi), axis=1) & live
+        single = ~self.convex[ids] & self.single[ids]
+        slow = (~neg & ~holds & live) | (neg & finite & (self._may_cut(ids, rlo, rhi) | single))
+        for k in np.flatnonzero(slow):
+            lo[k], hi[k] = self.box(int(ids[k]), (rlo[k], rhi[k]))
+        return lo, hi
+
+    def _may_cut(self, ids, rlo, rhi):
+        """Whether a negated convex primitive may hold a face of the region: at least four of
+        the region's corners in its box (a necessary condition for :meth:`cut`)."""
+        olo, ohi = self.own_lo[ids], self.own_hi[ids]
+        inside = np.zeros(len(ids), dtype=np.int64)
+        for c in range(8):
+            corner = np.where(np.array([(c >> k) & 1 for k in range(3)], dtype=bool), rhi, rlo)
+            inside += np.all((olo <= corner) & (corner <= ohi), axis=1)
+        return self.convex[ids] & (inside >= 4)
+
+    def cut_by(self, cutters, b):
+        """``b`` cut by each negated convex primitive of ``cutters`` (an AND's operands) that
+        may hold a face of it, until none does."""
+        done = set()
+        while len(cutters):
+            cand = cutters[self._may_cut(cutters, np.asarray(b[0])[None], np.asarray(b[1])[None])]
+            cand = [int(k) for k in cand if int(k) not in done]
+            changed = False
+            for k in cand:
+                done.add(k)
+                nb = self.cut(k, b)
+                if is_empty(nb):
+                    return empty_box()
+                if not _same(nb, b):
+                    b, changed = nb, True
+                    break
+            if not changed:
+                break
         return b
 
     def box(self, i, r):
@@ -407,7 +524,7 @@ class _Leaves:
         b = self._cache.get(key)
         if b is not None:
             return b
-        qs = self._quads[i]
+        qs = self.quads(i)
         if not self.g.neg[i]:
             own = self.own(i)
             b = own if _contains_box(r, own) else _norm_box(primitive_box(qs, r))
@@ -443,34 +560,7 @@ REFINE_SPLIT = 32
 REFINE_MIN = 0.002
 
 
-def _tree_distance(g: _Graph, leaves: _Leaves, x: np.ndarray) -> np.ndarray:
-    """Conservative signed distance of the solid at points ``x`` (N, 3), evaluated on the
-    instances: a literal's conservative distance (:meth:`Quadric.distance`: its magnitude
-    never exceeds the distance to the surface, negative inside), max over an AND, min over
-    an OR, negated for a negated primitive.  Where the value is d > 0 no point of the solid is
-    within d (the operand of an AND that is > d is empty in that ball; all operands of an OR
-    are).  Arrays are dropped after their last parent has used them."""
-    n = len(g.kind)
-    last = [max(p) if p else n for p in g.parents]
-    vals: dict[int, np.ndarray] = {}
-    for i in range(n):
-        if g.kind[i] == _LEAF:
-            d = leaves.distance(i, x).max(axis=0)
-            v = -d if g.neg[i] else d
-        else:
-            kids = [vals[k] for k in g.kids[i]]
-            if g.kind[i] == _AND:
-                v = np.max(kids, axis=0) if kids else np.full(len(x), -np.inf)
-            else:
-                v = np.min(kids, axis=0) if kids else np.full(len(x), np.inf)
-            for k in g.kids[i]:
-                if last[k] == i:
-                    vals.pop(k, None)
-        vals[i] = v
-    return vals[g.root]
-
-
-def _refine_by_distance(g: _Graph, leaves: _Leaves, box):
+def _refine_by_distance(distance: SparseDistance, box):
     """The root box shrunk to the cells that the conservative distance does not prove empty.
 
     A cell is empty if the distance at its center exceeds its half-diagonal.  The box starts
@@ -491,8 +581,8 @@ def _refine_by_distance(g: _Graph, leaves: _Leaves, box):
 
     def evaluate(c, h):
         """(undecided mask, distance) of cells (centers c, half-sizes h)."""
-        d = _tree_distance(g, leaves, c)
         r = np.linalg.norm(h, axis=1)
+        d = distance(c, h)
         return ~(d > r * (1.0 + 1e-9) + slack), d
 
     k = REFINE_CELLS
@@ -545,7 +635,7 @@ def _instances(g: _Graph, leaves: _Leaves, box, ub, empty) -> list:
         if g.kind[i] != _LEAF:
             continue
         qs = leaves.quads(i)
-        b = box[i]
+        b = (box[0][i], box[1][i])
         if ub is not None:
             b = _norm_box(meet(b, ub))
         if empty or is_empty(b):

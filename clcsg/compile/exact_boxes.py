@@ -12,6 +12,7 @@ from itertools import combinations
 
 import numpy as np
 
+from ..model.csg import _vec3
 from ..model.quadric import Quadric, frame_z_to
 from .term_bounds import FAR, term_box
 
@@ -294,21 +295,37 @@ def literals_box(literals, region=None, faces: bool = False):
     # cone around such a slab) proves nothing about compactness, and its size is not the
     # scene's
     finite = bool(np.all(np.abs(np.concatenate([lo, hi])) < 1e-3 * FAR))
-    n_planes = len(owner)
     face = np.empty((n, 2, 3))
     face[:, 0], face[:, 1] = np.inf, -np.inf
     if not quads:
-        if not finite:
-            return result((lo, hi))
-        X, _, _ = _candidates(None, N, D)
-        inside, _, on_p = _feasible(None, N, D, X)
-        if not inside.any():
-            return result((lo, hi))
-        box = meet(_box_of(X, inside), (lo, hi))
-        for col in range(n_planes):
-            face[owner[col]] = meet(_box_of(X, inside & on_p[:, col]), box)
-        return result(box, face)
-    box = (lo, hi)
+        return result(*_planes_box(N, D, owner, (lo, hi), finite, face))
+    box, exact = _quadrics_box(N, D, owner, quads, (lo, hi), finite, face)
+    if is_empty(box):
+        # the exact boxes of the parts do not meet
+        return result(None)
+    return result(box, face) if exact else result(box)
+
+
+def _planes_box(N, D, owner, polytope, finite, face):
+    """(box, face boxes or None) of a polytope of half-spaces only: the vertices' box, each
+    face's from the vertices on it (``face`` is filled in place)."""
+    if not finite:
+        return polytope, None
+    X, _, _ = _candidates(None, N, D)
+    inside, _, on_p = _feasible(None, N, D, X)
+    if not inside.any():
+        return polytope, None
+    box = meet(_box_of(X, inside), polytope)
+    for col in range(len(owner)):
+        face[owner[col]] = meet(_box_of(X, inside & on_p[:, col]), box)
+    return box, face
+
+
+def _quadrics_box(N, D, owner, quads, polytope, finite, face):
+    """(box, exact) of the set with quadratic literals ``quads``: each quadric cut by all the
+    half-spaces bounded exactly and the boxes intersected; ``exact`` (one quadric, bounded
+    exactly) when ``face`` has been filled with the face boxes."""
+    box = polytope
     single = len(quads) == 1
     exact_any = False
     for j, M in quads:
@@ -318,27 +335,21 @@ def literals_box(literals, region=None, faces: bool = False):
                 continue
         elif not single:
             # another quadric may be what bounds the set: add the polytope's box
-            bp = _split_literals(_box_literals((lo, hi)))
+            bp = _split_literals(_box_literals(polytope))
             NN, DD = np.vstack([N, bp[0]]), np.concatenate([D, bp[1]])
         X, con_q, con_p = _candidates(M, NN, DD)
         inside, on_q, on_p = _feasible(M, NN, DD, X)
         if not inside.any():
             continue
         exact_any = True
-        qbox = _box_of(X, inside)
-        box = meet(box, qbox)
+        box = meet(box, _box_of(X, inside))
         if single:
             on_q |= con_q
             on_p = on_p | con_p
             face[j] = meet(_box_of(X, inside & on_q), box)
-            for col in range(n_planes):
+            for col in range(len(owner)):
                 face[owner[col]] = meet(_box_of(X, inside & on_p[:, col]), box)
-    if is_empty(box):
-        # the exact boxes of the parts do not meet
-        return result(None)
-    if not (single and exact_any):
-        return result(box)
-    return result(box, face)
+    return box, single and exact_any
 
 
 def primitive_box(quadrics, region=None):
@@ -352,3 +363,127 @@ def primitive_box(quadrics, region=None):
     return literals_box([(q, 1) for q in quadrics], region)
 
 
+
+
+def kind_boxes(nodes, matrices):
+    """Exact boxes (lo, hi) (n, 3) of primitives ``nodes`` under affine ``matrices`` (n, 4, 4)
+    in closed form, padded as :func:`literals_box` pads, for boxes, spheres, ellipsoids,
+    finite cylinders and cone frusta (in numpy batches per kind), and a mask of the rows
+    computed (the other kinds: use :func:`primitive_box`).
+
+    Under x -> L x + t a box's half-extents are |L| s / 2; an ellipsoid's along x_k the norm of
+    row k of L diag(radii); a disc of radius r normal to the unit axis w (a cylinder's or a
+    frustum's end) has half-extent r sqrt(|L_k|^2 - (L_k . w)^2) along x_k, and a cylinder or
+    frustum is the convex hull of its two end discs."""
+    n = len(nodes)
+    m = np.asarray(matrices, dtype=np.float64).reshape(n, 4, 4)
+    lin, t = m[:, :3, :3], m[:, :3, 3]
+    lo, hi = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+    by_kind: dict = {}
+    for k, node in enumerate(nodes):
+        by_kind.setdefault(node.kind, []).append(k)
+    for kind, rows in by_kind.items():
+        rows = np.array(rows)
+        params = [nodes[k].params for k in rows]
+        if kind == "box":
+            s = np.array([_vec3(p.get("size", 1.0), "box size") for p in params])
+            c = np.array([_vec3(p.get("center", (0, 0, 0)), "box center") for p in params])
+            half = 0.5 * np.einsum("nij,nj->ni", np.abs(lin[rows]), s)
+            mid = np.einsum("nij,nj->ni", lin[rows], c) + t[rows]
+            lo[rows], hi[rows] = mid - half, mid + half
+        elif kind in ("sphere", "ellipsoid"):
+            key = "radius" if kind == "sphere" else "radii"
+            r = np.array([_vec3(p.get(key, 1.0), "radii") for p in params])
+            c = np.array([_vec3(p.get("center", (0, 0, 0)), "center") for p in params])
+            a = lin[rows] * r[:, None, :]
+            half = np.sqrt((a * a).sum(axis=2))
+            mid = np.einsum("nij,nj->ni", lin[rows], c) + t[rows]
+            lo[rows], hi[rows] = mid - half, mid + half
+        elif kind in ("cylinder", "cone"):
+            lo[rows], hi[rows] = _frusta_boxes(kind, params, lin[rows], t[rows])
+    done = np.isin(np.array([node.kind for node in nodes]), list(_CLOSED_FORM)) if n else np.zeros(0, bool)
+    size = 1.0 + np.abs(np.where(done[:, None], np.concatenate([lo, hi], axis=1), 0.0)).max(axis=1, initial=0.0)
+    # a box's sides are its planes: no padding, as literals_box meets a polytope's box with
+    # its vertices' (a face shared with a subtracted box must cut exactly)
+    pad = np.where(np.array([node.kind == "box" for node in nodes], dtype=bool), 0.0, _FEASIBLE * size)
+    return lo - pad[:, None], hi + pad[:, None], done
+
+
+_CLOSED_FORM = ("box", "sphere", "ellipsoid", "cylinder", "cone")
+
+
+def _frusta_boxes(kind, params, lin, t):
+    """Boxes of finite cylinders or cone frusta (the hull of their two end discs)."""
+    h = np.array([float(p.get("height", 1.0)) for p in params])
+    if kind == "cylinder":
+        r = np.array([float(p.get("radius", 1.0)) for p in params])
+        r1 = r2 = r
+    else:
+        r1 = np.array([float(p.get("r1", 1.0)) for p in params])
+        r2 = np.array([float(p.get("r2", 0.0)) for p in params])
+    w = np.array([_vec3(p.get("axis", (0, 0, 1)), "axis") for p in params])
+    w = w / np.linalg.norm(w, axis=1)[:, None]
+    c = np.array([_vec3(p.get("center", (0, 0, 0)), "center") for p in params])
+    lw = np.einsum("nij,nj->ni", lin, w)
+    half = np.sqrt(np.maximum((lin * lin).sum(axis=2) - lw * lw, 0.0))
+    mid = np.einsum("nij,nj->ni", lin, c) + t
+    e1, e2 = mid - 0.5 * h[:, None] * lw, mid + 0.5 * h[:, None] * lw
+    lo = np.minimum(e1 - r1[:, None] * half, e2 - r2[:, None] * half)
+    hi = np.maximum(e1 + r1[:, None] * half, e2 + r2[:, None] * half)
+    return lo, hi
+
+
+def kind_face_boxes(nodes, matrices, lo, hi, done):
+    """Per primitive of :func:`kind_boxes` (``lo``, ``hi``, ``done`` its results) the boxes of
+    its faces, one per literal in the primitive's order ((k, 2, 3) arrays; None where
+    ``done`` is False): a box's faces are its six rectangles; a sphere's or ellipsoid's
+    surface, a cylinder's or frustum's side span the whole box; the caps are the end discs."""
+    out = [None] * len(nodes)
+    for k, node in enumerate(nodes):
+        if not done[k]:
+            continue
+        box = np.array([lo[k], hi[k]])
+        m = np.asarray(matrices[k], dtype=np.float64)
+        lin, t = m[:3, :3], m[:3, 3]
+        p = node.params
+        n_lits = len(node.quadrics())
+        if node.kind == "box":
+            s = _vec3(p.get("size", 1.0), "box size")
+            c = _vec3(p.get("center", (0, 0, 0)), "box center")
+            faces = []
+            for axis in range(3):
+                for side in (1, -1):  # the order of the box's literals: +e_k, then -e_k
+                    half = np.abs(lin) @ np.where(np.arange(3) == axis, 0.0, s / 2)
+                    mid = lin @ (c + side * s[axis] / 2 * np.eye(3)[axis]) + t
+                    faces.append((mid - half, mid + half))
+            out[k] = np.array(faces)
+        elif node.kind in ("cylinder", "cone") and n_lits == 3:
+            h = float(p.get("height", 1.0))
+            if node.kind == "cylinder" or float(p.get("r1", 1.0)) == float(p.get("r2", 0.0)):
+                r1 = r2 = float(p.get("radius", p.get("r1", 1.0)))
+            else:
+                r1, r2 = float(p.get("r1", 1.0)), float(p.get("r2", 0.0))
+            w = _vec3(p.get("axis", (0, 0, 1)), "axis")
+            w = w / np.linalg.norm(w)
+            lw = lin @ w
+            half = np.sqrt(np.maximum((lin * lin).sum(axis=1) - lw * lw, 0.0))
+            mid = lin @ _vec3(p.get("center", (0, 0, 0)), "center") + t
+            top, bottom = mid + 0.5 * h * lw, mid - 0.5 * h * lw
+            caps = np.array([(top - r2 * half, top + r2 * half), (bottom - r1 * half, bottom + r1 * half)])
+            out[k] = np.concatenate([box[None], _padded(caps)])
+        elif n_lits == 1:
+            out[k] = box[None]
+    return out
+
+
+def _padded(boxes):
+    """Boxes (k, 2, 3) padded as :func:`_box_of` pads."""
+    size = 1.0 + np.abs(boxes).reshape(len(boxes), -1).max(axis=1)
+    pad = _FEASIBLE * size[:, None]
+    return np.stack([boxes[:, 0] - pad, boxes[:, 1] + pad], axis=1)
+
+
+def kind_box(node, matrix):
+    """:func:`kind_boxes` of one primitive: (lo, hi), or None for a kind without a closed form."""
+    lo, hi, done = kind_boxes([node], np.asarray(matrix, dtype=np.float64)[None])
+    return (lo[0], hi[0]) if done[0] else None

@@ -44,6 +44,8 @@ import numpy as np
 from ..errors import ParameterError, SceneError, UnboundedError
 from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.quadric import COEFFICIENT_INDEX, Quadric
+from .exact_boxes import kind_boxes, kind_face_boxes
+from .term_bounds import term_box
 
 OP_LEAF, OP_AND, OP_OR, OP_COPY, OP_CONST = 0, 1, 2, 3, 4
 OP_NAMES = ("LEAF", "AND", "OR", "COPY", "CONST")
@@ -55,6 +57,10 @@ _ZERO = 1e-13
 
 _TRUE, _FALSE = 0, 1  # expression ids of the constants
 _LEAF, _AND, _OR, _CONST = "leaf", "and", "or", "const"
+
+
+_ROWS = np.array([i for i, _ in COEFFICIENT_INDEX])
+_COLS = np.array([j for _, j in COEFFICIENT_INDEX])
 
 
 class QuadricTable:
@@ -70,34 +76,51 @@ class QuadricTable:
 
     def add(self, matrix: np.ndarray) -> tuple[int, int]:
         """(index, sign) of the canonical form K of ``matrix``: matrix = sign * |matrix| * K."""
-        m = np.asarray(matrix, dtype=np.float64)
-        norm = np.linalg.norm(m)
-        if not (np.isfinite(norm) and norm > 0.0):
+        return self.add_many(np.asarray(matrix, dtype=np.float64).reshape(1, 4, 4))[0]
+
+    def add_many(self, matrices: np.ndarray) -> list[tuple[int, int]]:
+        """:meth:`add` of every matrix of ``matrices`` (n, 4, 4), canonicalized in one batch."""
+        m = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
+        with np.errstate(all="ignore"):
+            norm = np.sqrt((m * m).sum(axis=(1, 2)))
+        if not np.all(np.isfinite(norm) & (norm > 0.0)):
             raise ParameterError("not a finite non-zero quadric")
-        coef = np.array([m[i, j] for i, j in COEFFICIENT_INDEX]) / norm
+        coef = m[:, _ROWS, _COLS] / norm[:, None]
         coef[np.abs(coef) < _ZERO] = 0.0
-        nz = np.flatnonzero(coef)
-        s = 1 if coef[nz[0]] > 0 else -1
-        coef *= s
-        key = tuple(np.round(coef / (4 * SAME_QUADRIC)).astype(np.int64))
-        for k in self._neighbours(key):
+        nz = np.argmax(coef != 0.0, axis=1)
+        sign = np.where(coef[np.arange(len(coef)), nz] > 0, 1, -1)
+        coef *= sign[:, None]
+        scaled = coef / (4 * SAME_QUADRIC)
+        keys = np.round(scaled)
+        # a coefficient within SAME_QUADRIC of another may round the other way only near a
+        # rounding boundary: those axes need the neighbouring keys too
+        near = np.abs(scaled - keys) > 0.25
+        keys = keys.astype(np.int64)
+        return [(self._find(c, tuple(k), np.flatnonzero(nr)), int(sg))
+                for c, k, nr, sg in zip(coef, keys.tolist(), near, sign)]
+
+    def _find(self, coef, key, near=range(10)) -> int:
+        for k in self._neighbours(key, near):
             for idx in self._grid.get(k, ()):
                 if np.abs(self.coefs[idx] - coef).max() < SAME_QUADRIC:
-                    return idx, s
+                    return idx
         self.coefs.append(coef)
         self._grid.setdefault(key, []).append(len(self.coefs) - 1)
-        return len(self.coefs) - 1, s
+        return len(self.coefs) - 1
 
     @staticmethod
-    def _neighbours(key):
+    def _neighbours(key, axes):
         yield key
-        # a coefficient near a rounding boundary may have rounded either way
-        for i in range(len(key)):
+        for i in axes:
             for d in (-1, 1):
                 yield key[:i] + (key[i] + d,) + key[i + 1:]
 
     def matrices(self) -> np.ndarray:
-        return np.array([Quadric.from_coefficients(c).matrix for c in self.coefs]).reshape(-1, 4, 4)
+        c = np.array(self.coefs, dtype=np.float64).reshape(-1, 10)
+        m = np.zeros((len(c), 4, 4))
+        m[:, _ROWS, _COLS] = c
+        m[:, _COLS, _ROWS] = c
+        return m
 
 
 @dataclass
@@ -112,6 +135,8 @@ class Instance:
     literals: list
     color: tuple
     box: tuple | None  # (lo, hi), None if provably empty
+    #: (n, 2, 3) per literal, the box of the primitive's face on it (closed-form kinds)
+    face_boxes: np.ndarray | None = None
 
 
 @dataclass
@@ -128,6 +153,9 @@ class Tape:
     empty: bool = False
     #: the CSG over the instances (:mod:`clcsg.compile.instance_program`): (ops, registers)
     instance_program: tuple | None = None
+    #: (builder, root, {expression: [(instance, negated)]}) of a tree tape: the expression DAG
+    #: the tape was emitted from, for pruning it per region (:mod:`clcsg.compile.root_tapes`)
+    dag: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_quadrics(self) -> int:
@@ -187,11 +215,12 @@ class _Builder:
     def combine(self, kind, ids) -> int:
         absorbing, neutral = (_FALSE, _TRUE) if kind == _AND else (_TRUE, _FALSE)
         seen = []
+        members = set()
         lits = set()
         for i in ids:
             if i == absorbing:
                 return absorbing
-            if i == neutral or i in seen:
+            if i == neutral or i in members:
                 continue
             if self.kind[i] == _LEAF:
                 q, s = self.args[i]
@@ -199,7 +228,7 @@ class _Builder:
                     return absorbing
                 lits.add((q, s))
             seen.append(i)
-        members = set(seen)
+            members.add(i)
         if any(self.complement.get(i, -1) in members for i in seen):  # x & ~x is empty, x | ~x everything
             return absorbing
         if not seen:
@@ -238,25 +267,53 @@ def _children(node, m, neg):
     raise SceneError(f"not a CSG node: {type(node).__name__}")
 
 
-def _world_literals(node: Primitive, m, inv, table: QuadricTable, source: str):
-    im = inv(m)
-    out = []
-    for q in node.quadrics():
-        w = im.T @ q.matrix @ im
-        try:
-            out.append(table.add(w))
-        except (ValueError, IndexError, FloatingPointError):
-            raise SceneError(f"{source}: {node!r}: its quadric overflows float64 after the transforms "
-                             "(sizes or offsets far too large)") from None
-    return out
+class _WorldLiterals:
+    """The world literals (quadric index, sign) of each primitive under each accumulated
+    transform, computed once (Q' = M^-T Q M^-1 for all of a primitive's quadrics at once) and
+    shared by the walks of the compiler."""
+
+    def __init__(self, table: QuadricTable, source: str):
+        self.table, self.source = table, source
+        self._inv = _inverse_cache()
+        self._memo: dict = {}
+
+    def __call__(self, node: Primitive, m: np.ndarray) -> list:
+        out = self._memo.get((id(node), m.tobytes()))
+        if out is None:
+            self.prepare([(node, m)])
+            out = self._memo[(id(node), m.tobytes())]
+        return out[1]
+
+    def prepare(self, pairs) -> None:
+        """Compute the literals of many (primitive, transform) pairs in one batch, in order
+        (the quadric table's indices follow it)."""
+        pairs = [(n, m) for n, m in pairs if (id(n), m.tobytes()) not in self._memo]
+        if not pairs:
+            return
+        im = np.array([self._inv(m) for _, m in pairs])
+        counts = [len(n.quadrics()) for n, _ in pairs]
+        owner = np.repeat(np.arange(len(pairs)), counts)
+        q = np.array([q.matrix for n, _ in pairs for q in n.quadrics()]).reshape(-1, 4, 4)
+        with np.errstate(all="ignore"):
+            w = np.einsum("nji,njk,nkl->nil", im[owner], q, im[owner])
+            bad = ~np.all(np.isfinite(w), axis=(1, 2)) | ~(np.abs(w).max(axis=(1, 2)) > 0)
+        if bad.any():
+            node = pairs[owner[np.flatnonzero(bad)[0]]][0]
+            raise SceneError(f"{self.source}: {node!r}: its quadric overflows float64 after the transforms "
+                             "(sizes or offsets far too large)")
+        lits = self.table.add_many(w)
+        start = 0
+        for (node, m), c in zip(pairs, counts):
+            self._memo[(id(node), m.tobytes())] = (node, lits[start:start + c])  # the node keeps its id unique
+            start += c
 
 
-def instances_of(shape: Shape, table: QuadricTable, source: str = "scene") -> list[Instance]:
+def instances_of(shape: Shape, table: QuadricTable, source: str = "scene", world=None) -> list[Instance]:
     """The primitive instances of ``shape`` in tree order (iterative depth-first walk; a shared
-    sub-graph under the same transform is walked once)."""
-    from .term_bounds import term_box
-
-    inv = _inverse_cache()
+    sub-graph under the same transform is walked once).  Their boxes are the primitives' exact
+    boxes (:func:`~clcsg.compile.exact_boxes.kind_boxes`, in one batch; the polytope box of
+    :func:`~clcsg.compile.term_bounds.term_box` for kinds without a closed form)."""
+    world = _WorldLiterals(table, source) if world is None else world
     out: list[Instance] = []
     seen = set()
     stack = [(shape, np.eye(4))]
@@ -267,20 +324,38 @@ def instances_of(shape: Shape, table: QuadricTable, source: str = "scene") -> li
             continue
         seen.add(key)
         if isinstance(node, Primitive):
-            lits = _world_literals(node, m, inv, table, source)
-            quads = [(Quadric.from_coefficients(table.coefs[q]), s) for q, s in lits]
-            out.append(Instance(len(out), node, m, lits, node.color, term_box(quads)))
+            out.append(Instance(len(out), node, m, None, node.color, None))
             continue
         _, kids = _children(node, m, False)
         for child, cm, _ in reversed(kids):
             stack.append((child, cm))
+    world.prepare([(i.node, i.matrix) for i in out])
+    for inst in out:
+        inst.literals = world(inst.node, inst.matrix)
+    _instance_boxes(out, table)
     return out
 
 
-def _expression(shape: Shape, table: QuadricTable, b: _Builder, source: str) -> int:
+def _instance_boxes(instances: list, table: QuadricTable) -> None:
+    """Set every instance's box (None if provably empty)."""
+    if not instances:
+        return
+    nodes, mats = [i.node for i in instances], np.array([i.matrix for i in instances])
+    lo, hi, done = kind_boxes(nodes, mats)
+    faces = kind_face_boxes(nodes, mats, lo, hi, done)
+    for inst, l, h, ok, f in zip(instances, lo, hi, done, faces):
+        if ok:
+            inst.box = None if np.any(l > h) else (l, h)
+            inst.face_boxes = None if inst.box is None else f
+        else:
+            quads = [(Quadric.from_coefficients(table.coefs[q]), s) for q, s in inst.literals]
+            inst.box = term_box(quads)
+
+
+def _expression(shape: Shape, world: _WorldLiterals, b: _Builder, prims: list | None = None) -> int:
     """The root expression id of ``shape`` (iterative post-order walk, memoized on
-    (node, transform, negated))."""
-    inv = _inverse_cache()
+    (node, transform, negated)); ``prims`` collects (node id, transform bytes, negated,
+    expression) of every primitive."""
     memo: dict = {}
     stack = [(shape, np.eye(4), False, False)]
     while stack:
@@ -289,12 +364,14 @@ def _expression(shape: Shape, table: QuadricTable, b: _Builder, source: str) -> 
         if key in memo:
             continue
         if isinstance(node, Primitive):
-            lits = _world_literals(node, m, inv, table, source)
+            lits = world(node, m)
             if neg:
                 memo[key] = b.combine(_OR, [b.leaf(q, -s) for q, s in lits])
             else:
                 memo[key] = b.combine(_AND, [b.leaf(q, s) for q, s in lits])
             _pair(b, memo, key)
+            if prims is not None:
+                prims.append(key + (memo[key],))
             continue
         kind, kids = _children(node, m, neg)
         keys = [(id(c), cm.tobytes(), cn) for c, cm, cn in kids]
@@ -453,18 +530,31 @@ def compile_shape(shape: Shape, user_bound=None, source: str = "scene", table: Q
     if not isinstance(shape, Shape):
         raise SceneError(f"{source}: expected a CSG shape, got {type(shape).__name__}")
     table = QuadricTable() if table is None else table
-    instances = instances_of(shape, table, source)
+    world = _WorldLiterals(table, source)
+    instances = instances_of(shape, table, source, world)
     b = _Builder()
-    root = _expression(shape, table, b, source)
+    prim_keys: list = []
+    root = _expression(shape, world, b, prim_keys)
     ops, n_regs = _emit(b, root)
     depth, dnf_terms = _depth_and_terms(b, root)
     bound, empty = scene_bound(shape, instances, root, user_bound, source)
-    tape = Tape(ops, n_regs, table.matrices(), instances, bound, "tree", empty=empty or root == _FALSE)
+    tape = Tape(ops, n_regs, table.matrices(), instances, bound, "tree", empty=empty or root == _FALSE,
+                dag=(b, root, _primitive_expressions(instances, prim_keys)))
     from .instance_program import instance_program
 
     tape.instance_program = instance_program(shape, instances)
     tape.stats = _tape_stats(tape, depth=depth, dnf_terms=dnf_terms)
     return tape
+
+
+def _primitive_expressions(instances, prim_keys) -> dict:
+    """expression id -> [(instance index, negated)] of the primitives' expressions."""
+    index = {(id(i.node), i.matrix.tobytes()): i.index for i in instances}
+    out: dict = {}
+    for node_id, m, neg, e in prim_keys:
+        if e not in (_TRUE, _FALSE):
+            out.setdefault(e, []).append((index[(node_id, m)], neg))
+    return out
 
 
 def _tape_stats(tape: Tape, **extra) -> dict:

@@ -82,8 +82,9 @@ from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build
 from ..cl.memory import check_allocation, device_buffer, upload
-from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype
+from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
 from ..compile.frames import principal_frame
+from ..compile.root_tapes import prune_root_tapes
 from ..compile.tape import OP_LEAF
 from ..errors import LimitError, UsageError
 from ..model.quadric import Quadric
@@ -134,9 +135,15 @@ def quadric_boxes(tape) -> dict:
     return out
 
 
-def root_tasks(tape, packed, frames):
-    """One task per (quadric, plane, sheet) and its root cell (holding the root tape)."""
-    tasks, cells = [], []
+def root_tasks(tape, packed, frames, radius: float = 0.0):
+    """One task per (quadric, plane, sheet) and its root cell, and the root tape rows.
+
+    Returns (tasks, cells, rows): ``rows`` (TAPE_OP_DTYPE) start the tape arena; they begin
+    with the full tape and continue with the quadrics' root tapes, pruned primitive by
+    primitive to what can matter within ``radius`` of the patches of the quadrics' tasks
+    (:mod:`clcsg.compile.root_tapes`); each root cell's ``tape_first`` / ``tape_count`` point
+    at its quadric's tape."""
+    tasks = []
     scale = float(np.abs(tape.bound).max(initial=1.0))
     for q, (lo, hi) in quadric_boxes(tape).items():
         lo, hi = lo - packed.origin, hi - packed.origin
@@ -154,15 +161,84 @@ def root_tasks(tape, packed, frames):
                 sheets = (0,)
             else:
                 continue  # a cylinder along u_k: plane k owns no point
-            i, j = [m for m in range(3) if m != k]
             for sheet in sheets:
                 tasks.append((q, k, sheet, 0, zlo, zhi))
-                cells.append((zlo[i], zlo[j], zhi[i], zhi[j], (np.nan,) * 4, len(tasks) - 1, 0, 0, len(tape.ops)))
     t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
     for n, row in enumerate(tasks):
         t[n] = row
-    c = np.array(cells, dtype=cell_dtype(packed.real)) if cells else np.zeros(0, cell_dtype(packed.real))
-    return t, c
+    c = np.zeros(len(tasks), dtype=cell_dtype(packed.real))
+    if not len(tasks):
+        return t, c, tape_rows(tape.ops)
+    zlo, zhi = t["zlo"].astype(np.float64), t["zhi"].astype(np.float64)
+    i = np.where(t["plane"] == 0, 1, 0)
+    j = np.where(t["plane"] == 2, 1, 2)
+    rows = np.arange(len(t))
+    c["x0"], c["y0"], c["x1"], c["y1"] = zlo[rows, i], zlo[rows, j], zhi[rows, i], zhi[rows, j]
+    c["d"] = np.nan
+    c["task"] = rows
+    regions = _task_regions(t, frames, packed.origin, 1.01 * radius + 1e-6 * scale)
+    spans, root_rows = prune_root_tapes(tape, regions)
+    span = np.array([spans[int(q)] for q in t["quadric"]]).reshape(-1, 2)
+    c["tape_first"], c["tape_count"] = span[:, 0], span[:, 1]
+    return t, c, tape_rows(root_rows)
+
+
+def _quadratic_ranges(lam, beta, a, b):
+    """Range of lam x^2 + 2 beta x over [a, b] (arrays)."""
+    fa, fb = lam * a * a + 2.0 * beta * a, lam * b * b + 2.0 * beta * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.where(lam != 0.0, -beta / np.where(lam != 0.0, lam, 1.0), np.nan)
+    inside = (v > a) & (v < b)
+    fv = np.where(inside, lam * v * v + 2.0 * beta * v, fa)
+    return np.minimum(np.minimum(fa, fb), fv), np.maximum(np.maximum(fa, fb), fv)
+
+
+def _task_regions(t, frames, origin, grow) -> dict:
+    """Per quadric, a world box holding every point of its tasks' patches grown by ``grow``.
+
+    Over task (plane k, sheet)'s root rectangle, R(x, y) = lam_i x^2 + 2 beta_i x + lam_j y^2
+    + 2 beta_j y + gamma is separable, so its range is the sum of two 1-D ranges, and the height
+    is t = +-sqrt(-R / lam_k) (eq. 7) or -R / (2 beta_k) (eq. 6): the patch lies in the local box
+    of the rectangle and that height range."""
+    n = len(t)
+    q, k, sheet = t["quadric"], t["plane"], t["sheet"]
+    lam = np.array([frames[int(u)].lam for u in q])
+    beta = np.array([frames[int(u)].beta for u in q])
+    gamma = np.array([frames[int(u)].gamma for u in q])
+    zlo, zhi = t["zlo"].astype(np.float64), t["zhi"].astype(np.float64)
+    r_lo, r_hi = gamma.copy(), gamma.copy()
+    for axis in range(3):
+        lo, hi = _quadratic_ranges(lam[:, axis], beta[:, axis], zlo[:, axis], zhi[:, axis])
+        other = k != axis
+        r_lo, r_hi = r_lo + np.where(other, lo, 0.0), r_hi + np.where(other, hi, 0.0)
+    rows = np.arange(n)
+    lk, bk = lam[rows, k], beta[rows, k]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        safe_l = np.where(lk != 0.0, lk, 1.0)
+        h1, h2 = -r_lo / safe_l, -r_hi / safe_l
+        h_lo, h_hi = np.minimum(h1, h2), np.maximum(h1, h2)
+        a, b = np.sqrt(np.maximum(h_lo, 0.0)), np.sqrt(np.maximum(h_hi, 0.0))
+        t_lo = np.where(sheet > 0, a, -b)
+        t_hi = np.where(sheet > 0, b, -a)
+        safe_b = np.where(bk != 0.0, 2.0 * bk, 1.0)
+        p1, p2 = -r_lo / safe_b, -r_hi / safe_b
+    t_lo = np.where(lk != 0.0, t_lo, np.minimum(p1, p2))
+    t_hi = np.where(lk != 0.0, t_hi, np.maximum(p1, p2))
+    eps = 1e-9 * (1.0 + np.maximum(np.abs(t_lo), np.abs(t_hi)))
+    lo, hi = zlo.copy(), zhi.copy()
+    lo[rows, k], hi[rows, k] = t_lo - eps, t_hi + eps
+    bits = np.array([[(c >> m) & 1 for m in range(3)] for c in range(8)], dtype=bool)
+    corners = np.where(bits[None], hi[:, None, :], lo[:, None, :])  # (n, 8, 3) local
+    U = np.array([frames[int(u)].U for u in q])
+    center = np.array([frames[int(u)].center for u in q])
+    world = center[:, None, :] + np.einsum("nij,ncj->nci", U, corners) + origin
+    wlo, whi = world.min(axis=1) - grow, world.max(axis=1) + grow
+    order = np.argsort(q, kind="stable")
+    qs = q[order]
+    starts = np.flatnonzero(np.concatenate([[True], qs[1:] != qs[:-1]]))
+    lo_q = np.minimum.reduceat(wlo[order], starts, axis=0)
+    hi_q = np.maximum.reduceat(whi[order], starts, axis=0)
+    return {int(u): (a, b) for u, a, b in zip(qs[starts], lo_q, hi_q)}
 
 
 #: where a split cuts a cell's longest edge, as a fraction of it (the build option SPLIT_AT of
@@ -304,7 +380,7 @@ def sample(
     packed = pack(tape, real)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
     frames_rec = frame_records(frames, real)
-    tasks, roots = root_tasks(tape, packed, frames)
+    tasks, roots, root_rows = root_tasks(tape, packed, frames, radius)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
              "estimated_samples": est.samples,
@@ -317,7 +393,7 @@ def sample(
 
     stats["expected_samples"] = guard.expected_samples(tape, est)
     sub, finisher = _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity,
-                               stats["expected_samples"], progress, max_levels)
+                               stats["expected_samples"], progress, max_levels, root_rows)
     t_sub = time.perf_counter()
     sub.run()
     t2 = time.perf_counter()
@@ -336,7 +412,7 @@ def sample(
 
 
 def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
-               progress, max_levels):
+               progress, max_levels, root_rows=None):
     """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
@@ -344,7 +420,7 @@ def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, 
     scene_buf = SceneBuffers(ctx, packed)
     finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
     sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity, expected, progress,
-                       max_levels, finisher)
+                       max_levels, finisher, root_rows)
     sub.task_quadrics = tasks["quadric"]
     return sub, finisher
 
@@ -432,7 +508,7 @@ class _Subdivision:
     """
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
-                 max_levels, finisher):
+                 max_levels, finisher, root_rows=None):
         self.ctx, self.prg, self.scene = ctx, prg, scene
         self.real = np.dtype(scene.packed.real)
         self.radius, self.floor = radius, floor
@@ -440,6 +516,8 @@ class _Subdivision:
         self.frames = upload(ctx, frames_rec)
         self.tasks = upload(ctx, tasks)
         self.roots = roots
+        # the arena starts with the root tapes (the full tape, then each quadric's)
+        self.root_rows = scene.packed.tape if root_rows is None else root_rows
         self.cdt = cell_dtype(self.real)
         self.sdt = raw_sample_dtype(self.real)
         self.finisher = finisher
@@ -515,7 +593,7 @@ class _Subdivision:
         import pyopencl as cl
 
         tape = self.scene.packed.tape
-        self.arena_in, self.cap_in = upload(self.ctx, tape), len(tape)
+        self.arena_in, self.cap_in = upload(self.ctx, self.root_rows), len(self.root_rows)
         self.cap_out = self.cap_arena
         self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
         cells_in = upload(self.ctx, self.roots, writable=True)

@@ -1,0 +1,106 @@
+"""Host compile time against the number of primitives: is it linear?
+
+Two families of scenes built with the Python API, each at sizes from about 100 to 5,000
+primitives:
+
+* **plate**: a 200 x 200 x 5 mm plate minus an n x n grid of chamfered holes (per hole a
+  cylinder and a cone frustum: 2 n^2 + 1 primitives; n = 50 is the 2,500-hole vent plate);
+* **union**: identical spheres (radius 0.6 on a unit grid, each touching its neighbours) in one
+  union.
+
+Per scene, process CPU time (``time.process_time``, best of the repeats: the machine is
+shared) of ``Scene.compile`` (tape, tree bounds, quadric table), of the tree bounds alone
+(:func:`clcsg.compile.bounds.tree_bounds`), and of the sampler's root tasks with their pruned
+root tapes (:func:`clcsg.sampling.sampler.root_tasks`, radius 1% of the bound's diagonal), the
+full tape's rows and the root tapes' mean rows.  Microseconds per primitive staying flat as the
+size grows is what linear means.  Writes ``bench/results/compile.json``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+
+import clcsg
+from clcsg.cl.records import pack
+from clcsg.compile.bounds import tree_bounds
+from clcsg.compile.frames import principal_frame
+from clcsg.model.csg import Difference, Union
+from clcsg.model.quadric import Quadric
+from clcsg.model.scene import Scene
+from clcsg.sampling.sampler import root_tasks
+
+from .common import Load, fmt, write
+
+PLATE_GRIDS = (7, 10, 16, 22, 32, 50)
+UNION_SIZES = (100, 250, 500, 1000, 2500, 5000)
+
+
+def plate(n: int, size: float = 200.0, thick: float = 5.0):
+    """A plate minus an n x n grid of holes, each a cylinder and a cone chamfer at the top."""
+    pitch = size / n
+    r = 0.3 * pitch
+    parts = [clcsg.box((size, size, thick))]
+    for i in range(n):
+        for j in range(n):
+            x, y = -size / 2 + (i + 0.5) * pitch, -size / 2 + (j + 0.5) * pitch
+            parts.append(clcsg.cylinder(thick + 2, r, (x, y, 0)))
+            parts.append(clcsg.cone(0.6 * r + 0.01, 1.5 * r, r - 0.01, (x, y, thick / 2 - 0.3 * r)))
+    return Difference(parts)
+
+
+def spheres(n: int):
+    """n spheres of radius 0.6 on a unit grid, in one union."""
+    k = math.ceil(n ** (1 / 3))
+    return Union([clcsg.sphere(0.6, (i % k, (i // k) % k, i // (k * k))) for i in range(n)])
+
+
+def _cpu(fn, repeats):
+    best, out = math.inf, None
+    for _ in range(repeats):
+        t = time.process_time()
+        out = fn()
+        best = min(best, time.process_time() - t)
+    return best, out
+
+
+def measure(shape, repeats: int = 2) -> dict:
+    compile_s, tape = _cpu(lambda: Scene(shape).compile(), repeats)
+    bounds_s, _ = _cpu(lambda: tree_bounds(shape), repeats)
+    radius = 0.01 * float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+    packed = pack(tape, np.float64)
+    frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
+    roots_s, (tasks, cells, rows) = _cpu(lambda: root_tasks(tape, packed, frames, radius), repeats)
+    n = len(tape.instances)
+    return {
+        "primitives": n, "quadrics": tape.n_quadrics, "instructions": int(len(tape.ops)),
+        "compile_cpu_s": compile_s, "tree_bounds_cpu_s": bounds_s, "root_tasks_cpu_s": roots_s,
+        "compile_us_per_primitive": 1e6 * compile_s / n, "tasks": int(len(tasks)),
+        "root_tape_rows_mean": float(np.mean(cells["tape_count"])) if len(cells) else 0.0,
+        "root_tape_rows_max": int(cells["tape_count"].max()) if len(cells) else 0,
+        "root_rows_total": int(len(rows)), "bound": tape.bound.tolist(),
+    }
+
+
+def run(quick: bool = False, device=None) -> None:
+    load = Load()
+    grids = PLATE_GRIDS[:4] if quick else PLATE_GRIDS
+    sizes = UNION_SIZES[:4] if quick else UNION_SIZES
+    rows = []
+    for n in grids:
+        rows.append({"family": "plate", "holes": n * n, **measure(plate(n))})
+    for n in sizes:
+        rows.append({"family": "union", **measure(spheres(n))})
+    env = load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(),
+                     "timer": "process CPU time, best of 2"})
+    path = write("compile", {"environment": env, "scenes": rows})
+    print("| scene | primitives | compile s | us / primitive | tree bounds s | root tasks s | root tape rows (mean / full) |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['family']} | {r['primitives']:,} | {fmt(r['compile_cpu_s'], '.2f')} | "
+              f"{fmt(r['compile_us_per_primitive'], '.0f')} | {fmt(r['tree_bounds_cpu_s'], '.2f')} | "
+              f"{fmt(r['root_tasks_cpu_s'], '.2f')} | {fmt(r['root_tape_rows_mean'], '.0f')} / {r['instructions']:,} |")
+    print(f"wrote {path}")

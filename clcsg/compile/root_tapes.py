@@ -1,0 +1,192 @@
+"""Root tapes per sampled quadric: the tape pruned, primitive by primitive, to what can matter
+over a region (the patches of the quadric's sampling tasks).
+
+A primitive's solid misses a region its exact box misses: over that region the primitive is
+FALSE and its complement TRUE, whatever the point.  So in the compiled expression DAG (the
+negation normal form the tape is emitted from) the node of such a primitive is a constant, and
+constants fold (FALSE absorbs AND, TRUE absorbs OR, the neutral element drops out).  The
+nodes of the primitives holding the sampled quadric are never replaced: the sampler substitutes
+that quadric's leaves by constants on its two sides, and a primitive with a substituted leaf is
+no longer its own solid.  The result is exact over the region: the same membership and the same
+conservative distances (eq. 22 on the tree) at every point of it as the full tape.
+
+The pruned expression is built from the near primitives upwards, so the work per quadric is the
+size of its pruned tape (and of the ancestors of its near primitives), not of the whole tape:
+each inner node knows how many of its operands are FALSE or TRUE when all their primitives are
+far (``default``), and only operands holding a near primitive are visited.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .bvh import BoxTree, morton_order
+from .tape import _AND, _CONST, _FALSE, _LEAF, _OR, _TRUE, _Builder, _emit, _postorder
+
+
+class PrimitiveDag:
+    """The expression DAG of a tree tape and where its primitives are in it.
+
+    ``builder``/``root``: the compiler's hash-consed DAG; ``prims``: expression id -> the
+    (instance index, negated) pairs whose expression it is."""
+
+    def __init__(self, builder: _Builder, root: int, prims: dict):
+        self.b, self.root = builder, root
+        self.order = _postorder(builder, root)
+        self.pos = {e: k for k, e in enumerate(self.order)}
+        self.by_instance: dict = {}
+        for e, owners in prims.items():
+            if e in self.pos:
+                for inst, _ in owners:
+                    self.by_instance.setdefault(inst, []).append(e)
+        self.parents: dict = {}
+        self.default: dict = {_TRUE: True, _FALSE: False}
+        self.n_false: dict = {}
+        self.n_true: dict = {}
+        self.none_args: dict = {}
+        for e in self.order:
+            kind = builder.kind[e]
+            if kind == _CONST:
+                continue
+            if kind in (_AND, _OR):
+                args = builder.args[e]
+                for a in args:
+                    self.parents.setdefault(a, []).append(e)
+                d = [self.default.get(a) for a in args]
+                self.n_false[e] = sum(x is False for x in d)
+                self.n_true[e] = sum(x is True for x in d)
+                self.none_args[e] = [a for a, x in zip(args, d) if x is None]
+            polarities = {neg for _, neg in prims.get(e, ())}
+            if len(polarities) == 1:  # a primitive: FALSE where it is far, its complement TRUE
+                self.default[e] = polarities.pop()
+            elif kind == _AND:
+                self.default[e] = False if self.n_false[e] else (True if self.n_true[e] == len(args) else None)
+            elif kind == _OR:
+                self.default[e] = True if self.n_true[e] else (False if self.n_false[e] == len(args) else None)
+            else:
+                self.default[e] = None
+
+    def pruned(self, near_instances) -> tuple[np.ndarray, int]:
+        """(ops, registers) of the tape with every primitive not in ``near_instances`` far."""
+        near = {e for i in near_instances for e in self.by_instance.get(int(i), ())}
+        live: dict = {self.root: set()}
+        stack = list(near)
+        seen = set(near)
+        while stack:
+            e = stack.pop()
+            for p in self.parents.get(e, ()):
+                live.setdefault(p, set()).add(e)
+                if p not in seen:
+                    seen.add(p)
+                    stack.append(p)
+        nb = _Builder()
+        full: dict = {}
+        built: dict = {}
+        for e in sorted(seen | {self.root}, key=self.pos.__getitem__):
+            if e in near or self.b.kind[e] in (_LEAF, _CONST):
+                built[e] = self._copy(e, nb, full)
+                continue
+            kind = self.b.kind[e]
+            args = live.get(e, set())
+            n_false = self.n_false[e] - sum(self.default.get(a) is False for a in args)
+            n_true = self.n_true[e] - sum(self.default.get(a) is True for a in args)
+            if (kind == _AND and n_false) or (kind == _OR and n_true):
+                built[e] = _FALSE if kind == _AND else _TRUE
+                continue
+            ids = [built[a] for a in args] + [self._copy(a, nb, full) for a in self.none_args[e] if a not in args]
+            built[e] = nb.combine(kind, ids)
+        return _emit(nb, built[self.root])
+
+    def _copy(self, e, nb: _Builder, full: dict) -> int:
+        """The whole sub-DAG of ``e`` in ``nb`` (iterative post-order, memoized in ``full``)."""
+        stack = [(e, False)]
+        while stack:
+            x, done = stack.pop()
+            if x in full:
+                continue
+            kind = self.b.kind[x]
+            if kind == _CONST:
+                full[x] = x
+            elif kind == _LEAF:
+                full[x] = nb.leaf(*self.b.args[x])
+            elif done:
+                full[x] = nb.combine(kind, [full[a] for a in self.b.args[x]])
+            else:
+                stack.append((x, True))
+                stack.extend((a, False) for a in self.b.args[x] if a not in full)
+        return full[e]
+
+
+def primitive_dag(tape) -> PrimitiveDag | None:
+    """The :class:`PrimitiveDag` of a tree tape (built once and kept on the tape), None for a
+    tape without one (the DNF shape)."""
+    if getattr(tape, "dag", None) is None:
+        return None
+    cached = getattr(tape, "_primitive_dag", None)
+    if cached is None:
+        cached = tape._primitive_dag = PrimitiveDag(*tape.dag)
+    return cached
+
+
+#: a quadric whose region holds more than this fraction of the primitives keeps the full tape
+#: (pruning would save little), and past MAX_NEAR (quadric, near primitive) pairs in all the
+#: remaining quadrics keep it too: the work stays linear in the tape
+DENSE_FRACTION = 0.5
+MAX_NEAR = 400_000
+#: quadrics whose regions are neighbours along a Morton curve share one root tape, pruned to
+#: the union of their near primitives (fewer, slightly longer tapes: less host work)
+GROUP = 8
+
+
+def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
+    """Per quadric of ``regions`` ({quadric: (lo, hi) world box}) its root tape: ({quadric:
+    (first, count)} into the returned rows (N, 4) int32, which start with the full tape).
+
+    A primitive is near a quadric's region if its box meets it (a
+    :class:`~clcsg.compile.bvh.BoxTree` query for all regions at once); the primitives holding
+    the quadric are always near.  A tape pruned to a set of near primitives is exact over every
+    region whose near primitives it holds, so up to :data:`GROUP` neighbouring quadrics share
+    one, and equal near sets one tape."""
+    full = np.asarray(tape.ops, dtype=np.int32)
+    out = {q: (0, len(full)) for q in regions}
+    dag = primitive_dag(tape)
+    if dag is None or not regions:
+        return out, full
+    qs = list(regions)
+    near = _near_sets(tape, qs, regions)
+    n_inst = len(tape.instances)
+    sparse = [k for k, nr in enumerate(near) if len(nr) <= DENSE_FRACTION * n_inst]
+    centers = np.array([0.5 * (regions[qs[k]][0] + regions[qs[k]][1]) for k in sparse]).reshape(-1, 3)
+    sparse = [sparse[k] for k in morton_order(centers)]
+    rows, used, shared, budget = [full], len(full), {}, MAX_NEAR
+    for g in range(0, len(sparse), GROUP):
+        members = sparse[g:g + GROUP]
+        key = frozenset().union(*(near[k] for k in members))
+        if len(key) > budget:
+            break
+        budget -= len(key)
+        if key not in shared:
+            ops, regs = dag.pruned(key)
+            if regs > tape.n_regs or len(ops) >= len(full):
+                shared[key] = (0, len(full))
+            else:
+                shared[key] = (used, len(ops))
+                rows.append(ops)
+                used += len(ops)
+        for k in members:
+            out[qs[k]] = shared[key]
+    return out, np.concatenate(rows).astype(np.int32)
+
+
+def _near_sets(tape, qs, regions) -> list:
+    """Per quadric of ``qs``, the instances whose boxes meet its region, and its owners."""
+    lo = np.array([i.box[0] if i.box is not None else np.full(3, np.inf) for i in tape.instances]).reshape(-1, 3)
+    hi = np.array([i.box[1] if i.box is not None else np.full(3, -np.inf) for i in tape.instances]).reshape(-1, 3)
+    rlo = np.array([regions[q][0] for q in qs]).reshape(-1, 3)
+    rhi = np.array([regions[q][1] for q in qs]).reshape(-1, 3)
+    region_of, inst = BoxTree(lo, hi).query(rlo, rhi)
+    order = np.argsort(region_of, kind="stable")
+    region_of, inst = region_of[order], inst[order]
+    bounds = np.searchsorted(region_of, np.arange(len(qs) + 1))
+    owners = tape.owners()
+    return [set(inst[bounds[k]:bounds[k + 1]].tolist()) | set(owners[q]) for k, q in enumerate(qs)]

@@ -1,0 +1,137 @@
+"""Compiling scenes of thousands of primitives: the tape is right, the bound is right, and the
+root tapes pruned per quadric are exact over their regions.
+
+Checked against the independent float64 tree oracle (tests/tree_oracle.py).  No timing here:
+``python -m bench compile`` measures the compile time against the number of primitives.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import clcsg
+import tree_oracle
+from clcsg.cl.records import pack
+from clcsg.compile.bounds import tree_bounds
+from clcsg.compile.frames import principal_frame
+from clcsg.compile.interpret import contains, member
+from clcsg.compile.root_tapes import prune_root_tapes
+from clcsg.model.csg import Difference, Union
+from clcsg.model.quadric import Quadric
+from clcsg.model.scene import Scene
+from clcsg.sampling.sampler import quadric_boxes, root_tasks
+
+SIZE, THICK = 200.0, 5.0
+
+
+def perforated_plate(n: int):
+    """A SIZE x SIZE x THICK plate minus an n x n grid of holes (a cylinder and a cone chamfer
+    each): 2 n^2 + 1 primitives."""
+    pitch = SIZE / n
+    r = 0.3 * pitch
+    parts = [clcsg.box((SIZE, SIZE, THICK))]
+    for i in range(n):
+        for j in range(n):
+            x, y = -SIZE / 2 + (i + 0.5) * pitch, -SIZE / 2 + (j + 0.5) * pitch
+            parts.append(clcsg.cylinder(THICK + 2, r, (x, y, 0)))
+            parts.append(clcsg.cone(0.6 * r + 0.01, 1.5 * r, r - 0.01, (x, y, THICK / 2 - 0.3 * r)))
+    return Difference(parts)
+
+
+def sphere_union(n: int, radius: float = 0.6):
+    k = math.ceil(n ** (1 / 3))
+    return Union([clcsg.sphere(radius, (i % k, (i // k) % k, i // (k * k))) for i in range(n)])
+
+
+@pytest.fixture(scope="module")
+def union_5000():
+    shape = sphere_union(5000)
+    return shape, Scene(shape).compile()
+
+
+@pytest.fixture(scope="module")
+def plate_2500():
+    shape = perforated_plate(50)
+    return shape, Scene(shape).compile()
+
+
+def test_5000_leaf_union_compiles_to_the_oracle_membership(union_5000):
+    shape, tape = union_5000
+    assert tape.stats["leaves"] == 5000 and len(tape.instances) == 5000
+    rng = np.random.default_rng(1)
+    lo, hi = tape.bound
+    # points everywhere in the bound, and points near the spheres' surfaces (where a wrong
+    # leaf or a wrong sign shows)
+    centers = np.array([[i % 18, (i // 18) % 18, i // 324] for i in range(5000)], dtype=float)
+    d = rng.normal(size=(800, 3))
+    near = centers[rng.integers(0, 5000, 800)] + 0.6 * (1 + rng.uniform(-0.02, 0.02, (800, 1))) * (
+        d / np.linalg.norm(d, axis=1)[:, None])
+    x = np.vstack([rng.uniform(lo, hi, (800, 3)), near])
+    got = contains(tape.ops, tape.quadrics, x)
+    want = tree_oracle.contains(shape, x)
+    assert got.any() and not got.all()
+    np.testing.assert_array_equal(got, want)
+
+
+def test_5000_leaf_union_bound(union_5000):
+    _, tape = union_5000
+    np.testing.assert_allclose(tape.bound, [[-0.6, -0.6, -0.6], [17.6, 17.6, 15.6]], atol=1e-6)
+
+
+def test_2500_hole_plate_compiles_with_the_right_bound(plate_2500):
+    shape, tape = plate_2500
+    assert len(tape.instances) == 5001
+    half = np.array([SIZE / 2, SIZE / 2, THICK / 2])
+    np.testing.assert_allclose(tape.bound, [-half, half], atol=1e-6)
+    tb = tree_bounds(shape)
+    np.testing.assert_allclose(tb.bound, tape.bound, atol=1e-12)
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-half * 1.05, half * 1.05, (1000, 3))
+    np.testing.assert_array_equal(contains(tape.ops, tape.quadrics, x), tree_oracle.contains(shape, x))
+
+
+def _region_points(lo, hi, rng, n):
+    return rng.uniform(lo, hi, (n, 3))
+
+
+@pytest.mark.parametrize("scene", ["plate", "union"])
+def test_root_tapes_are_exact_over_their_regions(scene):
+    """Per quadric, the pruned root tape gives the full tape's membership on both sides of the
+    quadric (the substitution of eq. 22 on the tree) at random points of its region."""
+    shape = perforated_plate(8) if scene == "plate" else sphere_union(216)
+    tape = Scene(shape).compile()
+    rng = np.random.default_rng(3)
+    boxes = quadric_boxes(tape)
+    regions = {q: (lo - 0.05, hi + 0.05) for q, (lo, hi) in boxes.items()}
+    spans, rows = prune_root_tapes(tape, regions)
+    pruned = [q for q, (first, _) in spans.items() if first > 0]
+    assert len(pruned) > 0.8 * len(spans)
+    for q in rng.choice(pruned, 25, replace=False):
+        first, count = spans[q]
+        ops = rows[first:first + count]
+        assert count < len(tape.ops) / 3
+        x = _region_points(*regions[q], rng, 400)
+        full = member(tape.ops, tape.quadrics, x, int(q))
+        part = member(ops, tape.quadrics, x, int(q))
+        np.testing.assert_array_equal(part[0], full[0])
+        np.testing.assert_array_equal(part[1], full[1])
+
+
+def test_root_tasks_point_at_pruned_tapes_that_start_the_arena():
+    shape = sphere_union(125)
+    tape = Scene(shape).compile()
+    packed = pack(tape, np.float64)
+    frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
+    tasks, cells, rows = root_tasks(tape, packed, frames, radius=0.05)
+    full = tape.ops.astype(np.int32)
+    as_ops = rows.view(np.int32).reshape(-1, 4)
+    np.testing.assert_array_equal(as_ops[:len(full)], full)
+    assert np.all(cells["tape_first"] + cells["tape_count"] <= len(rows))
+    assert cells["tape_count"].mean() < len(full) / 2
+    for c in cells[:50]:
+        ops = as_ops[c["tape_first"]:c["tape_first"] + c["tape_count"]]
+        # every leaf of a task's own quadric survives the pruning
+        assert tasks["quadric"][c["task"]] in ops[ops[:, 0] == 0, 2]
