@@ -1,4 +1,4 @@
-"""The resource guard (clcsg/sampling/guard.py) and the device's allocation limits: the
+"""The resource guard (clcsg/compile/bounds/estimates.py) and the device's allocation limits: the
 estimate against real sample counts, a tiny radius on a big scene fails before any kernel
 runs, normal runs pass, and every device buffer is checked before it is created."""
 
@@ -15,8 +15,8 @@ import pytest
 import clcsg
 from clcsg.cli import app as cli
 from clcsg.errors import LimitError, UsageError
-from clcsg.io.ply import read_samples as read_ply
-from clcsg.sampling import guard
+from clcsg.writers.ply import read_samples as read_ply
+from clcsg.compile.bounds import estimates as guard
 from clcsg.sampling.sampler import sample
 
 from test_robustness import EXAMPLES, NAN, _info, _tape

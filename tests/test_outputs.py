@@ -16,7 +16,7 @@ from PIL import Image as PILImage
 import clcsg
 from clcsg.cli import app as cli
 from clcsg.errors import SceneError, UsageError
-from clcsg.io.outputs import IMAGE_FORMATS
+from clcsg.writers.output_files import IMAGE_FORMATS
 from clcsg.sampling.samples import load_samples
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -20,7 +20,7 @@ import pytest
 
 import clcsg
 from clcsg.compile.interpret import member
-from clcsg.io.ply import read_samples
+from clcsg.writers.ply import read_samples
 from clcsg.model.solids import _make
 from clcsg.sampling.sampler import sample
 

@@ -1,5 +1,5 @@
 """Bounds on the CSG tree (clcsg/compile/bounds.py: shape_bound, tree_bounds; exact_boxes.py: primitive_box,
-quadric_regions), the guard's estimate from those regions (clcsg/sampling/guard.py:
+quadric_regions), the guard's estimate from those regions (clcsg/compile/bounds/estimates.py:
 estimate_regions, check_estimate), the iterative ``contains`` and the random programs
 (clcsg/model/random_programs.py, tests/strategies.py: csg_programs).
 
@@ -23,15 +23,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 import clcsg
-from clcsg.compile.bounds import shape_bound, tree_bounds
-from clcsg.compile.exact_boxes import literals_box, primitive_box
-from clcsg.compile.regions import quadric_regions, unique_quadrics
+from clcsg.compile.bounds.tree import shape_bound, tree_bounds
+from clcsg.compile.bounds.exact_boxes import literals_box, primitive_box
+from clcsg.compile.bounds.regions import quadric_regions, unique_quadrics
 from clcsg.errors import SceneError, UnboundedError
-from clcsg.io.openscad import parse_csg
+from clcsg.readers.openscad import parse_csg
 from clcsg.model import csg
 from clcsg.model.quadric import Quadric, affine, frame_z_to
 from clcsg.model.random_programs import HALF_EXTENT, random_program
-from clcsg.sampling import guard
+from clcsg.compile.bounds import estimates as guard
 from strategies import affine_maps, csg_programs, shapes
 
 EXAMPLES = int(os.environ.get("CLCSG_HYPOTHESIS_EXAMPLES", 200))
@@ -524,7 +524,7 @@ def test_guard_refuses_only_what_really_does_not_fit(cl_context):
     measures the real count first); under a limit below the real count it is refused, with
     the measured count in the message."""
     from clcsg.errors import LimitError
-    from clcsg.sampling import guard
+    from clcsg.compile.bounds import estimates as guard
 
     prog = random_program(np.random.default_rng(27))
     tape = clcsg.Scene(prog.shape).compile()

@@ -126,7 +126,7 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
     Returns a ``pyarrow.Table`` (a pandas DataFrame with ``as_pandas=True``), one row per scene
     in input order.  Needs pyarrow (and dask for the Dask engine): ``pip install 'clcsg[batch]'``.
     """
-    from ..io.progress import for_option
+    from ..progress import for_option
 
     require("pyarrow", "clcsg batch")
     address = dask_address(scheduler, dask)

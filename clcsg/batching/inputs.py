@@ -133,7 +133,7 @@ def _expand_one(item) -> list[dict]:
 
 
 def _object(obj, k: int) -> dict:
-    from ..io.scenefile import dumps, scene_to_dict
+    from ..readers.scenefile import dumps, scene_to_dict
 
     name = f"scene-{k:05d}"
     return dict(stem=name, source=f"<object {k}>", kind=".json", text=dumps(scene_to_dict(obj)), path=None,

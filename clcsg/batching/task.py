@@ -92,11 +92,11 @@ def load_scene(job: Job):
     if job.error:
         raise SceneError(job.error)
     if job.kind == ".json":
-        from ..io.scenefile import loads_json
+        from ..readers.scenefile import loads_json
 
         return loads_json(job.text, job.source)
     if job.kind == ".csg":
-        from ..io.openscad import parse_csg
+        from ..readers.openscad import parse_csg
 
         return parse_csg(job.text, job.source)
     from ..model.scene import load
@@ -185,7 +185,7 @@ def _queries(job: Job, options: Options, tape, ctx, row: dict, files: dict) -> N
 
 
 def _sample_and_render(job: Job, options: Options, ctx, row: dict, files: dict) -> None:
-    from ..io.outputs import png_bytes
+    from ..writers.output_files import png_bytes
     from ..rendering.splat import render
 
     s = _sample(job, options, ctx, row)

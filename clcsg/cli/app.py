@@ -12,7 +12,7 @@ else is a bug and prints ``clcsg: internal error: ...`` and exits 1.  ``--debug`
 instead, to show the traceback.
 
 Progress: every subcommand takes ``--progress {auto,bar,json,none}`` and ``--quiet``;
-:func:`main` makes the matching :class:`~clcsg.io.progress.Reporter` the current one while the
+:func:`main` makes the matching :class:`~clcsg.progress.Reporter` the current one while the
 command runs (steps longer than half a second get a bar on a terminal, nothing in a pipe; with
 ``json`` every event, warnings and errors included, is one JSON object per line on stderr).
 Commands end with a one-line summary on stdout (not with ``--quiet``).
@@ -269,7 +269,7 @@ def _json_warning(message, category, filename, lineno, line=None) -> str:
 
 def _reporter(args):
     """The progress reporter that ``args`` (--progress, --quiet, sample's --no-progress) ask for."""
-    from ..io.progress import Reporter
+    from ..progress import Reporter
 
     mode = getattr(args, "progress", "auto")
     if getattr(args, "no_progress", False) and mode != "json":
@@ -284,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (never raises unless ``--debug``)."""
     import warnings
 
-    from ..io.progress import using
+    from ..progress import using
 
     warnings.formatwarning = _format_warning
     argv = list(sys.argv[1:] if argv is None else argv)

@@ -82,7 +82,7 @@ def add_parser(subparsers):
 
 def run(args) -> int:
     from ..batching.api import batch
-    from ..io.progress import current
+    from ..progress import current
     from .render import parse_size
     from .runs import Run
     from .sample import parse_positive

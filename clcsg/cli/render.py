@@ -114,8 +114,8 @@ def parse_size(text) -> tuple[int, int]:
 
 def parse_background(text) -> tuple[float, ...]:
     """``"R,G,B[,A]"`` (components in [0, 1], or 0-255 if any is above 1), a color name or
-    ``#hex`` (:func:`clcsg.io.colors.parse_color_text`)."""
-    from ..io.colors import ColorError, parse_color_text
+    ``#hex`` (:func:`clcsg.model.colors.parse_color_text`)."""
+    from ..model.colors import ColorError, parse_color_text
 
     try:
         return parse_color_text(text, allow_255=True)
@@ -164,7 +164,7 @@ def cli_camera(args, bound, fit=None) -> Camera:
 
 def _check_outputs(args) -> None:
     """Every output path, before any work."""
-    from ..io.outputs import check_image_output, check_output
+    from ..writers.output_files import check_image_output, check_output
 
     check_image_output(args.output)
     for option, path, ext, what in (("--depth", args.depth, ".npy", "depth"), ("--ids", args.ids, ".npy", "ids"),
@@ -207,7 +207,7 @@ def run(args) -> int:
     import warnings
 
     from ..cl.device import get_context
-    from ..io.colors import ColorError, scheme_color
+    from ..model.colors import ColorError, scheme_color
     from ..rendering.raytracer import raytrace
     from ..rendering.splat import render
     from .app import bound_diagonal, parse_radius
@@ -249,7 +249,7 @@ def run(args) -> int:
         warnings.warn(f"{args.scene}: the solid is empty; the image is all background", stacklevel=2)
         img, what = _empty_image(size, background, args.method), "empty solid"
     elif args.method == "raytrace":
-        from ..io.colors import recolor_defaults
+        from ..model.colors import recolor_defaults
 
         recolor_defaults(tape, default_color)
         with run.step("frame", "framing the view (probe ray trace)"):

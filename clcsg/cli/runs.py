@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-from ..io.progress import current
+from ..progress import current
 
 
 class Run:

@@ -75,7 +75,7 @@ def write_stats(path, stats) -> None:
 
 def run(args) -> int:
     from ..cl.device import get_context
-    from ..io.outputs import check_output, check_samples_output
+    from ..writers.output_files import check_output, check_samples_output
     from ..sampling.sampler import sample
     from .runs import Run, load_scene
 

@@ -83,7 +83,7 @@ def run(args) -> int:
     import webbrowser
 
     from ..cl.device import get_context
-    from ..io.colors import ColorError, scheme_color
+    from ..model.colors import ColorError, scheme_color
     from ..viewer.frames import warm_up
     from ..viewer.server import ViewerServer, bind
     from ..viewer.session import Session, parse_radius

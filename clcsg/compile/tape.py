@@ -252,7 +252,7 @@ def _world_literals(node: Primitive, m, inv, table: QuadricTable, source: str):
 def instances_of(shape: Shape, table: QuadricTable, source: str = "scene") -> list[Instance]:
     """The primitive instances of ``shape`` in tree order (iterative depth-first walk; a shared
     sub-graph under the same transform is walked once)."""
-    from .term_bounds import term_box
+    from .bounds.term_boxes import term_box
 
     inv = _inverse_cache()
     out: list[Instance] = []
@@ -479,7 +479,7 @@ def scene_bound(shape, instances, root, user_bound, source):
     """(bound (2, 3), empty) of the solid."""
     if root == _FALSE:
         return np.zeros((2, 3)), True
-    from . import bounds
+    from .bounds import tree as bounds
 
     if hasattr(bounds, "shape_bound"):
         return bounds.shape_bound(shape, user_bound=user_bound, source=source)

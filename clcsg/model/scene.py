@@ -1,9 +1,9 @@
 """A scene: a CSG shape plus the optional bound that unbounded terms are clipped to.
 
 ``load`` and ``save`` pick the format from the file name: ``.json`` is clcsg's own scene
-format (:mod:`clcsg.io.scenefile`), ``.csg`` is OpenSCAD's CSG export (:mod:`clcsg.io.openscad`)
+format (:mod:`clcsg.readers.scenefile`), ``.csg`` is OpenSCAD's CSG export (:mod:`clcsg.readers.openscad`)
 and ``.scad`` an OpenSCAD program, exported to CSG by the ``openscad`` binary first
-(:mod:`clcsg.io.scad`).
+(:mod:`clcsg.readers.scad`).
 """
 
 from __future__ import annotations
@@ -73,15 +73,15 @@ def load(path) -> Scene:
         raise SceneError(f"{p}: no such file")
     ext = os.path.splitext(p)[1].lower()
     if ext == ".json":
-        from ..io.scenefile import load_json
+        from ..readers.scenefile import load_json
 
         return load_json(p)
     if ext == ".csg":
-        from ..io.openscad import load_csg
+        from ..readers.openscad import load_csg
 
         return load_csg(p)
     if ext == ".scad":
-        from ..io.scad import load_scad
+        from ..readers.scad import load_scad
 
         return load_scad(p)
     raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json, .csg or .scad)")
@@ -92,6 +92,6 @@ def save(obj, path) -> None:
     p = os.fspath(path)
     if os.path.splitext(p)[1].lower() != ".json":
         raise SceneError(f"{p}: scenes are saved as .json")
-    from ..io.scenefile import save_json
+    from ..readers.scenefile import save_json
 
     save_json(as_scene(obj), p)

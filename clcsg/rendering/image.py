@@ -45,14 +45,14 @@ class Image:
     def save(self, path) -> None:
         """Write the color image; the format is the extension's: ``.png``, ``.jpg`` / ``.jpeg``
         (no alpha: the alpha channel is dropped), ``.webp`` (lossless) or ``.tif`` / ``.tiff``
-        (see :mod:`clcsg.io.outputs`).  Another extension is a UsageError."""
-        from ..io.outputs import write_image
+        (see :mod:`clcsg.writers.output_files`).  Another extension is a UsageError."""
+        from ..writers.output_files import write_image
 
         write_image(self.rgba, path)
 
     def _repr_png_(self) -> bytes:
         """The image as PNG, for Jupyter and IPython."""
-        from ..io.outputs import png_bytes
+        from ..writers.output_files import png_bytes
 
         return png_bytes(self.rgba)
 

@@ -21,7 +21,7 @@ from ..cl.records import SceneBuffers, pack
 from ..errors import UsageError
 from .camera import Camera
 from .image import Image
-from .view import Shading, pack_view
+from .shading import Shading, pack_view
 
 TILE = 16
 #: fixed work-group shape of the per-pixel kernels (raytrace, resolve): PoCL compiles a kernel
@@ -68,7 +68,7 @@ def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 
     Context.  ``background``: RGBA/RGB in [0, 1].  ``precision``: ``"auto"`` (double where the
     device has fp64), ``"double"`` or ``"float"``.  ``normal_form``: ``"tree"`` or ``"dnf"``
     (the same image either way).  ``aa``: N x N supersampling (see :func:`clcsg.render`).
-    Further keywords are :class:`~clcsg.rendering.view.Shading` options (ambient, diffuse,
+    Further keywords are :class:`~clcsg.rendering.shading.Shading` options (ambient, diffuse,
     specular, shininess, gamma, key).
     """
     from .supersample import supersample

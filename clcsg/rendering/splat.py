@@ -31,7 +31,7 @@ from ..cl.memory import device_buffer, upload
 from ..errors import UsageError
 from .image import Image
 from .raytracer import camera_or_fit, pixel_range
-from .view import Shading, pack_view
+from .shading import Shading, pack_view
 
 #: fixed work-group size of the splat pass (see raytracer.PIXEL_GROUP: a size chosen by the
 #: runtime would recompile the kernel for every new sample count)

@@ -4,7 +4,7 @@ on the CSG tape.
 Decomposition
 -------------
 Every unique quadric q that a leaf of the tape uses is sampled from each of the three sampling
-planes of its principal frame (:mod:`clcsg.compile.frames`) and, for two-sheet heightfields,
+planes of its principal frame (:mod:`clcsg.compile.quadric_frames`) and, for two-sheet heightfields,
 from both sheets.  A *task* is one (quadric, plane, sheet); its root cell is the box of the
 primitive instances that have q as a literal (the CSG surface lies on the union of the
 primitives' boundaries), cut by the scene bound, projected into the plane's local (x, y).
@@ -62,7 +62,7 @@ from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype
-from ..compile.frames import principal_frame
+from ..compile.quadric_frames import principal_frame
 from ..compile.tape import OP_LEAF
 from ..errors import LimitError, UsageError
 from ..model.quadric import Quadric
@@ -154,7 +154,7 @@ def estimate_samples(tape, radius: float) -> int:
 
 
 class _Progress:
-    """Progress of the level loop on the current reporter (:mod:`clcsg.io.progress`: a bar on
+    """Progress of the level loop on the current reporter (:mod:`clcsg.progress`: a bar on
     a terminal, JSON lines with ``--progress json``, nothing in a pipe or with ``progress=False``).
 
     Done / total count cells: the work of a level is its cells.  The total is a forecast,
@@ -167,7 +167,7 @@ class _Progress:
     """
 
     def __init__(self, enabled, estimate=0, roots=None, floor=None, max_levels=400):
-        from ..io.progress import for_option
+        from ..progress import for_option
 
         self.reporter = for_option(enabled)
         self.estimate = int(estimate)
@@ -226,7 +226,7 @@ def sample(
     diagonal)).  ``distortion``: use the interval
     distortion bound (True) or the worst case max(sqrt 3, bound) (False).  ``capacity``: initial
     (cells, samples[, arena[, clip]]) buffer sizes (tests force tiny ones).
-    ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.sampling.guard`;
+    ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.compile.bounds.estimates`;
     None: 50 million samples / 80% of the device's global memory); past them
     :class:`~clcsg.errors.LimitError` is raised before anything is allocated.
     """
@@ -251,7 +251,7 @@ def sample(
 
     ctx = scene_context(device)
     real = np.dtype(_device.real_dtype(ctx))
-    from . import guard
+    from ..compile.bounds import estimates as guard
 
     limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
     est = guard.estimate_tape(tape, radius, real.itemsize)

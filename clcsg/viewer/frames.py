@@ -105,7 +105,7 @@ def render(context, model, camera, method: str = "splat", aa: int = 1):
     from ..rendering.raytracer import trace
     from ..rendering.splat import rasterize
     from ..rendering.supersample import supersample
-    from ..rendering.view import Shading
+    from ..rendering.shading import Shading
 
     shading = Shading()
     if method == "splat":
@@ -223,7 +223,7 @@ def download(context, model, query, kind: str) -> tuple[bytes, str]:
     aa = check_aa(_side(query.get("aa", 1), "aa"), cam.width, cam.height)
     img = render(context, model, cam, query.get("method", "splat"), aa)
     if kind == "png":
-        from ..io.outputs import png_bytes
+        from ..writers.output_files import png_bytes
 
         return png_bytes(img.rgba), "image/png"
     buf = io.BytesIO()

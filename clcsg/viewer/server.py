@@ -301,7 +301,7 @@ class ViewerServer:
         """``fn(*args)`` (a new model or None) as a progress step, then the model's warm-up."""
         import contextlib
 
-        from ..io.progress import using
+        from ..progress import using
 
         with contextlib.ExitStack() as stack:
             if self.reporter is not None:

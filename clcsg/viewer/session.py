@@ -106,7 +106,7 @@ class Session:
         from ..model.scene import load
 
         if self.path.lower().endswith(".scad") and os.path.isfile(self.path):
-            from ..io.scad import load_scad
+            from ..readers.scad import load_scad
 
             scene, deps = load_scad(self.path, with_dependencies=True)
             self.files = deps

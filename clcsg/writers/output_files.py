@@ -3,8 +3,8 @@
 Images (:func:`write_image`, via Pillow): ``.png``, ``.jpg`` / ``.jpeg``, ``.webp`` (lossless,
 so the pixels are exact) and ``.tif`` / ``.tiff``; RGBA where the format has alpha, RGB for
 JPEG (the alpha channel is dropped: transparent pixels show the background colour).  Samples:
-``.ply`` (binary PLY, :mod:`clcsg.io.ply`) and ``.npz`` (everything needed to render them
-again, :mod:`clcsg.io.samples_npz`).  Per-pixel arrays are ``.npy``, statistics ``.json``.
+``.ply`` (binary PLY, :mod:`clcsg.writers.ply`) and ``.npz`` (everything needed to render them
+again, :mod:`clcsg.writers.samples_npz`).  Per-pixel arrays are ``.npy``, statistics ``.json``.
 
 :func:`check_output` raises a one-line :class:`~clcsg.errors.UsageError` for an unknown
 extension or a missing directory, so that ``clcsg sample -o x.png`` fails at once instead of
