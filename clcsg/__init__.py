@@ -17,19 +17,44 @@ The data flows one way, one package per stage:
    (:func:`inside`, :func:`distance`); ``batching``: many scenes sampled (and rendered) into a
    folder with a manifest, on a process pool or a Dask cluster (:func:`batch`).
 """
-from .errors import ClcsgError
-from .model.csg import Shape, contains, difference, intersection, union
-from .model.quadric import Quadric
-from .model.solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
-
 __version__ = "0.2.0"
-from .cl.device import devices
-from .model.scene import Scene, load, save
-from .rendering.camera import Camera, orbit
-from .rendering.image import Image
-from .rendering.raytracer import raytrace
-from .rendering.splat import render
-from .sampling.sampler import sample
-from .sampling.samples import Samples, load_samples
-from .queries import distance, inside
-from .batching.api import batch
+
+#: public name -> the module that defines it; imported on first use (PEP 562), so that
+#: ``clcsg --version`` and ``clcsg --help`` load neither numpy nor pyopencl
+_EXPORTS = {
+    "ClcsgError": "errors",
+    **dict.fromkeys(("Shape", "contains", "difference", "intersection", "union"), "model.csg"),
+    "Quadric": "model.quadric",
+    **dict.fromkeys(("box", "cone", "cylinder", "ellipsoid", "halfspace", "quadric", "slab", "sphere"),
+                    "model.solids"),
+    "Scene": "model.scene",
+    **dict.fromkeys(("load", "save", "as_scene"), "readers.scenes"),
+    "devices": "cl.device",
+    **dict.fromkeys(("Camera", "orbit"), "rendering.camera"),
+    "Image": "rendering.image",
+    "raytrace": "rendering.raytracer",
+    "render": "rendering.splat",
+    "sample": "sampling.sampler",
+    "Samples": "sampling.samples",
+    "load_samples": "writers.samples_npz",
+    "write_samples": "writers.output_files",
+    **dict.fromkeys(("to_open3d", "to_trimesh"), "writers.interop"),
+    **dict.fromkeys(("distance", "inside"), "queries"),
+    "batch": "batching.api",
+}
+__all__ = ["__version__", *_EXPORTS]
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'clcsg' has no attribute {name!r}")
+    import importlib  # stdlib; the import machinery itself
+
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -45,7 +45,7 @@ def cl_context():
 @pytest.fixture
 def tmp_scene(tmp_path):
     """A function writing a Shape or Scene to a scene file in tmp_path; returns the path."""
-    from clcsg.model.scene import save
+    from clcsg.readers.scenes import save
 
     def write(obj, name: str = "scene.json"):
         path = tmp_path / name

@@ -233,18 +233,18 @@ def test_scene_info_bound_override_and_unbounded():
 
 @pytest.fixture
 def scene_loader(monkeypatch):
-    """``clcsg.model.scene.load`` returning demo_scene() for '*.demo' paths (the file formats are
+    """``clcsg.readers.scenes.load`` returning demo_scene() for '*.demo' paths (the file formats are
     tested elsewhere; this tests the CLI around the loader)."""
-    import clcsg.model.scene
+    import clcsg.readers.scenes
 
-    real = clcsg.model.scene.load
+    real = clcsg.readers.scenes.load
 
     def load(path):
         if str(path).endswith(".demo"):
             return demo_scene()
         return real(path)
 
-    monkeypatch.setattr(clcsg.model.scene, "load", load)
+    monkeypatch.setattr(clcsg.readers.scenes, "load", load)
 
 
 def test_info_text(capsys, scene_loader):

@@ -59,7 +59,7 @@ GUARD_EXAMPLES = ["saddle.json", "bracket.json", "flange.csg", "spheres.json"]
 def test_estimate_is_never_far_below_the_real_count(cl_context, name):
     if name in SAMPLER_SCENES:
         shape, r = SAMPLER_SCENES[name]
-        sc = clcsg.model.scene.as_scene(shape)
+        sc = clcsg.as_scene(shape)
     else:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

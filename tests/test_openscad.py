@@ -14,7 +14,8 @@ from clcsg.model.csg import Difference, Intersection, Primitive, Transformed, Un
 from clcsg.errors import SceneError
 from clcsg.compile.dnf import normalize
 from clcsg.readers.openscad import WEB_COLORS, OpenScadWarning, load_csg, parse_csg
-from clcsg.model.scene import Scene, load
+from clcsg.model.scene import Scene
+from clcsg.readers.scenes import load
 
 DATA = Path(__file__).parent / "data" / "openscad"
 EXAMPLES = Path(__file__).parent.parent / "examples"

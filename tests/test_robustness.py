@@ -331,7 +331,7 @@ def test_dnf_past_its_limit_is_caught_in_seconds(tmp_path, capsys):
 
 
 def _tape(shape):
-    return clcsg.model.scene.as_scene(shape).compile()
+    return clcsg.as_scene(shape).compile()
 
 
 # -- empty results ------------------------------------------------------------------------------

@@ -16,6 +16,10 @@ from . import inputs as _inputs
 from .manifest import Manifest
 from .options import Options, Radius, require
 from .outputs import queries_path, samples_path, view_path, write_files
+from .dask_engine import parse_local
+from . import local
+from ..progress import for_option
+from . import dask_engine
 
 
 class _Tally:
@@ -76,7 +80,6 @@ def dask_address(scheduler, dask) -> str | None:
         raise UsageError("give either a scheduler address or a local Dask cluster (local:N), not both")
     if scheduler is None and dask is None:
         return None
-    from .dask_engine import parse_local
 
     if scheduler is None:
         address = f"local:{dask}" if isinstance(dask, int) else str(dask)
@@ -89,10 +92,7 @@ def dask_address(scheduler, dask) -> str | None:
 
 def _engine(todo, options, workers, address, retries):
     if address is not None:
-        from . import dask_engine
-
         return dask_engine.run(todo, options, address, retries)
-    from . import local
 
     return local.run(todo, options, workers, retries)
 
@@ -126,8 +126,6 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
     Returns a ``pyarrow.Table`` (a pandas DataFrame with ``as_pandas=True``), one row per scene
     in input order.  Needs pyarrow (and dask for the Dask engine): ``pip install 'clcsg[batch]'``.
     """
-    from ..progress import for_option
-
     require("pyarrow", "clcsg batch")
     address = dask_address(scheduler, dask)
     if address is not None:

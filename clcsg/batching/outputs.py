@@ -30,6 +30,7 @@ import uuid
 
 import numpy as np
 
+from ..writers import ply
 from .options import FORMATS, require
 
 SAMPLES_DIR = "samples"
@@ -84,7 +85,7 @@ def samples_bytes(samples, fmt: str, metadata: dict | None = None) -> bytes:
     fd, tmp = tempfile.mkstemp(suffix=".ply")
     os.close(fd)
     try:
-        samples.to_ply(tmp)
+        ply.write_samples(samples, tmp)
         with open(tmp, "rb") as f:
             return f.read()
     finally:

@@ -17,6 +17,7 @@ import importlib.resources
 import threading
 
 import numpy as np
+from .constants import defines as shared
 
 _cache: dict = {}
 _lock = threading.Lock()
@@ -49,8 +50,6 @@ def real_options(real) -> list[str]:
 
 def build_options(defines: dict | None = None, real=np.float64) -> list[str]:
     """``-D`` options: precision, the shared constants, then ``defines``."""
-    from .constants import defines as shared
-
     merged = {**shared(), **(defines or {})}
     return real_options(real) + [f"-D{k}={v}" for k, v in sorted(merged.items())]
 

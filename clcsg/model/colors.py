@@ -25,6 +25,7 @@ import numbers
 import re
 
 from PIL import ImageColor
+from ..model.csg import DEFAULT_COLOR
 
 #: OpenSCAD's default face colour, "opencsg-face-front" / "cgal-face-front" of its default
 #: colour scheme "Cornfield" (color-schemes/render/cornfield.json): ``clcsg render --colors
@@ -125,8 +126,6 @@ def recolor_defaults(tape, color) -> int:
     """Give every primitive instance of ``tape`` that has clcsg's default colour the colour
     ``color`` (RGBA); returns how many were changed.  Only what rendering reads changes (the
     instances' ``color``), so the tape must be packed again afterwards."""
-    from ..model.csg import DEFAULT_COLOR
-
     if color is None:
         return 0
     default = tuple(float(x) for x in DEFAULT_COLOR)

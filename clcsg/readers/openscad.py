@@ -70,6 +70,7 @@ from ..model.scene import Scene
 from ..model.colors import NAMED_COLORS, ColorError, from_string
 from .openscad_tokens import SOURCE_HINT, UNDEF, Node, OpenScadWarning, Parser, Source, fmt, is_num
 from .trampoline import run
+from ..model import solids
 
 __all__ = [
     "load_csg", "parse_csg", "OpenScadWarning", "WEB_COLORS", "SUPPORTED_NODES", "MAX_DEPTH", "MAX_NODE_DEPTH",
@@ -335,8 +336,6 @@ class _Evaluator:
         return False
 
     def _make(self, node, factory, ctx, **params):
-        from ..model import solids
-
         try:
             return getattr(solids, factory)(color=ctx.color, **params)
         except (SceneError, ValueError, ArithmeticError, TypeError) as e:

@@ -37,6 +37,7 @@ import warnings
 
 from ..errors import SceneError
 from ..model.scene import Scene
+from .openscad import OpenScadWarning, parse_csg
 
 __all__ = ["load_scad", "export_csg", "find_openscad", "parse_dependencies", "DEFAULT_TIMEOUT"]
 
@@ -174,8 +175,6 @@ def load_scad(path, *, timeout: float | None = None, with_dependencies: bool = F
     the absolute paths of every file the program read: itself and what it ``include``s and
     ``use``s, directly or not).
     """
-    from .openscad import OpenScadWarning, parse_csg
-
     p = os.fspath(path)
     if not os.path.isfile(p):
         raise SceneError(f"{p}: no such file" if not os.path.exists(p) else f"{p}: not a file")

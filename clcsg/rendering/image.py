@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import UsageError
+from ..writers.output_files import write_image
+from ..writers.output_files import png_bytes
 
 
 @dataclass
@@ -46,14 +48,10 @@ class Image:
         """Write the color image; the format is the extension's: ``.png``, ``.jpg`` / ``.jpeg``
         (no alpha: the alpha channel is dropped), ``.webp`` (lossless) or ``.tif`` / ``.tiff``
         (see :mod:`clcsg.writers.output_files`).  Another extension is a UsageError."""
-        from ..writers.output_files import write_image
-
         write_image(self.rgba, path)
 
     def _repr_png_(self) -> bytes:
         """The image as PNG, for Jupyter and IPython."""
-        from ..writers.output_files import png_bytes
-
         return png_bytes(self.rgba)
 
     def save_depth(self, path) -> None:

@@ -14,6 +14,8 @@ import time
 
 import numpy as np
 
+from ..compile.tape import Tape
+from ..readers.scenes import as_scene
 from ..cl.device import choose_real, context_of
 from ..cl.programs import build, event_seconds, kernel
 from ..cl.memory import device_buffer, upload
@@ -22,6 +24,7 @@ from ..errors import UsageError
 from .camera import Camera
 from .image import Image
 from .shading import Shading, pack_view
+from .supersample import supersample
 
 TILE = 16
 #: fixed work-group shape of the per-pixel kernels (raytrace, resolve): PoCL compiles a kernel
@@ -39,9 +42,6 @@ def pixel_range(width: int, height: int) -> tuple[tuple[int, int], tuple[int, in
 
 def as_tape(obj, normal_form: str = "tree"):
     """A :class:`~clcsg.compile.tape.Tape` from a Tape, Samples, Scene, Shape or scene file path."""
-    from ..compile.tape import Tape
-    from ..model.scene import as_scene
-
     if isinstance(obj, Tape):
         return obj
     tape = getattr(obj, "tape", None)
@@ -71,8 +71,6 @@ def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 
     Further keywords are :class:`~clcsg.rendering.shading.Shading` options (ambient, diffuse,
     specular, shininess, gamma, key).
     """
-    from .supersample import supersample
-
     tape = as_tape(scene, normal_form)
     cam = camera_or_fit(camera, tape.bound)
     shade = Shading().with_options(background=background, **shading)

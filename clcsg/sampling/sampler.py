@@ -63,11 +63,13 @@ from ..cl.programs import build
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, task_dtype
 from ..compile.quadric_frames import principal_frame
-from ..compile.tape import OP_LEAF
+from ..cl.constants import OP_LEAF
 from ..errors import LimitError, UsageError
 from ..model.quadric import Quadric
-from ..model.scene import as_scene
+from ..readers.scenes import as_scene
 from .samples import Samples
+from ..compile.bounds import estimates as guard
+from ..progress import for_option
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
@@ -167,8 +169,6 @@ class _Progress:
     """
 
     def __init__(self, enabled, estimate=0, roots=None, floor=None, max_levels=400):
-        from ..progress import for_option
-
         self.reporter = for_option(enabled)
         self.estimate = int(estimate)
         self.levels_expected = max_levels
@@ -251,7 +251,6 @@ def sample(
 
     ctx = scene_context(device)
     real = np.dtype(_device.real_dtype(ctx))
-    from ..compile.bounds import estimates as guard
 
     limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
     est = guard.estimate_tape(tape, radius, real.itemsize)

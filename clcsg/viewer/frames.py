@@ -24,6 +24,13 @@ import numpy as np
 
 from ..errors import UsageError
 from ..rendering.camera import Camera
+from ..writers.ply import write_samples
+from ..rendering.raytracer import trace
+from ..rendering.splat import rasterize
+from ..rendering.supersample import supersample
+from ..rendering.shading import Shading
+from ..rendering.supersample import check_aa
+from ..writers.output_files import png_bytes
 
 #: the largest frame side the page may ask for
 MAX_SIDE = 4096
@@ -102,11 +109,6 @@ def fitted_view(samples, width, height) -> dict:
 def render(context, model, camera, method: str = "splat", aa: int = 1):
     """The :class:`~clcsg.Image` of ``model`` from ``camera``: ``method`` ``"splat"`` (its
     samples, device buffers uploaded once per model) or ``"raytrace"`` (its tape)."""
-    from ..rendering.raytracer import trace
-    from ..rendering.splat import rasterize
-    from ..rendering.supersample import supersample
-    from ..rendering.shading import Shading
-
     shading = Shading()
     if method == "splat":
         def at(cam):
@@ -218,13 +220,10 @@ def download(context, model, query, kind: str) -> tuple[bytes, str]:
     except ValueError:
         raise UsageError("view: not valid JSON") from None
     cam = camera_of(view, query.get("width"), query.get("height"))
-    from ..rendering.supersample import check_aa
 
     aa = check_aa(_side(query.get("aa", 1), "aa"), cam.width, cam.height)
     img = render(context, model, cam, query.get("method", "splat"), aa)
     if kind == "png":
-        from ..writers.output_files import png_bytes
-
         return png_bytes(img.rgba), "image/png"
     buf = io.BytesIO()
     np.savez_compressed(buf, rgba=img.rgba, depth=img.depth, ids=img.ids,
@@ -238,6 +237,6 @@ def _ply_bytes(samples) -> bytes:
 
     with tempfile.TemporaryDirectory(prefix="clcsg-view-") as tmp:
         path = os.path.join(tmp, "samples.ply")
-        samples.to_ply(path)
+        write_samples(samples, path)
         with open(path, "rb") as f:
             return f.read()

@@ -19,6 +19,7 @@ import os
 import numpy as np
 
 from ..errors import UsageError
+from . import ply, samples_npz
 
 #: image extension -> Pillow format
 IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP", ".tif": "TIFF", ".tiff": "TIFF"}
@@ -59,6 +60,20 @@ def check_image_output(path, option: str | None = "-o") -> str:
 
 def check_samples_output(path, option: str | None = "-o") -> str:
     return check_output(path, SAMPLE_FORMATS, "sample", option)
+
+
+def write_samples(samples, path, float32: bool = False) -> None:
+    """Write :class:`~clcsg.sampling.samples.Samples` in the format of ``path``'s extension:
+    ``.ply`` (binary PLY, double precision unless ``float32``: Open3D, MeshLab, plyfile read it)
+    or ``.npz`` (the samples with their tape: :func:`clcsg.load_samples` reads them back,
+    ``clcsg render samples.npz`` renders them again)."""
+    fmt = check_samples_output(path, None)
+    if fmt == "PLY":
+        ply.write_samples(samples, path, float32=float32)
+    elif float32:
+        raise UsageError(f"{path}: float32 applies to PLY output; .npz keeps the samples in double precision")
+    else:
+        samples_npz.save_samples(samples, path)
 
 
 def _pil_image(rgba: np.ndarray, fmt: str):

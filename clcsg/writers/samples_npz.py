@@ -23,6 +23,10 @@ import os
 import numpy as np
 
 from ..errors import SceneError
+from ..errors import UsageError
+from ..cl.records import pack
+from ..compile.tape import Instance, Tape
+from ..sampling.samples import Samples
 
 FORMAT = "clcsg-samples"
 VERSION = 1
@@ -41,8 +45,6 @@ def _json(obj) -> np.ndarray:
 def save_samples(samples, path) -> None:
     """Write ``samples`` (with their tape) as an ``.npz`` archive at ``path`` (the name is
     used as given)."""
-    from ..errors import UsageError
-
     t = samples.tape
     insts = list(t.instances)
     lits = [np.asarray(inst.literals, dtype=np.int64).reshape(-1, 2) for inst in insts]
@@ -75,10 +77,6 @@ def save_samples(samples, path) -> None:
 
 def load_samples(path):
     """The :class:`~clcsg.sampling.samples.Samples` saved by :func:`save_samples`."""
-    from ..cl.records import pack
-    from ..compile.tape import Instance, Tape
-    from ..sampling.samples import Samples
-
     p = os.fspath(path)
     try:
         z = np.load(p, allow_pickle=False)
