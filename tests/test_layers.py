@@ -12,6 +12,7 @@ from __future__ import annotations
 import ast
 import importlib
 import pathlib
+import re
 import subprocess
 import sys
 
@@ -160,3 +161,43 @@ def test_version_and_help_load_neither_numpy_nor_pyopencl(argv):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "HEAVY []" in out.stdout, out.stdout
+
+
+# -- the docs name every module, and every module path they name exists ------------------------
+DOCS = ROOT.parent / "docs"
+ARCHITECTURE = DOCS / "architecture.md"
+
+
+def _doc_texts() -> dict[str, str]:
+    files = [ROOT.parent / "README.md", *sorted(DOCS.glob("*.md"))]
+    return {f.name: f.read_text(encoding="utf-8") for f in files}
+
+
+def test_architecture_lists_every_module():
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    named = set(re.findall(r"`(clcsg/[\w/]+\.py)`", text))
+    missing = sorted(str(p.relative_to(ROOT.parent)) for p in ROOT.rglob("*.py")
+                     if str(p.relative_to(ROOT.parent)) not in named)
+    assert not missing, "modules docs/architecture.md does not name: " + ", ".join(missing)
+
+
+def test_every_path_and_module_the_docs_name_exists():
+    import clcsg
+
+    bad = []
+    for name, text in _doc_texts().items():
+        for path in re.findall(r"`(clcsg/[\w./-]*)`", text):
+            if not (ROOT.parent / path).exists():
+                bad.append(f"{name}: {path}")
+        for dotted in re.findall(r"\bclcsg\.[a-z_][\w.]*", text):
+            parts = dotted.rstrip(".").split(".")
+            if parts[1] in clcsg.__all__ or parts[1] == "__version__":
+                continue  # a public name such as clcsg.sample
+            # the longest prefix that is a module must exist; the rest are its attributes
+            k = len(parts)
+            while k > 1 and not ((ROOT.parent / pathlib.Path(*parts[:k])).with_suffix(".py").exists()
+                                 or (ROOT.parent / pathlib.Path(*parts[:k]) / "__init__.py").exists()):
+                k -= 1
+            if k == 1:
+                bad.append(f"{name}: {dotted}")
+    assert not bad, "paths or modules named in the docs that do not exist:\n" + "\n".join(bad)
