@@ -12,14 +12,13 @@ import os
 import time
 
 from ..errors import UsageError
+from ..progress import for_option
+from . import dask_engine, local
 from . import inputs as _inputs
+from .dask_engine import parse_local
 from .manifest import Manifest
 from .options import Options, Radius, require
 from .outputs import queries_path, samples_path, view_path, write_files
-from .dask_engine import parse_local
-from . import local
-from ..progress import for_option
-from . import dask_engine
 
 
 class _Tally:
@@ -97,6 +96,28 @@ def _engine(todo, options, workers, address, retries):
     return local.run(todo, options, workers, retries)
 
 
+def _output_folder(outdir) -> str:
+    outdir = os.fspath(outdir)
+    try:
+        os.makedirs(outdir, exist_ok=True)
+    except OSError as e:
+        raise UsageError(f"{outdir}: cannot create the output folder: {e.strerror or e}") from None
+    return outdir
+
+
+def _not_done(jobs, manifest, hashes, redo_errors: bool, tally) -> list:
+    """The jobs an earlier run did not complete; the others go into the manifest as skipped."""
+    todo = []
+    for job in jobs:
+        old = manifest.complete(job.name, hashes[job.name], redo_errors)
+        if old is None:
+            todo.append(job)
+        else:
+            manifest.add({**old, "skipped": True})
+            tally.count({**old, "skipped": True})
+    return todo
+
+
 def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=(640, 480), points=None,
           random_points: int = 0, workers=None,
           scheduler: str | None = None, dask=None, device=None, normal_form: str = "tree", floor=None,
@@ -142,24 +163,12 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
     if int(retries) < 0:
         raise UsageError(f"retries must be >= 0, got {retries}")
     jobs = _inputs.jobs(scenes)
-    outdir = os.fspath(outdir)
-    try:
-        os.makedirs(outdir, exist_ok=True)
-    except OSError as e:
-        raise UsageError(f"{outdir}: cannot create the output folder: {e.strerror or e}") from None
+    outdir = _output_folder(outdir)
     manifest = Manifest(outdir)
     tally = _Tally(len(jobs))
     hashes = {job.name: options.content_hash(job.digest) for job in jobs}
-    todo = []
-    for job in jobs:
-        old = manifest.complete(job.name, hashes[job.name], redo_errors)
-        if old is None:
-            todo.append(job)
-        else:
-            manifest.add({**old, "skipped": True})
-            tally.count({**old, "skipped": True})
-    rep = for_option(progress)
-    with rep.step("batch", "batch", total=len(jobs), unit="scenes") as st:
+    todo = _not_done(jobs, manifest, hashes, redo_errors, tally)
+    with for_option(progress).step("batch", "batch", total=len(jobs), unit="scenes") as st:
         st.update(done=tally.done, note=tally.note())
         try:
             if todo:
