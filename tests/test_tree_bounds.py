@@ -1,4 +1,4 @@
-"""Bounds on the CSG tree (clcsg/compile/bounds.py: shape_bound, tree_bounds; exact_boxes.py: primitive_box,
+"""Bounds on the CSG tree (clcsg/compile/bounds/tree.py: shape_bound, tree_bounds; exact_boxes.py: primitive_box,
 quadric_regions), the guard's estimate from those regions (clcsg/compile/bounds/estimates.py:
 estimate_regions, check_estimate), the iterative ``contains`` and the random programs
 (clcsg/model/random_programs.py, tests/strategies.py: csg_programs).
