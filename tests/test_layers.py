@@ -219,3 +219,13 @@ def test_no_function_over_80_lines():
                 if name not in LONG_FUNCTIONS_BEING_SPLIT:
                     long.append(f"{name} ({n.end_lineno - n.lineno + 1} lines)")
     assert not long, "functions over 80 lines:\n" + "\n".join(long)
+
+
+def test_no_command_help_loads_pyopencl():
+    code = ("import sys\nfrom clcsg.cli import main\n"
+            "for cmd in ('devices', 'info', 'sample', 'render', 'batch', 'view'):\n"
+            "    try:\n        main([cmd, '--help'])\n    except SystemExit:\n        pass\n"
+            "print('PYOPENCL', 'pyopencl' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "PYOPENCL False" in out.stdout and "usage: clcsg sample" in out.stdout
