@@ -1,21 +1,24 @@
 """clcsg: exact point sampling and pixel-perfect splat rendering of quadric CSG solids.
 
-The data flows one way, one package per stage:
+The data flows one way, one package per stage (every module and the layers:
+``docs/architecture.md``):
 
 1. ``model``: the scene — quadrics, primitives, the CSG graph (:class:`Shape`), :class:`Scene`;
-   ``io`` reads and writes it (JSON scene files, OpenSCAD ``.csg`` / ``.scad``, PLY samples).
+   ``readers`` read scene files into it (JSON scene files, OpenSCAD ``.csg`` / ``.scad``).
 2. ``compile``: the graph becomes a tape over unique canonical quadrics (transforms and
    complements pushed to the leaves, shared sub-graphs once), with primitive instances, bounds
-   and principal frames; the paper's DNF is one shape of tape.
+   and estimates (``compile.bounds``) and principal frames; the paper's DNF is one shape of tape.
 3. ``sampling``: per (quadric, sampling plane, sheet) an adaptive subdivision on the device,
-   each cell with its pruned tape: :func:`sample` returns :class:`Samples`.
+   each cell with its pruned tape: :func:`sample` returns :class:`Samples`, plain arrays that
+   ``writers`` turn into PLY, NPZ, Open3D or trimesh (:func:`write_samples`).
 4. ``rendering``: splats with local ray tracing and clipping by tape (:func:`render`) and the
    exact tree ray tracer (:func:`raytrace`), both into an :class:`Image`.
-5. ``cl`` is the OpenCL plumbing (devices, programs, records, shared constants); ``cli`` the
-   command line, one module per command.
+5. ``cl`` is the OpenCL plumbing (devices, programs, records, shared constants).
 6. ``queries``: occupancy and a conservative signed distance at given points, on the device
-   (:func:`inside`, :func:`distance`); ``batching``: many scenes sampled (and rendered) into a
-   folder with a manifest, on a process pool or a Dask cluster (:func:`batch`).
+   (:func:`inside`, :func:`distance`).
+7. ``pipeline``: scene -> tape -> radius -> samples -> camera -> image, the one path the front
+   ends take: ``cli`` (one module per command), ``viewer`` and ``batching`` (many scenes into a
+   folder with a manifest, on a process pool or a Dask cluster: :func:`batch`).
 """
 __version__ = "0.2.0"
 
