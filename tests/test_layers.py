@@ -229,3 +229,11 @@ def test_no_command_help_loads_pyopencl():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "PYOPENCL False" in out.stdout and "usage: clcsg sample" in out.stdout
+
+
+def test_every_public_name_resolves():
+    import clcsg
+
+    missing = [name for name in clcsg.__all__ if getattr(clcsg, name, None) is None]
+    assert not missing, missing
+    assert {"sample", "render", "write_samples", "load_samples", "to_open3d", "to_trimesh"} <= set(clcsg.__all__)
