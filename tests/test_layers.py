@@ -136,19 +136,25 @@ def test_model_imports_nothing_above_it():
 
 def test_every_module_imports_on_its_own():
     """Each module imported with none of ours loaded yet (as a fresh interpreter would)."""
-    failures = []
-    for module, _path in modules():
-        if module == "clcsg.__main__":
-            continue
-        for name in [m for m in sys.modules if m == "clcsg" or m.startswith("clcsg.")]:
+    def ours():
+        return [m for m in sys.modules if m == "clcsg" or m.startswith("clcsg.")]
+
+    loaded = {name: sys.modules[name] for name in ours()}  # put back afterwards: the other tests
+    failures = []                                        # hold these modules' classes
+    try:
+        for module, _path in modules():
+            if module == "clcsg.__main__":
+                continue
+            for name in ours():
+                del sys.modules[name]
+            try:
+                importlib.import_module(module)
+            except Exception as e:  # noqa: BLE001 - reported below with the module's name
+                failures.append(f"{module}: {type(e).__name__}: {e}")
+    finally:
+        for name in ours():
             del sys.modules[name]
-        try:
-            importlib.import_module(module)
-        except Exception as e:  # noqa: BLE001 - reported below with the module's name
-            failures.append(f"{module}: {type(e).__name__}: {e}")
-    for name in [m for m in sys.modules if m == "clcsg" or m.startswith("clcsg.")]:
-        del sys.modules[name]
-    importlib.import_module("clcsg")
+        sys.modules.update(loaded)
     assert not failures, "\n".join(failures)
 
 
