@@ -3,7 +3,7 @@
 :func:`tree_bounds` walks the graph iteratively (bottom-up and top-down passes over
 (node, transform, polarity) instances), then refines the root box by the graph's conservative
 distance; :func:`shape_bound` is the scene bound alone.  The boxes of the primitive instances
-feed :func:`clcsg.compile.regions.quadric_regions` (the resource guard's regions).
+feed :func:`clcsg.compile.bounds.regions.quadric_regions` (the resource guard's regions).
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SceneError, UnboundedError
-from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
-from ..model.quadric import ray_distance
+from ...errors import SceneError, UnboundedError
+from ...model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
+from ...model.quadric import ray_distance
 from .exact_boxes import empty_box, is_empty, literals_box, meet, primitive_box
 
 # The graph is walked once (iteratively) into *instances*: a node under one accumulated world
