@@ -23,13 +23,14 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent / "clcsg"
 #: bottom to top; a node may import only nodes of its own or a lower layer
 LAYERS = (
     ("errors", "progress"),
+    ("atomic",),
     ("model",),
     ("cl",),
     ("compile",),
     ("readers",),
     ("sampling",),
     ("writers",),
-    ("rendering", "queries"),
+    ("rendering", "queries", "meshing"),
     ("pipeline",),
     ("viewer", "batching"),
     ("cli",),

@@ -229,6 +229,7 @@ SUMMARIES = {
     "render": "render a scene to an image (splats or exact ray tracing)",
     "batch": "sample (and render) many scenes into a folder: process pool or Dask, restartable",
     "view": "preview a scene in the web browser, redrawn when the file changes",
+    "mesh": "write a closed triangle mesh (STL, 3MF, OBJ, PLY, OFF) with vertices on the exact surface",
 }
 
 

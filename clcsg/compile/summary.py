@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from ..model.construction import Construction
+from ..model.csg import walk
 from ..model.scene import Scene
 
 
@@ -16,9 +18,6 @@ def _plain(v):
 def constructions(shape) -> list[str]:
     """What each construction (extrusion, revolution, hull, Minkowski sum) of the graph expands
     to, one line each: 'hull of 8 spheres: 12 planes, 12 cylinders, 8 spheres'."""
-    from ..model.construction import Construction
-    from ..model.csg import walk
-
     return [n.describe() for n in walk(shape) if isinstance(n, Construction)]
 
 

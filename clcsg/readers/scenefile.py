@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..errors import SceneError, TransformError
 from ..model import solids
 from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
@@ -148,8 +149,6 @@ def dumps(data) -> str:
 
 def save_json(scene, path) -> None:
     """Write a Scene (or a bare Shape) as a ``.json`` scene file."""
-    from ..atomic import atomic_open
-
     text = dumps(scene_to_dict(scene))
     with atomic_open(path, "w", "scene") as f:
         f.write(text)
