@@ -34,7 +34,7 @@ import numpy as np
 import clcsg
 from clcsg.cl.device import get_context
 from clcsg.cli import main as cli_main
-from clcsg.io.ply import read_samples
+from clcsg.writers.ply import read_samples
 from clcsg.model.random_programs import random_program
 
 from .common import Load, diagonal, environment, write

@@ -123,7 +123,7 @@ def quadrics() -> list[Quadric]:
 
 
 def pack_quadrics(qs, real):
-    from clcsg.compile.frames import principal_frame
+    from clcsg.compile.quadric_frames import principal_frame
     from clcsg.cl.records import quadric_dtype
     from clcsg.sampling.sampler import frame_records
 

@@ -1,43 +1,71 @@
 """clcsg: exact point sampling and pixel-perfect splat rendering of quadric CSG solids.
 
-The data flows one way, one package per stage:
+The data flows one way, one package per stage (every module and the layers:
+``docs/architecture.md``):
 
 1. ``model``: the scene — quadrics, primitives, the CSG graph (:class:`Shape`), :class:`Scene`;
    2-D :class:`Profile` s (``square``, ``circle``, ``polygon``, ``offset``) become exact solids
    with :func:`extrude` and :func:`revolve`; :func:`hull` and :func:`minkowski` build rounded
-   solids; ``io`` reads and writes it (JSON scene files, OpenSCAD ``.csg`` / ``.scad``, PLY samples).
+   solids; ``readers`` read scene files into it (JSON scene files, OpenSCAD ``.csg`` / ``.scad``).
 2. ``compile``: the graph becomes a tape over unique canonical quadrics (transforms and
    complements pushed to the leaves, shared sub-graphs once), with primitive instances, bounds
-   and principal frames; the paper's DNF is one shape of tape.
+   and estimates (``compile.bounds``) and principal frames; the paper's DNF is one shape of tape.
 3. ``sampling``: per (quadric, sampling plane, sheet) an adaptive subdivision on the device,
-   each cell with its pruned tape: :func:`sample` returns :class:`Samples`.
+   each cell with its pruned tape: :func:`sample` returns :class:`Samples`, plain arrays that
+   ``writers`` turn into PLY, NPZ, Open3D or trimesh (:func:`write_samples`).
 4. ``rendering``: splats with local ray tracing and clipping by tape (:func:`render`) and the
    exact tree ray tracer (:func:`raytrace`), both into an :class:`Image`.
-5. ``cl`` is the OpenCL plumbing (devices, programs, records, shared constants); ``cli`` the
-   command line, one module per command.
+5. ``cl`` is the OpenCL plumbing (devices, programs, records, shared constants).
 6. ``queries``: occupancy and a conservative signed distance at given points, on the device
-   (:func:`inside`, :func:`distance`); ``batching``: many scenes sampled (and rendered) into a
-   folder with a manifest, on a process pool or a Dask cluster (:func:`batch`).
+   (:func:`inside`, :func:`distance`).
+7. ``pipeline``: scene -> tape -> radius -> samples -> camera -> image, the one path the front
+   ends take: ``cli`` (one module per command), ``viewer`` and ``batching`` (many scenes into a
+   folder with a manifest, on a process pool or a Dask cluster: :func:`batch`).
 """
-from .errors import ClcsgError
-from .model.csg import Shape, contains, difference, intersection, union
-from .model.quadric import Quadric
-from .model.solids import box, cone, cylinder, ellipsoid, halfspace, quadric, slab, sphere
-from .model.profile import Profile, circle, polygon, square
-from .model.profile_ops import offset
-from .model.extrude import extrude
-from .model.revolve import revolve
-from .model.hull import hull, minkowski
-
 __version__ = "0.2.0"
-from .cl.device import devices
-from .model.scene import Scene, load, save
-from .rendering.camera import Camera, orbit
-from .rendering.image import Image
-from .rendering.raytracer import raytrace
-from .rendering.splat import render
-from .sampling.sampler import sample
-from .sampling.samples import Samples, load_samples
-from .queries import distance, inside
-from .batching.api import batch
-from .meshing import mesh
+
+#: public name -> the module that defines it; imported on first use (PEP 562), so that
+#: ``clcsg --version`` and ``clcsg --help`` load neither numpy nor pyopencl
+_EXPORTS = {
+    "ClcsgError": "errors",
+    **dict.fromkeys(("Shape", "contains", "difference", "intersection", "union"), "model.csg"),
+    "Quadric": "model.quadric",
+    **dict.fromkeys(("box", "cone", "cylinder", "ellipsoid", "halfspace", "quadric", "slab", "sphere"),
+                    "model.solids"),
+    "Scene": "model.scene",
+    **dict.fromkeys(("load", "save", "as_scene"), "readers.scenes"),
+    "devices": "cl.device",
+    **dict.fromkeys(("Camera", "orbit"), "rendering.camera"),
+    "Image": "rendering.image",
+    "raytrace": "rendering.raytracer",
+    "render": "rendering.splat",
+    "sample": "sampling.sampler",
+    "Samples": "sampling.samples",
+    "load_samples": "writers.samples_npz",
+    "write_samples": "writers.output_files",
+    **dict.fromkeys(("to_open3d", "to_trimesh"), "writers.interop"),
+    **dict.fromkeys(("distance", "inside"), "queries"),
+    "batch": "batching.api",
+    **dict.fromkeys(("Profile", "circle", "polygon", "square"), "model.profile"),
+    "offset": "model.profile_ops",
+    "extrude": "model.extrude",
+    "revolve": "model.revolve",
+    **dict.fromkeys(("hull", "minkowski"), "model.hull"),
+    "mesh": "meshing",
+}
+__all__ = ["__version__", *_EXPORTS]
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'clcsg' has no attribute {name!r}")
+    import importlib  # stdlib; the import machinery itself
+
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

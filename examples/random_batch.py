@@ -24,7 +24,7 @@ def write_programs(folder: str, n: int, seed: int = 0, max_depth: int = 3, manif
     """Write ``n`` random programs into ``folder``: ``scenes/prog_NNNNN.csg``, or with
     ``manifest`` one JSON scene per line in ``programs.txt``; returns the batch input (the
     scenes folder or the manifest file).  The same seed gives the same programs."""
-    from clcsg.io.scenefile import scene_to_dict
+    from clcsg.readers.scenefile import scene_to_dict
     from clcsg.model.random_programs import random_program
 
     rng = np.random.default_rng(seed)

@@ -1,6 +1,6 @@
 """Shared fixtures.
 
-``cl_context``: the session's OpenCL :class:`~clcsg.host.device.Context`, chosen like the CLI
+``cl_context``: the session's OpenCL :class:`~clcsg.cl.device.Context`, chosen like the CLI
 default (``PYOPENCL_CTX`` if set, else the first GPU, else the first CPU; never Oclgrind), so
 ``PYOPENCL_CTX=1:0 pytest`` runs the same tests on another device.  Without any OpenCL device
 the tests that use it are skipped, except under CI (``CI`` set), where that is a failure.
@@ -45,7 +45,7 @@ def cl_context():
 @pytest.fixture
 def tmp_scene(tmp_path):
     """A function writing a Shape or Scene to a scene file in tmp_path; returns the path."""
-    from clcsg.model.scene import save
+    from clcsg.readers.scenes import save
 
     def write(obj, name: str = "scene.json"):
         path = tmp_path / name

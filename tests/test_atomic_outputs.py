@@ -15,9 +15,9 @@ import pytest
 
 from clcsg.batching.outputs import write_atomic
 from clcsg.errors import OutputError
-from clcsg.io import atomic
-from clcsg.io.atomic import atomic_open
-from clcsg.io.outputs import write_image, write_json, write_npy
+from clcsg import atomic
+from clcsg.atomic import atomic_open
+from clcsg.writers.output_files import write_image, write_json, write_npy
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "examples", "drilled_block.json")
@@ -100,7 +100,7 @@ def test_samples_writers_on_a_full_disk(small_disk, cl_context):
 
 _SLOW_WRITER = """
 import sys, time
-from clcsg.io.atomic import atomic_open
+from clcsg.atomic import atomic_open
 with atomic_open(sys.argv[1], "wb") as f:
     for k in range(10000):
         f.write(b"x" * 65536)
@@ -115,7 +115,7 @@ with atomic_open(sys.argv[1], "wb") as f:
 def test_sigkill_during_the_write_keeps_the_previous_file(tmp_path, unnamed):
     target = tmp_path / "out.bin"
     target.write_bytes(OLD)
-    code = _SLOW_WRITER if unnamed else "import clcsg.io.atomic as a; a._open_unnamed = lambda folder: None\n" + _SLOW_WRITER
+    code = _SLOW_WRITER if unnamed else "import clcsg.atomic as a; a._open_unnamed = lambda folder: None\n" + _SLOW_WRITER
     env = {**os.environ, "PYTHONPATH": ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")}
     proc = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE, env=env)
     assert proc.stdout.readline() == b"writing\n"

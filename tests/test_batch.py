@@ -21,7 +21,7 @@ from clcsg.batching.options import DependencyError
 from clcsg.batching.task import CRASH_HOOK
 from clcsg.cli.app import main
 from clcsg.errors import UsageError
-from clcsg.io.ply import read_samples
+from clcsg.writers.ply import read_samples
 from clcsg.model.random_programs import random_program
 
 import tree_oracle as T
@@ -208,7 +208,7 @@ def test_manifest_inputs_and_ply_output(dask_run, scene_dir, tmp_path):
     _, dask_out, _ = dask_run
     listing = tmp_path / "list.txt"
     shutil.copy(_scene_file(scene_dir, "prog_04"), tmp_path)
-    inline = json.dumps(clcsg.io.scenefile.scene_to_dict(clcsg.box(1) - clcsg.sphere(0.6)), separators=(",", ":"))
+    inline = json.dumps(clcsg.readers.scenefile.scene_to_dict(clcsg.box(1) - clcsg.sphere(0.6)), separators=(",", ":"))
     listing.write_text(f"# scenes\nprog_04.csg\n\n{inline}\nmissing.json\nnotes.md\n")
     table = clcsg.batch(str(listing), RADIUS, tmp_path / "out", fmt="ply", workers=1, progress=False)
     rows = _rows(table)

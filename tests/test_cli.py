@@ -233,18 +233,18 @@ def test_scene_info_bound_override_and_unbounded():
 
 @pytest.fixture
 def scene_loader(monkeypatch):
-    """``clcsg.model.scene.load`` returning demo_scene() for '*.demo' paths (the file formats are
+    """``clcsg.readers.scenes.load`` returning demo_scene() for '*.demo' paths (the file formats are
     tested elsewhere; this tests the CLI around the loader)."""
-    import clcsg.model.scene
+    import clcsg.readers.scenes
 
-    real = clcsg.model.scene.load
+    real = clcsg.readers.scenes.load
 
     def load(path):
         if str(path).endswith(".demo"):
             return demo_scene()
         return real(path)
 
-    monkeypatch.setattr(clcsg.model.scene, "load", load)
+    monkeypatch.setattr(clcsg.readers.scenes, "load", load)
 
 
 def test_info_text(capsys, scene_loader):
@@ -310,7 +310,7 @@ def test_sample_writes_ply_and_stats(tmp_path):
     import json as _json
 
     from clcsg.cli import main as _main
-    from clcsg.io.ply import read_samples
+    from clcsg.writers.ply import read_samples
 
     out, stats = tmp_path / "s.ply", tmp_path / "s.json"
     scene = tmp_path / "scene.json"
@@ -344,7 +344,7 @@ def test_radius_relative_to_the_scene_diagonal(tmp_path):
     """``-r 2%`` is 2% of the bound's diagonal, for sample as for render: the same samples as
     the absolute radius."""
     import clcsg
-    from clcsg.io.ply import read_samples
+    from clcsg.writers.ply import read_samples
 
     path = tmp_path / "s.json"
     clcsg.save(clcsg.box(2.0) - clcsg.sphere(1.2), path)

@@ -18,7 +18,7 @@ import pytest
 
 import clcsg
 from clcsg import Camera, raytrace, render, sample
-from clcsg.io.openscad import OpenScadWarning, load_csg
+from clcsg.readers.openscad import OpenScadWarning, load_csg
 from clcsg.model.construction import Construction
 from clcsg.model.csg import walk
 
@@ -247,7 +247,7 @@ def test_scene_file_round_trip(name, tmp_scene):
 ])
 def test_scene_file_construction_errors(root, message):
     from clcsg.errors import SceneError
-    from clcsg.io.scenefile import scene_from_dict
+    from clcsg.readers.scenefile import scene_from_dict
 
     with pytest.raises(SceneError) as info:
         scene_from_dict({"clcsg": 1, "root": root}, "part.json")

@@ -1,5 +1,5 @@
 """Device listing and selection: the real OpenCL installation, and the selection rule
-(:func:`clcsg.host.device.choose`) on synthetic device lists."""
+(:func:`clcsg.cl.device.choose`) on synthetic device lists."""
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 import clcsg
 from clcsg.model import csg, solids
 from clcsg.errors import DnfLimitError, SceneError, UnboundedError
-from clcsg.compile import term_bounds as bounds_module
+from clcsg.compile.bounds import term_boxes as bounds_module
 from clcsg.compile import dnf as dnf_module
 from clcsg.compile.dnf import normalize
 from clcsg.model.quadric import Quadric

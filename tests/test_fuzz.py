@@ -37,8 +37,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from clcsg.errors import ClcsgError, LimitError, SceneError, UsageError  # noqa: E402
-from clcsg.io.openscad import parse_csg  # noqa: E402
-from clcsg.io.scenefile import loads_json  # noqa: E402
+from clcsg.readers.openscad import parse_csg  # noqa: E402
+from clcsg.readers.scenefile import loads_json  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -1,4 +1,4 @@
-"""The resource guard (clcsg/sampling/guard.py) and the device's allocation limits: the
+"""The resource guard (clcsg/compile/bounds/estimates.py) and the device's allocation limits: the
 estimate against real sample counts, a tiny radius on a big scene fails before any kernel
 runs, normal runs pass, and every device buffer is checked before it is created."""
 
@@ -15,8 +15,8 @@ import pytest
 import clcsg
 from clcsg.cli import app as cli
 from clcsg.errors import LimitError, UsageError
-from clcsg.io.ply import read_samples as read_ply
-from clcsg.sampling import guard
+from clcsg.writers.ply import read_samples as read_ply
+from clcsg.compile.bounds import estimates as guard
 from clcsg.sampling.sampler import sample
 
 from test_robustness import EXAMPLES, NAN, _info, _tape
@@ -59,7 +59,7 @@ GUARD_EXAMPLES = ["saddle.json", "bracket.json", "flange.csg", "spheres.json"]
 def test_estimate_is_never_far_below_the_real_count(cl_context, name):
     if name in SAMPLER_SCENES:
         shape, r = SAMPLER_SCENES[name]
-        sc = clcsg.model.scene.as_scene(shape)
+        sc = clcsg.as_scene(shape)
     else:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -14,7 +14,7 @@ import pytest
 import clcsg
 from clcsg import Camera
 from clcsg.cli import app as cli
-from clcsg.io import colors
+from clcsg.model import colors
 from clcsg.model.csg import DEFAULT_COLOR
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -13,8 +13,9 @@ from clcsg import box, cone, cylinder, sphere
 from clcsg.model.csg import Difference, Intersection, Primitive, Transformed, Union, contains, difference, union, walk
 from clcsg.errors import SceneError
 from clcsg.compile.dnf import normalize
-from clcsg.io.openscad import WEB_COLORS, OpenScadWarning, load_csg, parse_csg
-from clcsg.model.scene import Scene, load
+from clcsg.readers.openscad import WEB_COLORS, OpenScadWarning, load_csg, parse_csg
+from clcsg.model.scene import Scene
+from clcsg.readers.scenes import load
 
 DATA = Path(__file__).parent / "data" / "openscad"
 EXAMPLES = Path(__file__).parent.parent / "examples"

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from clcsg.model.csg import Union, walk
 from clcsg.errors import SceneError
-from clcsg.io.openscad import MAX_DEPTH, load_csg, parse_csg
+from clcsg.readers.openscad import MAX_DEPTH, load_csg, parse_csg
 from clcsg.model.scene import Scene
 
 from test_openscad import err, quiet_parse

@@ -13,7 +13,7 @@ import pytest
 
 import clcsg
 from clcsg.compile.dnf import normalize
-from clcsg.io.openscad import parse_csg
+from clcsg.readers.openscad import parse_csg
 from clcsg.model.csg import contains
 
 from test_openscad import quiet_load

@@ -16,8 +16,8 @@ from PIL import Image as PILImage
 import clcsg
 from clcsg.cli import app as cli
 from clcsg.errors import SceneError, UsageError
-from clcsg.io.outputs import IMAGE_FORMATS
-from clcsg.sampling.samples import load_samples
+from clcsg.writers.output_files import IMAGE_FORMATS
+from clcsg.writers.samples_npz import load_samples
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PART = (clcsg.box(2, color=(0.9, 0.5, 0.1)) - clcsg.cylinder(3, 0.5)) | clcsg.sphere(0.6, center=(0, 0, 1.1))
@@ -121,7 +121,7 @@ def test_ply_reads_back_with_plyfile_bit_for_bit(part_samples, tmp_path):
     plyfile = pytest.importorskip("plyfile", reason="plyfile is in the [test] extra")
     s = part_samples
     path = tmp_path / "s.ply"
-    s.to_ply(path)
+    clcsg.write_samples(s, path)
     v = plyfile.PlyData.read(str(path))["vertex"].data
     assert len(v) == len(s) > 500
     for k, name in enumerate("xyz"):
@@ -132,7 +132,7 @@ def test_ply_reads_back_with_plyfile_bit_for_bit(part_samples, tmp_path):
     assert {tuple(c) for c in rgb} >= {(230, 128, 26), (204, 204, 204)}  # the orange box, the grey sphere
     assert np.array_equal(v["quadric"], s.quadrics) and np.array_equal(v["primitive"], s.primitives)
     assert np.array_equal(v["radius"], s.radii)
-    s.to_ply(tmp_path / "f.ply", float32=True)
+    clcsg.write_samples(s, tmp_path / "f.ply", float32=True)
     v32 = plyfile.PlyData.read(str(tmp_path / "f.ply"))["vertex"].data
     assert v32["x"].dtype == np.dtype("<f4") and np.array_equal(v32["x"], s.positions[:, 0].astype(np.float32))
 
@@ -141,7 +141,7 @@ def test_ply_reads_back_with_plyfile_bit_for_bit(part_samples, tmp_path):
 def test_saved_samples_round_trip_and_render_the_same_image(part_samples, tmp_path, cl_context):
     s = part_samples
     path = tmp_path / "s.npz"
-    s.save(path)
+    clcsg.write_samples(s, path)
     t = load_samples(path)
     for name in ("positions", "normals", "radii", "quadrics", "signs", "primitives", "clip_first", "clip_count",
                  "clip_ops"):
@@ -194,7 +194,7 @@ def test_cli_sample_writes_npz_and_refuses_what_saved_samples_cannot_do(scene_fi
 def test_to_trimesh(part_samples):
     trimesh = pytest.importorskip("trimesh", reason="trimesh is in the [test] extra")
     s = part_samples
-    pc = s.to_trimesh()
+    pc = clcsg.to_trimesh(s)
     assert isinstance(pc, trimesh.PointCloud)
     assert np.array_equal(pc.vertices, s.positions)
     assert np.array_equal(pc.colors, np.round(255 * np.clip(s.colors, 0, 1)).astype(np.uint8))
@@ -204,7 +204,7 @@ def test_to_trimesh(part_samples):
 def test_to_open3d(part_samples):
     o3d = pytest.importorskip("open3d", reason="open3d is not installed (optional, 400 MB: pip install open3d)")
     s = part_samples
-    pc = s.to_open3d()
+    pc = clcsg.to_open3d(s)
     assert isinstance(pc, o3d.geometry.PointCloud)
     assert np.array_equal(np.asarray(pc.points), s.positions)
     assert np.array_equal(np.asarray(pc.normals), s.normals)
@@ -214,4 +214,4 @@ def test_to_open3d(part_samples):
 def test_missing_library_names_the_pip_package(part_samples, monkeypatch):
     monkeypatch.setitem(sys.modules, "open3d", None)  # makes `import open3d` fail
     with pytest.raises(ImportError, match=r"pip install open3d"):
-        part_samples.to_open3d()
+        clcsg.to_open3d(part_samples)

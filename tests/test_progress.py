@@ -15,7 +15,7 @@ import sys
 import pytest
 
 import clcsg
-from clcsg.io.progress import Reporter, current, for_option, using
+from clcsg.progress import Reporter, current, for_option, using
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "examples", "pawn.csg")

@@ -1,4 +1,4 @@
-"""Every device record: the numpy dtype (clcsg/cl/records.py, clcsg/rendering/view.py) has the
+"""Every device record: the numpy dtype (clcsg/cl/records.py, clcsg/rendering/shading.py) has the
 C struct's size and field offsets on the device, in both precisions (the model is pyopencl's
 match_dtype_to_c_struct)."""
 
@@ -7,7 +7,7 @@ import pytest
 
 from clcsg.cl import programs
 from clcsg.cl.records import RECORDS
-from clcsg.rendering.view import view_dtype
+from clcsg.rendering.shading import view_dtype
 
 CASES = [(name, header, factory) for name, header, factory in RECORDS] + [("view_rec", "shade.h", view_dtype)]
 

@@ -40,7 +40,7 @@ from clcsg.errors import (
 from clcsg.cl.device import DeviceInfo, choose, require_int64_atomics
 from clcsg.sampling.sampler import sample
 from clcsg import raytrace, render
-from clcsg.io.ply import read_samples as read_ply
+from clcsg.writers.ply import read_samples as read_ply
 
 import tree_oracle as T
 from coverage import assert_same_samples, uncovered
@@ -331,7 +331,7 @@ def test_dnf_past_its_limit_is_caught_in_seconds(tmp_path, capsys):
 
 
 def _tape(shape):
-    return clcsg.model.scene.as_scene(shape).compile()
+    return clcsg.as_scene(shape).compile()
 
 
 # -- empty results ------------------------------------------------------------------------------

@@ -20,7 +20,7 @@ import pytest
 
 import clcsg
 from clcsg.compile.interpret import member
-from clcsg.io.ply import read_samples
+from clcsg.writers.ply import read_samples
 from clcsg.model.solids import _make
 from clcsg.sampling.sampler import sample
 
@@ -261,7 +261,7 @@ def test_ply_round_trip(tmp_path, cl_context):
     shape = clcsg.sphere(1.0, color=(1, 0, 0)) | clcsg.box(1, center=(1, 0, 0), color=(0, 0, 1))
     s = sample(shape, 0.2, device=cl_context)
     path = tmp_path / "s.ply"
-    s.to_ply(path)
+    clcsg.write_samples(s, path)
     head = path.read_bytes()[:200]
     assert head.startswith(b"ply\nformat binary_little_endian 1.0\n")
     back = read_samples(path)

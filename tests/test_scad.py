@@ -1,6 +1,6 @@
 """``.scad`` input through the real ``openscad`` binary, the example models, deep nesting.
 
-* ``clcsg.load("model.scad")`` runs ``openscad -o TMP.csg model.scad`` (clcsg.io.scad): the
+* ``clcsg.load("model.scad")`` runs ``openscad -o TMP.csg model.scad`` (clcsg.readers.scad): the
   examples/*.scad models export and load, and the committed examples/*.csg are their exports;
   OpenSCAD's errors, a missing binary and a timeout are one-line SceneErrors.
 * Nodes nested 1,000 and 10,000 deep load (parser and evaluator use explicit stacks); JSON
@@ -26,10 +26,10 @@ import pytest
 
 import clcsg
 from clcsg.errors import SceneError
-from clcsg.io import openscad as openscad_module
-from clcsg.io import scenefile
-from clcsg.io.openscad import MAX_NODE_DEPTH, OpenScadWarning, parse_csg
-from clcsg.io.scad import DEFAULT_TIMEOUT, export_csg, find_openscad, load_scad
+from clcsg.readers import openscad as openscad_module
+from clcsg.readers import scenefile
+from clcsg.readers.openscad import MAX_NODE_DEPTH, OpenScadWarning, parse_csg
+from clcsg.readers.scad import DEFAULT_TIMEOUT, export_csg, find_openscad, load_scad
 from clcsg.model.csg import Difference, Primitive, Shape, Transformed, Union, walk
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -137,7 +137,7 @@ def test_committed_csg_loads(name):
 
 
 def clcsg_color(name):
-    from clcsg.io.openscad import WEB_COLORS
+    from clcsg.readers.openscad import WEB_COLORS
 
     return [x / 255 for x in WEB_COLORS[name][:3]]
 

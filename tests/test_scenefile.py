@@ -1,4 +1,4 @@
-"""The JSON scene format (clcsg/io/scenefile.py): round trips, sharing, the example scenes
+"""The JSON scene format (clcsg/readers/scenefile.py): round trips, sharing, the example scenes
 and the JSON Schema (validation messages: test_scenefile_validation.py)."""
 
 from __future__ import annotations
@@ -15,14 +15,14 @@ from hypothesis import strategies as st
 
 import clcsg
 from clcsg.model import csg, solids
-from clcsg.io import scenefile
+from clcsg.readers import scenefile
 from clcsg.errors import DnfLimitError, OutputError, SceneError
 from clcsg.model.scene import Scene
 from strategies import any_primitives, affine_maps, shapes, shared_nodes
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLES = sorted(glob.glob(os.path.join(ROOT, "examples", "*.json")))
-SCHEMA_PATH = os.path.join(ROOT, "clcsg", "io", "schema", "scene.schema.json")
+SCHEMA_PATH = os.path.join(ROOT, "clcsg", "readers", "schema", "scene.schema.json")
 UB = np.array([[-3.5, -3.5, -3.5], [3.5, 3.5, 3.5]])
 N_EXAMPLES = int(os.environ.get("CLCSG_HYPOTHESIS_EXAMPLES", 40))
 

@@ -1,4 +1,4 @@
-"""The JSON scene format (clcsg/io/scenefile.py): validation, every bad file a one-line
+"""The JSON scene format (clcsg/readers/scenefile.py): validation, every bad file a one-line
 SceneError naming the file, the node and the reason."""
 
 from __future__ import annotations
@@ -12,13 +12,13 @@ import pytest
 
 import clcsg
 from clcsg.model import csg, solids
-from clcsg.io import scenefile
+from clcsg.readers import scenefile
 from clcsg.errors import SceneError, TransformError
 from test_scenefile import assert_same_graph
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLES = sorted(glob.glob(os.path.join(ROOT, "examples", "*.json")))
-SCHEMA_PATH = os.path.join(ROOT, "clcsg", "io", "schema", "scene.schema.json")
+SCHEMA_PATH = os.path.join(ROOT, "clcsg", "readers", "schema", "scene.schema.json")
 UB = np.array([[-3.5, -3.5, -3.5], [3.5, 3.5, 3.5]])
 N_EXAMPLES = int(os.environ.get("CLCSG_HYPOTHESIS_EXAMPLES", 40))
 

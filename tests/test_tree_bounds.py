@@ -1,5 +1,5 @@
-"""Bounds on the CSG tree (clcsg/compile/bounds.py: shape_bound, tree_bounds; exact_boxes.py: primitive_box,
-quadric_regions), the guard's estimate from those regions (clcsg/sampling/guard.py:
+"""Bounds on the CSG tree (clcsg/compile/bounds/tree.py: shape_bound, tree_bounds; exact_boxes.py: primitive_box,
+quadric_regions), the guard's estimate from those regions (clcsg/compile/bounds/estimates.py:
 estimate_regions, check_estimate), the iterative ``contains`` and the random programs
 (clcsg/model/random_programs.py, tests/strategies.py: csg_programs).
 
@@ -23,15 +23,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 import clcsg
-from clcsg.compile.bounds import shape_bound, tree_bounds
-from clcsg.compile.exact_boxes import literals_box, primitive_box
-from clcsg.compile.regions import quadric_regions, unique_quadrics
+from clcsg.compile.bounds.tree import shape_bound, tree_bounds
+from clcsg.compile.bounds.exact_boxes import literals_box, primitive_box
+from clcsg.compile.bounds.regions import quadric_regions, unique_quadrics
 from clcsg.errors import SceneError, UnboundedError
-from clcsg.io.openscad import parse_csg
+from clcsg.readers.openscad import parse_csg
 from clcsg.model import csg
 from clcsg.model.quadric import Quadric, affine, frame_z_to
 from clcsg.model.random_programs import HALF_EXTENT, random_program
-from clcsg.sampling import guard
+from clcsg.compile.bounds import estimates as guard
 from strategies import affine_maps, csg_programs, shapes
 
 EXAMPLES = int(os.environ.get("CLCSG_HYPOTHESIS_EXAMPLES", 200))
@@ -379,7 +379,7 @@ def test_empty_and_tightened_cases():
     b, _ = shape_bound(s)
     np.testing.assert_allclose(b, [[-0.5, -0.5, -0.5], [1, 0.5, 0.5]], atol=1e-9)
     # the DNF's union of term boxes is looser on the same shape
-    dnf = clcsg.model.scene.as_scene(s).normalize()
+    dnf = clcsg.as_scene(s).normalize()
     assert np.all(dnf.bound[1] - dnf.bound[0] >= b[1] - b[0] - 1e-9)
 
 
@@ -468,7 +468,7 @@ def test_estimate_regions_is_within_2x_of_the_true_area():
     assert area * (1 - 1e-9) <= est.area <= 2.5 * area, (est.area, area)
     # the rotated case is looser than the axis-aligned one but still an upper bound; the DNF
     # estimate of the axis-aligned drilled cube is not tighter than this one
-    dnf_est = guard.estimate(clcsg.model.scene.as_scene(cases[2][0]).normalize(), 0.1)
+    dnf_est = guard.estimate(clcsg.as_scene(cases[2][0]).normalize(), 0.1)
     est, *_ = _regions_estimate(cases[2][0])
     assert est.area <= dnf_est.area * (1 + 1e-9)
 
@@ -507,7 +507,7 @@ def test_check_estimate_and_check():
     assert guard.check_estimate(est) is est
     with pytest.raises(clcsg.errors.LimitError, match="limit of 1,000 samples"):
         guard.check_estimate(est.at(0.01), max_samples=1000, source="s.json")
-    dnf = clcsg.model.scene.as_scene(clcsg.sphere(1.0)).normalize()
+    dnf = clcsg.as_scene(clcsg.sphere(1.0)).normalize()
     assert guard.check(dnf, 0.1).samples == guard.estimate(dnf, 0.1).samples
     assert guard.check(est, 0.2).radius == 0.2  # an Estimate is accepted too
     with pytest.raises(clcsg.errors.UsageError):
@@ -524,7 +524,7 @@ def test_guard_refuses_only_what_really_does_not_fit(cl_context):
     measures the real count first); under a limit below the real count it is refused, with
     the measured count in the message."""
     from clcsg.errors import LimitError
-    from clcsg.sampling import guard
+    from clcsg.compile.bounds import estimates as guard
 
     prog = random_program(np.random.default_rng(27))
     tape = clcsg.Scene(prog.shape).compile()

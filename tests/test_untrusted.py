@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from clcsg.errors import SceneError
-from clcsg.io.ply import read_samples
+from clcsg.writers.ply import read_samples
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLES = int(os.environ.get("CLCSG_FUZZ_EXAMPLES", "60"))
@@ -241,7 +241,7 @@ def test_ply_reader_refuses_damaged_files(tmp_path, reference):
 
 _MEASURE = """
 import os, resource, sys
-from clcsg.model.scene import load
+from clcsg.readers.scenes import load
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 load(sys.argv[1])
 print((resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) * 1024 / os.path.getsize(sys.argv[1]))
@@ -274,7 +274,7 @@ def _holes_json(path, n: int) -> None:
 def test_scene_readers_stay_within_the_memory_the_guard_assumes(tmp_path, ext, make, factor):
     """Peak RSS growth while loading a ~1 MB file, per byte of the file, is within the factor
     the up-front memory guard uses (so the guard's estimate is an upper bound)."""
-    from clcsg.io import budget
+    from clcsg.readers import budget
 
     path = str(tmp_path / f"big{ext}")
     make(path, 5000)
@@ -286,8 +286,8 @@ def test_scene_readers_stay_within_the_memory_the_guard_assumes(tmp_path, ext, m
 
 def test_a_scene_larger_than_memory_is_refused_up_front(tmp_path, monkeypatch):
     from clcsg.errors import LimitError
-    from clcsg.io import budget
-    from clcsg.model.scene import load
+    from clcsg.readers import budget
+    from clcsg.readers.scenes import load
 
     path = tmp_path / "big.csg"
     _holes_csg(path, 200)

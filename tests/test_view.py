@@ -304,7 +304,7 @@ def test_missing_packages_are_one_line(tmp_path):
 
 def _openscad():
     from clcsg.errors import SceneError
-    from clcsg.io.scad import find_openscad
+    from clcsg.readers.scad import find_openscad
 
     try:
         return find_openscad()

@@ -13,7 +13,10 @@ import os
 import time
 
 from ..errors import OutputError, UsageError
+from ..progress import for_option
+from . import dask_engine, local
 from . import inputs as _inputs
+from .dask_engine import parse_local
 from .manifest import Manifest
 from .options import Options, Radius, file_digests, require
 from .outputs import queries_path, samples_path, view_path, write_files
@@ -83,7 +86,6 @@ def dask_address(scheduler, dask) -> str | None:
         raise UsageError("give either a scheduler address or a local Dask cluster (local:N), not both")
     if scheduler is None and dask is None:
         return None
-    from .dask_engine import parse_local
 
     if scheduler is None:
         address = f"local:{dask}" if isinstance(dask, int) else str(dask)
@@ -96,12 +98,34 @@ def dask_address(scheduler, dask) -> str | None:
 
 def _engine(todo, options, workers, address, retries):
     if address is not None:
-        from . import dask_engine
-
         return dask_engine.run(todo, options, address, retries)
-    from . import local
 
     return local.run(todo, options, workers, retries)
+
+
+def _output_folder(outdir) -> str:
+    outdir = os.fspath(outdir)
+    try:
+        os.makedirs(outdir, exist_ok=True)
+    except OSError as e:
+        raise UsageError(f"{outdir}: cannot create the output folder: {e.strerror or e}") from None
+    return outdir
+
+
+def _not_done(jobs, manifest, options: Options, redo_errors: bool, tally) -> list:
+    """The jobs an earlier run did not complete; the others go into the manifest as skipped.
+
+    A ``.scad`` program's error may come from a file it includes, so it is never final."""
+    todo = []
+    for job in jobs:
+        old = manifest.complete(job.name, lambda deps, job=job: _hash(job, options, deps),
+                                redo_errors or job.kind == ".scad")
+        if old is None:
+            todo.append(job)
+        else:
+            manifest.add({**old, "skipped": True})
+            tally.count({**old, "skipped": True})
+    return todo
 
 
 def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=(640, 480), points=None,
@@ -133,8 +157,6 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
     Returns a ``pyarrow.Table`` (a pandas DataFrame with ``as_pandas=True``), one row per scene
     in input order.  Needs pyarrow (and dask for the Dask engine): ``pip install 'clcsg[batch]'``.
     """
-    from ..io.progress import for_option
-
     require("pyarrow", "clcsg batch")
     address = dask_address(scheduler, dask)
     if address is not None:
@@ -151,25 +173,11 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
     if int(retries) < 0:
         raise UsageError(f"retries must be >= 0, got {retries}")
     jobs = _inputs.jobs(scenes)
-    outdir = os.fspath(outdir)
-    try:
-        os.makedirs(outdir, exist_ok=True)
-    except OSError as e:
-        raise UsageError(f"{outdir}: cannot create the output folder: {e.strerror or e}") from None
+    outdir = _output_folder(outdir)
     manifest = Manifest(outdir)
     tally = _Tally(len(jobs))
-    todo = []
-    for job in jobs:
-        # a .scad program's error may come from a file it includes: never final
-        old = manifest.complete(job.name, lambda deps, job=job: _hash(job, options, deps),
-                                redo_errors or job.kind == ".scad")
-        if old is None:
-            todo.append(job)
-        else:
-            manifest.add({**old, "skipped": True})
-            tally.count({**old, "skipped": True})
-    rep = for_option(progress)
-    with rep.step("batch", "batch", total=len(jobs), unit="scenes") as st:
+    todo = _not_done(jobs, manifest, options, redo_errors, tally)
+    with for_option(progress).step("batch", "batch", total=len(jobs), unit="scenes") as st:
         st.update(done=tally.done, note=tally.note())
         try:
             if todo:

@@ -29,6 +29,9 @@ import re
 from dataclasses import dataclass
 
 from ..errors import UsageError
+from ..readers.scenefile import dumps, scene_to_dict
+from ..model.csg import Shape
+from ..model.scene import Scene
 
 SCENE_EXTENSIONS = (".json", ".csg", ".scad")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
@@ -133,8 +136,6 @@ def _expand_one(item) -> list[dict]:
 
 
 def _object(obj, k: int) -> dict:
-    from ..io.scenefile import dumps, scene_to_dict
-
     name = f"scene-{k:05d}"
     return dict(stem=name, source=f"<object {k}>", kind=".json", text=dumps(scene_to_dict(obj)), path=None,
                 error=None)
@@ -143,9 +144,6 @@ def _object(obj, k: int) -> dict:
 def jobs(inputs) -> list[Job]:
     """The jobs of ``inputs`` (one input or a list of them; see the module docstring), in
     order; the same file named twice is one job."""
-    from ..model.csg import Shape
-    from ..model.scene import Scene
-
     if isinstance(inputs, (str, os.PathLike, Shape, Scene)):
         inputs = [inputs]
     items: list[dict] = []

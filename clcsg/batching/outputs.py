@@ -30,7 +30,8 @@ import tempfile
 import numpy as np
 
 from ..errors import OutputError
-from ..io.atomic import write_bytes
+from ..atomic import write_bytes
+from ..writers import ply
 from .options import FORMATS, require
 
 SAMPLES_DIR = "samples"
@@ -85,7 +86,7 @@ def samples_bytes(samples, fmt: str, metadata: dict | None = None) -> bytes:
     fd, tmp = tempfile.mkstemp(suffix=".ply")
     os.close(fd)
     try:
-        samples.to_ply(tmp)
+        ply.write_samples(samples, tmp)
         with open(tmp, "rb") as f:
             return f.read()
     finally:
@@ -93,7 +94,7 @@ def samples_bytes(samples, fmt: str, metadata: dict | None = None) -> bytes:
 
 
 def write_atomic(path: str, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically and durably (:func:`clcsg.io.atomic.write_bytes`:
+    """Write ``data`` to ``path`` atomically and durably (:func:`clcsg.atomic.write_bytes`:
     a temporary in its folder, fsync, ``os.replace``): a process that dies leaves the old file
     or none, never a partial one.  :class:`~clcsg.errors.OutputError` if it cannot."""
     folder = os.path.dirname(path) or "."

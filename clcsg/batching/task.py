@@ -34,8 +34,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ClcsgError
-from ..model.scene import Scene
+from ..cl.device import get_context
+from ..errors import ClcsgError, SceneError
+from ..pipeline import Pipeline, bound_diagonal
+from ..queries import distance, inside
+from ..readers import scenes
+from ..readers.openscad import parse_csg
+from ..readers.scad import load_scad
+from ..readers.scenefile import loads_json
+from ..rendering.camera import orbit
+from ..writers.output_files import png_bytes
 from .inputs import Job
 from .options import Options
 from .outputs import parquet_bytes, queries_path, samples_bytes, samples_path, view_path
@@ -62,8 +70,6 @@ class Result:
 def init_worker(device=None) -> None:
     """Open the OpenCL device ``device`` in this process, once (a failure is kept and reported
     in the row of every scene this worker runs, so the pool itself stays usable)."""
-    from ..cl.device import get_context
-
     _worker["device"] = device
     try:
         get_context(device)
@@ -89,46 +95,23 @@ def load_scene(job: Job):
     """(the Scene of a job, parsed from its text; the other files it read).  A ``.scad`` file
     is run through openscad, which lists the files it includes and uses (``openscad -d``);
     they go into the scene's content hash."""
-    from ..errors import SceneError
-
     if job.error:
         raise SceneError(job.error)
     if job.kind == ".json":
-        from ..io.scenefile import loads_json
-
         return loads_json(job.text, job.source), []
     if job.kind == ".csg":
-        from ..io.openscad import parse_csg
-
         return parse_csg(job.text, job.source), []
     if job.kind == ".scad":
-        from ..io.scad import load_scad
-
         scene, deps = load_scad(job.path, with_dependencies=True)
         own = os.path.abspath(job.path)
         return scene, [d for d in deps if d != own]
-    from ..model.scene import load
-
-    return load(job.path), []
+    return scenes.load(job.path), []
 
 
-@dataclass
-class _Compiled(Scene):
-    """A Scene with its tape compiled already (the radius needs the bound before sampling, and
-    :func:`clcsg.sample` compiles the scene it is given: this one hands back ``tape``)."""
-
-    tape: object = None
-
-    def compile(self, normal_form: str = "tree", term_limit=None):
-        return self.tape
-
-
-def cameras(samples, n: int, size, ctx) -> list:
+def cameras(pipe: Pipeline, samples, n: int, size) -> list:
     """The ``n`` view cameras of the module docstring."""
-    from ..rendering.camera import Camera, orbit
-
     w, h = size
-    fitted = Camera.fit_silhouette(samples.tape, w, h, fov=FOV, up=UP, device=ctx)
+    fitted = pipe.camera(w, h, fov=FOV, up=UP, tape=samples.tape)
     d = fitted.eye - fitted.target
     elevation = math.degrees(math.asin(float(np.clip(d @ np.asarray(UP) / np.linalg.norm(d), -1.0, 1.0))))
     return list(orbit(fitted, n=n, elevation=elevation))
@@ -143,20 +126,18 @@ def _one_line(text) -> str:
     return " ".join(str(text).split())
 
 
-def _sample(job: Job, options: Options, ctx, row: dict):
-    """The scene's samples; its statistics into ``row``.  The radius is ``options.radius`` of
-    the compiled bound's diagonal; an empty solid has no bound and no radius (NaN)."""
-    from ..sampling.sampler import sample
-
-    scene, deps = load_scene(job)
-    row["dependencies"] = json.dumps(deps) if deps else None
+def _sample(pipe: Pipeline, options: Options, row: dict):
+    """The scene's samples; its statistics into ``row``.  The radius is the pipeline's
+    (``options.radius``, relative to the compiled bound's diagonal); the manifest shows an
+    empty solid's relative radius as NaN (no bound, no diagonal)."""
     t0 = time.perf_counter()
-    tape = scene.compile(options.normal_form)
+    tape = pipe.tape
     compile_s = time.perf_counter() - t0
-    diag = 0.0 if tape.empty else float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
-    radius = options.radius.of(diag) if diag > 0 or not options.radius.relative else float("nan")
-    s = sample(_Compiled(scene.shape, scene.bound, scene.source, tape), radius if radius > 0 else 1.0, device=ctx,
-               normal_form=options.normal_form, floor=options.floor, progress=False, max_samples=options.max_samples)
+    diag = 0.0 if tape.empty else bound_diagonal(tape.bound)
+    radius = pipe.radius(options.radius)
+    s = pipe.samples(radius, floor=options.floor, progress=False, max_samples=options.max_samples)
+    if tape.empty and options.radius.relative:
+        radius = float("nan")
     st = s.stats
     row.update(samples=len(s), radius=radius, diagonal=diag, quadrics=int(st.get("tape_quadrics", tape.n_quadrics)),
                primitives=len(tape.instances), instructions=int(st.get("tape_instructions", len(tape.ops))),
@@ -175,14 +156,12 @@ def query_points(job: Job, options: Options, tape) -> np.ndarray:
     if tape.empty:
         return np.zeros((0, 3))
     lo, hi = tape.bound
-    pad = 0.05 * float(np.linalg.norm(hi - lo))
+    pad = 0.05 * bound_diagonal(tape.bound)
     rng = np.random.default_rng(int(job.digest[:16], 16))
     return rng.uniform(lo - pad, hi + pad, (int(options.random_points), 3))
 
 
 def _queries(job: Job, options: Options, tape, ctx, row: dict, files: dict) -> None:
-    from ..queries import distance, inside
-
     t0 = time.perf_counter()
     pts = query_points(job, options, tape)
     ins = inside(tape, pts, device=ctx)
@@ -194,16 +173,16 @@ def _queries(job: Job, options: Options, tape, ctx, row: dict, files: dict) -> N
 
 
 def _sample_and_render(job: Job, options: Options, ctx, row: dict, files: dict) -> None:
-    from ..io.outputs import png_bytes
-    from ..rendering.splat import render
-
-    s = _sample(job, options, ctx, row)
+    scene, deps = load_scene(job)
+    row["dependencies"] = json.dumps(deps) if deps else None
+    pipe = Pipeline(scene, ctx, options.normal_form)
+    s = _sample(pipe, options, row)
     meta = {"scene": job.name, "source": job.source, "radius": repr(row["radius"])}
     files[samples_path(job.name, options.fmt)] = samples_bytes(s, options.fmt, meta)
     t1 = time.perf_counter()
-    cams = cameras(s, options.views, options.size, ctx) if options.views and len(s) else []
+    cams = cameras(pipe, s, options.views, options.size) if options.views and len(s) else []
     for k, cam in enumerate(cams):
-        img = render(s, cam, device=ctx, background=BACKGROUND)
+        img = pipe.image(cam, s, background=BACKGROUND)
         files[view_path(job.name, k)] = png_bytes(img.rgba)
     row.update(views=len(cams), cameras=json.dumps([_camera_record(c) for c in cams]),
                render_s=time.perf_counter() - t1)
@@ -222,7 +201,6 @@ def run_job(job: Job, options: Options) -> Result:
         try:
             if _worker["error"] is not None and _worker["device"] == options.device:
                 raise _worker["error"]
-            from ..cl.device import get_context
 
             _sample_and_render(job, options, get_context(options.device), row, files)
         except ClcsgError as e:

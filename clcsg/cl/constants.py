@@ -1,4 +1,5 @@
-"""Constants that host and kernels share, defined once here.
+"""Constants that host and kernels share, defined once here (this module imports nothing of
+ours: the tape compiler, the host interpreter and every kernel read them from here).
 
 :func:`defines` turns them into ``-D`` build options (:mod:`clcsg.cl.programs` adds them to
 every program), so a kernel's counter slot or sentinel is never typed twice.  Counter slots are
@@ -7,6 +8,10 @@ their count.
 """
 
 from __future__ import annotations
+
+#: the tape's opcodes (a row is op, out, a, b: see :class:`clcsg.compile.tape.Tape`)
+OP_LEAF, OP_AND, OP_OR, OP_COPY, OP_CONST = 0, 1, 2, 3, 4
+OP_NAMES = ("LEAF", "AND", "OR", "COPY", "CONST")
 
 #: counters of the sampler's classify kernel, in slot order
 SAMPLER_COUNTERS = (
@@ -40,8 +45,6 @@ def _slots(prefix: str, group: str, names) -> dict:
 
 
 def defines() -> dict:
-    from ..compile.tape import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
-
     d = {"OP_LEAF": OP_LEAF, "OP_AND": OP_AND, "OP_OR": OP_OR, "OP_COPY": OP_COPY, "OP_CONST": OP_CONST}
     d.update(_slots("SC", "SAMPLER_COUNTERS", SAMPLER_COUNTERS))
     d.update(_slots("PC", "SPLAT_COUNTERS", SPLAT_COUNTERS))

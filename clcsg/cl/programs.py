@@ -5,8 +5,10 @@ sits next to the module that drives it.  Sources are read with importlib.resourc
 from an installed wheel); ``cl/include`` (headers shared by every stage) and the source's own
 folder are the include path.  Parameters are ``-D`` build options, and the constants that host
 and kernels share (:mod:`clcsg.cl.constants`) are passed as build options too, so they have one
-source.  Built programs are cached per (context, path, options, hash of the sources);
-pyopencl also caches binaries on disk.
+source.  Built programs are cached per (context, path, options, hash of the sources) in the
+process, and their binaries on disk across processes (:func:`cache_dir`: loading a binary
+takes about a hundredth of a second where a build from source, even one the driver's own
+cache answers, takes several), so a second ``clcsg sample`` builds nothing.
 """
 
 from __future__ import annotations
@@ -14,9 +16,13 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import importlib.resources
+import os
+import tempfile
 import threading
 
 import numpy as np
+
+from .constants import defines as shared
 
 _cache: dict = {}
 _lock = threading.Lock()
@@ -49,14 +55,58 @@ def real_options(real) -> list[str]:
 
 def build_options(defines: dict | None = None, real=np.float64) -> list[str]:
     """``-D`` options: precision, the shared constants, then ``defines``."""
-    from .constants import defines as shared
-
     merged = {**shared(), **(defines or {})}
     return real_options(real) + [f"-D{k}={v}" for k, v in sorted(merged.items())]
 
 
+def cache_dir() -> str | None:
+    """Where program binaries are kept: ``$CLCSG_CACHE_DIR``, else ``clcsg/programs`` in
+    ``$XDG_CACHE_HOME`` (default ``~/.cache``); None (no disk cache) if ``$CLCSG_NO_CACHE`` is
+    set."""
+    if os.environ.get("CLCSG_NO_CACHE"):
+        return None
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.environ.get("CLCSG_CACHE_DIR") or os.path.join(root, "clcsg", "programs")
+
+
+def _binary_path(context, key) -> str | None:
+    """The cache file of a program: named by the hash of its key and of the device and driver
+    (a new driver or device never loads an old binary)."""
+    folder = cache_dir()
+    devices = context.ctx.devices
+    if folder is None or len(devices) != 1:
+        return None
+    d = devices[0]
+    ident = repr((key[1:], d.name, d.version, d.driver_version, d.platform.name, d.platform.version))
+    return os.path.join(folder, hashlib.sha256(ident.encode()).hexdigest() + ".bin")
+
+
+def _from_binary(cl, context, binary_path, options):
+    """The program built from its cached binary, or None (no file, or the driver refused it)."""
+    try:
+        with open(binary_path, "rb") as f:
+            binary = f.read()
+        return cl.Program(context.ctx, list(context.ctx.devices), [binary]).build(options=options)
+    except (OSError, cl.Error):
+        return None
+
+
+def _store_binary(cl, prg, binary_path) -> None:
+    """Write the program's binary atomically; a cache that cannot be written is skipped."""
+    try:
+        (binary,) = prg.get_info(cl.program_info.BINARIES)
+        os.makedirs(os.path.dirname(binary_path), exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=os.path.dirname(binary_path), suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(binary)
+        os.replace(tmp, binary_path)
+    except (OSError, ValueError, cl.Error):
+        pass
+
+
 def build(context, path: str, defines: dict | None = None, real=np.float64):
-    """The built program at package path ``path`` for ``context`` (cached).
+    """The built program at package path ``path`` for ``context`` (cached in the process and,
+    as a binary, on disk).
 
     ``defines`` become ``-DKEY=VALUE`` options; ``real`` selects double or float.
     """
@@ -71,7 +121,12 @@ def build(context, path: str, defines: dict | None = None, real=np.float64):
         prg = _cache.get(key)
         if prg is None:
             options = opts + ["-I", package_dir("cl/include"), "-I", package_dir(folder)]
-            prg = cl.Program(context.ctx, src).build(options=options)
+            binary_path = _binary_path(context, key)
+            prg = None if binary_path is None else _from_binary(cl, context, binary_path, options)
+            if prg is None:
+                prg = cl.Program(context.ctx, src).build(options=options)
+                if binary_path is not None:
+                    _store_binary(cl, prg, binary_path)
             _cache[key] = prg
     return prg
 

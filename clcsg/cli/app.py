@@ -4,7 +4,8 @@ Each subcommand is a module of this package with two functions: ``add_parser(sub
 builds its argparse parser (with :func:`add_subcommand`, which adds the common options such as
 ``--device``), and ``run(args) -> int`` does the work.  :data:`COMMANDS` is the dispatch table
 (modules are imported on first use, which keeps ``clcsg --help`` fast); to add a subcommand,
-write the module and add one line there.
+write the module and add one line there.  Only the chosen command's module is imported (and
+its parser built): ``clcsg --version`` and ``clcsg --help`` load neither numpy nor pyopencl.
 
 Errors: a :class:`~clcsg.errors.ClcsgError` prints ``clcsg: error: <message>`` (one line) and
 exits with its ``exit_code``; a bad command line exits 2 (argparse); Ctrl-C exits 130; anything
@@ -12,7 +13,7 @@ else is a bug and prints ``clcsg: internal error: ...`` and exits 1.  ``--debug`
 instead, to show the traceback.
 
 Progress: every subcommand takes ``--progress {auto,bar,json,none}`` and ``--quiet``;
-:func:`main` makes the matching :class:`~clcsg.io.progress.Reporter` the current one while the
+:func:`main` makes the matching :class:`~clcsg.progress.Reporter` the current one while the
 command runs (steps longer than half a second get a bar on a terminal, nothing in a pipe; with
 ``json`` every event, warnings and errors included, is one JSON object per line on stderr).
 Commands end with a one-line summary on stdout (not with ``--quiet``).
@@ -27,12 +28,14 @@ import os
 import re
 import sys
 import textwrap
+import importlib
+import warnings
 from typing import Callable
-
-import numpy as np
 
 from .. import __version__
 from ..errors import ClcsgError, UsageError
+from ..progress import Reporter, using
+from ..sampling.radius import Radius
 
 PROG = "clcsg"
 
@@ -67,12 +70,14 @@ def parse_floats(text: str, n: int, name: str) -> tuple[float, ...]:
     return tuple(out)
 
 
-def parse_bound(text: str, name: str = "--bound") -> np.ndarray:
-    """A (2, 3) bound from ``"x0,y0,z0,x1,y1,z1"`` with lo < hi on every axis."""
-    v = np.array(parse_floats(text, 6, name)).reshape(2, 3)
-    if np.any(v[1] <= v[0]):
+def parse_bound(text: str, name: str = "--bound") -> tuple:
+    """A bound ``((x0, y0, z0), (x1, y1, z1))`` from ``"x0,y0,z0,x1,y1,z1"`` with lo < hi on
+    every axis."""
+    v = parse_floats(text, 6, name)
+    lo, hi = v[:3], v[3:]
+    if any(b <= a for a, b in zip(lo, hi)):
         raise UsageError(f"{name}: need x0 < x1, y0 < y1 and z0 < z1, got {text!r}")
-    return v
+    return lo, hi
 
 
 _NEGATIVE_VECTOR = re.compile(r"^-\.?\d.*,")
@@ -81,16 +86,7 @@ _NEGATIVE_VECTOR = re.compile(r"^-\.?\d.*,")
 def parse_radius(text: str, name: str = "--radius"):
     """``--radius``: scene units or a percentage of the bound's diagonal
     (:class:`~clcsg.sampling.radius.Radius`)."""
-    from ..sampling.radius import Radius
-
     return Radius.parse(text, name)
-
-
-def bound_diagonal(bound) -> float:
-    """|hi - lo| of a scene bound; 1 when it is empty or degenerate (a relative radius then
-    means that fraction of one scene unit)."""
-    d = float(np.linalg.norm(np.asarray(bound[1], dtype=np.float64) - np.asarray(bound[0], dtype=np.float64)))
-    return d if d > 0 and math.isfinite(d) else 1.0
 
 
 def join_negative_vectors(argv: list[str]) -> list[str]:
@@ -203,8 +199,6 @@ def _lazy(module: str, name: str) -> Callable:
     """Function ``name`` of ``clcsg.cli.<module>``, imported on first call."""
 
     def call(*args, **kw):
-        import importlib
-
         return getattr(importlib.import_module(f"clcsg.cli.{module}"), name)(*args, **kw)
 
     call.__name__ = f"{module}.{name}"
@@ -226,8 +220,27 @@ COMMANDS: dict[str, tuple[Callable, Callable]] = {
     "mesh": _command("mesh"),
 }
 
+#: the one-line help of each command in ``clcsg --help`` (the command's own parser is built only
+#: when it runs)
+SUMMARIES = {
+    "devices": "list OpenCL devices and show which one is used",
+    "info": "compile a scene and print its statistics",
+    "sample": "sample the CSG surface and write a PLY point cloud (or .npz)",
+    "render": "render a scene to an image (splats or exact ray tracing)",
+    "batch": "sample (and render) many scenes into a folder: process pool or Dask, restartable",
+    "view": "preview a scene in the web browser, redrawn when the file changes",
+    "mesh": "write a closed triangle mesh (STL, 3MF, OBJ, PLY, OFF) with vertices on the exact surface",
+}
 
-def build_parser() -> argparse.ArgumentParser:
+
+def _chosen(argv: list[str]) -> str | None:
+    """The command named in ``argv`` (the first word that is one), or None."""
+    return next((a for a in argv if a in COMMANDS), None)
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser; with ``argv``, only the command it names gets its full parser (the others
+    are listed with their one-line help), so a command imports only what it uses."""
     parser = argparse.ArgumentParser(
         prog=PROG,
         description="Exact point sampling and splat rendering of quadric CSG solids on OpenCL.",
@@ -248,8 +261,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show the traceback on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     sub.required = True
-    for add, _run in COMMANDS.values():
-        add(sub)
+    chosen = None if argv is None else _chosen(argv)
+    for name, (add, _run) in COMMANDS.items():
+        if argv is None or name == chosen:
+            add(sub)
+        else:
+            sub.add_parser(name, help=SUMMARIES[name], add_help=False)
     return parser
 
 
@@ -270,8 +287,6 @@ def _json_warning(message, category, filename, lineno, line=None) -> str:
 
 def _reporter(args):
     """The progress reporter that ``args`` (--progress, --quiet, sample's --no-progress) ask for."""
-    from ..io.progress import Reporter
-
     mode = getattr(args, "progress", "auto")
     if getattr(args, "no_progress", False) and mode != "json":
         mode = "none"
@@ -283,18 +298,15 @@ def _reporter(args):
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (never raises unless ``--debug``)."""
-    import warnings
-
-    from ..io.progress import using
-
     warnings.formatwarning = _format_warning
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv  # known even if parsing fails
     as_json = False
     try:
-        parser = build_parser()
+        argv = join_negative_vectors(argv)
+        parser = build_parser(argv)
         try:
-            args = parser.parse_args(join_negative_vectors(argv))
+            args = parser.parse_args(argv)
         except SystemExit as e:  # --help, --version, bad command line
             return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         debug = bool(getattr(args, "debug", False))

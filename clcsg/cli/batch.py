@@ -5,7 +5,12 @@ from __future__ import annotations
 import textwrap
 import warnings
 
-from .app import add_subcommand, parse_radius, positive_int
+from .app import SUMMARIES, add_subcommand, parse_radius, positive_int
+from ..batching.api import batch
+from ..progress import current
+from .render import parse_size
+from .runs import Run
+from .sample import parse_positive
 
 #: failed scenes named one per line in warnings; the rest are counted
 SHOWN_FAILURES = 10
@@ -15,7 +20,7 @@ def add_parser(subparsers):
     p = add_subcommand(
         subparsers,
         "batch",
-        help="sample (and render) many scenes into a folder: process pool or Dask, restartable",
+        help=SUMMARIES["batch"],
         description="""
             Sample every scene of INPUTS into OUTDIR: samples/NAME.parquet (x y z nx ny nz quadric
             primitive radius clipped; --format ply for PLY), with --views N the PNG images
@@ -81,12 +86,6 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from ..batching.api import batch
-    from ..io.progress import current
-    from .render import parse_size
-    from .runs import Run
-    from .sample import parse_positive
-
     size = parse_size(args.size)
     floor = None if args.floor is None else parse_positive(args.floor, "--floor")
     run = Run("batch")

@@ -6,13 +6,14 @@ import json
 import os
 
 from ..errors import DeviceError
-from .app import add_subcommand
+from .app import SUMMARIES, add_subcommand
+from ..cl.device import choose, list_devices
 
 def add_parser(subparsers):
     p = add_subcommand(
         subparsers,
         "devices",
-        help="list OpenCL devices and show which one is used",
+        help=SUMMARIES["devices"],
         description="""
             List every OpenCL device with its P:D index, type and the features clcsg uses
             (fp64, 64-bit atomics).  The device used by default is marked with '*' (with
@@ -31,8 +32,6 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from ..cl.device import choose, list_devices
-
     infos = list_devices()
     problem = None
     try:

@@ -6,16 +6,19 @@ import json
 import os
 
 from ..errors import DeviceError
-from .app import _box, add_subcommand, parse_bound, positive_int
+from ..readers import scenes
+from .app import SUMMARIES, _box, add_subcommand, parse_bound, positive_int
+from ..compile.dnf import DEFAULT_TERM_LIMIT
+from ..cl.device import choose, list_devices
+from ..compile.summary import scene_info
+from .runs import Run
 
 
 def add_parser(subparsers):
-    from ..compile.dnf import DEFAULT_TERM_LIMIT
-
     p = add_subcommand(
         subparsers,
         "info",
-        help="compile a scene and print its statistics",
+        help=SUMMARIES["info"],
         description="""
             Load a scene (.json, OpenSCAD .csg or .scad), compile it to a tape over unique
             canonical quadrics and print what the sampler and the renderers will work on:
@@ -50,8 +53,6 @@ def device_summary(spec: str | None) -> dict:
     With ``spec`` None and no usable device: ``{"device": None, "device_problem": message}``
     (host-only commands still work); an explicit ``spec`` that fails raises DeviceError.
     """
-    from ..cl.device import choose, list_devices
-
     try:
         infos = list_devices()
         return {"device": infos[choose(infos, spec, os.environ)].as_dict()}
@@ -101,15 +102,11 @@ def format_info(info: dict) -> str:
 
 
 def run(args) -> int:
-    from ..compile.summary import scene_info
-    from ..model.scene import load
-    from .runs import Run
-
     bound = None if args.bound is None else parse_bound(args.bound, "--bound")
     dev = device_summary(args.device)  # a bad --device fails before the scene is read
     run = Run("info")
     with run.step("load", f"loading {args.scene}"):
-        scene = load(args.scene)
+        scene = scenes.load(args.scene)
     with run.step("compile", "compiling the scene" + (" and its DNF" if args.normal_form == "dnf" else "")):
         info = scene_info(scene, normal_form=args.normal_form, term_limit=args.term_limit, bound=bound,
                           listing=args.tape)

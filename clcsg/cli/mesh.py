@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from ..meshing.mesher import DEFAULT_CELLS, DEFAULT_TOLERANCE, mesh
+from ..meshing.writers import FORMATS, check_output, write
+from ..sampling.radius import Radius
 from .app import add_subcommand, parse_bound, positive_int
+from .runs import Run, load_scene
 
 
 def add_parser(subparsers):
-    from ..meshing.pipeline import DEFAULT_CELLS, DEFAULT_TOLERANCE
-    from ..meshing.writers import FORMATS
-
     p = add_subcommand(
         subparsers,
         "mesh",
@@ -44,11 +45,6 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    from ..meshing.pipeline import mesh
-    from ..meshing.writers import check_output, write
-    from ..sampling.radius import Radius
-    from .runs import Run, load_scene
-
     check_output(args.output)
     Radius.parse(args.tolerance, "--tolerance")
     bound = None if args.bound is None else parse_bound(args.bound, "--bound")

@@ -4,15 +4,22 @@ from __future__ import annotations
 
 import os
 import textwrap
+import warnings
 
 import numpy as np
 
+from ..cl.device import get_context
 from ..errors import UsageError
-from ..rendering.camera import Camera
-from ..sampling.radius import Radius
-
-#: the splat radius without --radius: 1% of the scene bound's diagonal
-DEFAULT_RADIUS = Radius(0.01, relative=True)
+from ..model.colors import ColorError, parse_color_text, recolor_defaults, scheme_color
+from ..pipeline import Pipeline
+from ..readers import scenes
+from ..rendering.camera import Camera, _fov, _vec3
+from ..rendering.image import Image
+from ..rendering.supersample import check_aa
+from ..writers.output_files import check_image_output, check_output
+from ..writers.samples_npz import load_samples
+from .app import SUMMARIES, UNRESOLVED_HELP, add_subcommand, parse_floats, parse_radius, positive_int
+from .runs import Run
 
 RENDER_DESCRIPTION = """
     Render a scene to an image (.png, .jpg, .webp or .tif, by the extension of OUT).  The
@@ -42,8 +49,6 @@ SAMPLE_FILES = (".npz", ".ply")
 def add_render_arguments(parser) -> None:
     """Add the ``clcsg render`` arguments to an argparse parser.  ``--device`` is added only
     if the parser does not have it yet (``cli.add_subcommand`` adds it)."""
-    from .app import positive_int
-
     p = parser
     p.add_argument("scene", metavar="SCENE",
                    help="scene file (.json, OpenSCAD .csg or .scad) or samples saved as .npz by clcsg sample")
@@ -89,9 +94,7 @@ def add_render_arguments(parser) -> None:
 
 def add_parser(subparsers):
     """``add_<name>_parser`` for the dispatch table of clcsg/cli.py."""
-    from .app import UNRESOLVED_HELP, add_subcommand
-
-    p = add_subcommand(subparsers, "render", help="render a scene to an image (splats or exact ray tracing)",
+    p = add_subcommand(subparsers, "render", help=SUMMARIES["render"],
                        description=RENDER_DESCRIPTION,
                        epilog=textwrap.dedent(RENDER_EPILOG) + textwrap.dedent(UNRESOLVED_HELP))
     add_render_arguments(p)
@@ -114,9 +117,7 @@ def parse_size(text) -> tuple[int, int]:
 
 def parse_background(text) -> tuple[float, ...]:
     """``"R,G,B[,A]"`` (components in [0, 1], or 0-255 if any is above 1), a color name or
-    ``#hex`` (:func:`clcsg.io.colors.parse_color_text`)."""
-    from ..io.colors import ColorError, parse_color_text
-
+    ``#hex`` (:func:`clcsg.model.colors.parse_color_text`)."""
     try:
         return parse_color_text(text, allow_255=True)
     except ColorError as e:
@@ -125,9 +126,6 @@ def parse_background(text) -> tuple[float, ...]:
 
 def view_options(args) -> dict:
     """The camera options (--size, --fov, --up, --eye, --target), parsed and checked."""
-    from ..rendering.camera import _fov, _vec3
-    from .app import parse_floats
-
     w, h = parse_size(args.size)
     (fov,) = parse_floats(args.fov, 1, "--fov")
     _fov(fov)
@@ -164,8 +162,6 @@ def cli_camera(args, bound, fit=None) -> Camera:
 
 def _check_outputs(args) -> None:
     """Every output path, before any work."""
-    from ..io.outputs import check_image_output, check_output
-
     check_image_output(args.output)
     for option, path, ext, what in (("--depth", args.depth, ".npy", "depth"), ("--ids", args.ids, ".npy", "ids"),
                                     ("--stats", args.stats, ".json", "statistics")):
@@ -186,15 +182,12 @@ def _saved_samples(args, run):
     if args.radius is not None:
         raise UsageError(f"--radius does not apply to saved samples ({args.scene}): they keep the radius they "
                          "were sampled with")
-    from ..sampling.samples import load_samples
 
     with run.step("load", f"loading {args.scene}"):
         return load_samples(args.scene)
 
 
 def _empty_image(size, background, method):
-    from ..rendering.image import Image
-
     w, h = size
     bg = np.round(255 * np.asarray(background[:4])).astype(np.uint8)
     return Image(np.broadcast_to(bg, (h, w, 4)).copy(), np.full((h, w), np.inf, np.float32),
@@ -202,81 +195,74 @@ def _empty_image(size, background, method):
                  {"method": method, "covered_pixels": 0, "total_s": 0.0})
 
 
-def run(args) -> int:
-    """Run ``clcsg render`` (argparse namespace from :func:`add_render_arguments`)."""
-    import warnings
-
-    from ..cl.device import get_context
-    from ..io.colors import ColorError, scheme_color
-    from ..rendering.raytracer import raytrace
-    from ..rendering.splat import render
-    from .app import bound_diagonal, parse_radius
-    from .runs import Run
-
-    _check_outputs(args)  # before any work: an unknown extension fails at once
+def _render_options(args) -> dict:
+    """The checked image options: size, background, aa and the default colour."""
     background = parse_background(args.background)
     if args.transparent:
         background = background[:3] + (0.0,)
         if os.path.splitext(args.output)[1].lower() in (".jpg", ".jpeg"):
             warnings.warn(f"{args.output}: JPEG has no alpha channel: the background is {background[:3]}, "
-                          "not transparent", stacklevel=2)
+                          "not transparent", stacklevel=3)
     view = view_options(args)
     size = (view["w"], view["h"])
-    from ..rendering.supersample import check_aa
-
     aa = check_aa(getattr(args, "aa", 1), *size)
     try:
         default_color = scheme_color(getattr(args, "colors", "clcsg"))
     except ColorError as e:
         raise UsageError(f"--colors: {e}") from None
+    return {"size": size, "background": background, "aa": aa, "default_color": default_color}
+
+
+def _raytraced(args, run, pipe, opts):
+    recolor_defaults(pipe.tape, opts["default_color"])
+    with run.step("frame", "framing the view (probe ray trace)"):
+        camera = cli_camera(args, pipe.tape.bound, lambda w, h, fov, up: pipe.camera(w, h, fov, up))
+    with run.step("render", f"ray tracing {camera.width}x{camera.height}"):
+        img = pipe.image(camera, method="raytrace", background=opts["background"], aa=opts["aa"])
+    return img, "ray traced"
+
+
+def _splatted(args, run, pipe, samples, radius, opts):
+    """Splats of ``samples`` (sampled here at ``radius`` when None)."""
+    stats = {}
+    if samples is None:
+        with run.step("sample", "sampling: building the OpenCL program"):
+            samples = pipe.samples(radius, progress=None, max_samples=getattr(args, "max_samples", None))
+        stats["sampling"] = dict(samples.stats)
+    if opts["default_color"] is not None:
+        samples.with_default_color(opts["default_color"])
+    with run.step("frame", "framing the view (probe ray trace)"):
+        camera = cli_camera(args, samples.bound, lambda w, h, fov, up: pipe.camera(w, h, fov, up, tape=samples.tape))
+    with run.step("render", f"rendering {len(samples):,} splats at {camera.width}x{camera.height}"):
+        img = pipe.image(camera, samples, surface_aligned=not args.no_surface_aligned,
+                         backface_culling=not args.no_backface_culling, background=opts["background"], aa=opts["aa"])
+    img.stats.update(stats)
+    return img, f"{len(samples):,} splats (r = {samples.radius:.6g})", samples
+
+
+def run(args) -> int:
+    """Run ``clcsg render`` (argparse namespace from :func:`add_render_arguments`)."""
+    _check_outputs(args)  # before any work: an unknown extension fails at once
+    opts = _render_options(args)
     radius = None if args.radius is None else parse_radius(args.radius)
     run = Run("render")
     samples = _saved_samples(args, run)
-    normal_form = getattr(args, "normal_form", "tree")
+    pipe = Pipeline(None, normal_form=getattr(args, "normal_form", "tree"))
     if samples is None:
-        from ..model.scene import load
-
         with run.step("load", f"loading {args.scene}"):
-            scene = load(args.scene)
+            pipe.scene = scenes.load(args.scene)
         with run.step("compile", "compiling the scene"):
-            tape = scene.compile(normal_form)
+            tape = pipe.tape
     else:
         tape = samples.tape
-    ctx = get_context(getattr(args, "device", None))
-    stats = {}
-    options = dict(device=ctx, background=background, aa=aa)
+    pipe.device = get_context(getattr(args, "device", None))
     if tape.empty:
         warnings.warn(f"{args.scene}: the solid is empty; the image is all background", stacklevel=2)
-        img, what = _empty_image(size, background, args.method), "empty solid"
+        img, what = _empty_image(opts["size"], opts["background"], args.method), "empty solid"
     elif args.method == "raytrace":
-        from ..io.colors import recolor_defaults
-
-        recolor_defaults(tape, default_color)
-        with run.step("frame", "framing the view (probe ray trace)"):
-            camera = cli_camera(args, tape.bound, lambda w, h, fov, up: Camera.fit_silhouette(
-                tape, w, h, fov=fov, up=up, device=ctx))
-        with run.step("render", f"ray tracing {camera.width}x{camera.height}"):
-            img = raytrace(tape, camera, **options)
-        what = "ray traced"
+        img, what = _raytraced(args, run, pipe, opts)
     else:
-        if samples is None:
-            from ..sampling.sampler import sample
-
-            radius = (radius or DEFAULT_RADIUS).of(bound_diagonal(tape.bound))
-            with run.step("sample", "sampling: building the OpenCL program"):
-                samples = sample(scene, radius, device=ctx, progress=None, normal_form=normal_form,
-                                 max_samples=getattr(args, "max_samples", None))
-            stats["sampling"] = dict(samples.stats)
-        if default_color is not None:
-            samples.with_default_color(default_color)
-        with run.step("frame", "framing the view (probe ray trace)"):
-            camera = cli_camera(args, samples.bound, lambda w, h, fov, up: Camera.fit_silhouette(
-                samples.tape, w, h, fov=fov, up=up, device=ctx))
-        with run.step("render", f"rendering {len(samples):,} splats at {camera.width}x{camera.height}"):
-            img = render(samples, camera, surface_aligned=not args.no_surface_aligned,
-                         backface_culling=not args.no_backface_culling, **options)
-        what = f"{len(samples):,} splats (r = {samples.radius:.6g})"
-    img.stats.update(stats)
+        img, what, samples = _splatted(args, run, pipe, samples, radius, opts)
     with run.step("write", f"writing {args.output}"):
         for path, save in ((args.output, img.save), (args.depth, img.save_depth), (args.ids, img.save_ids),
                            (args.stats, img.save_stats)):
@@ -284,6 +270,7 @@ def run(args) -> int:
                 save(path)
                 run.wrote(path)
     covered = int(img.stats.get("covered_pixels", 0))
+    size = opts["size"]
     run.summary(f"{what}: {size[0]}x{size[1]}, {covered:,} surface pixels", method=args.method,
                 covered_pixels=covered, samples=None if samples is None else len(samples))
     return 0

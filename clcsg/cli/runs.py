@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import time
 
-from ..io.progress import current
+from ..progress import current
+from ..readers import scenes
 
 
 class Run:
@@ -52,7 +53,5 @@ class Run:
 
 def load_scene(run: Run, path, bound=None):
     """The scene at ``path`` (with ``bound`` if given), loaded in a step."""
-    from ..model.scene import as_scene, load
-
     with run.step("load", f"loading {path}"):
-        return as_scene(load(path), bound)
+        return scenes.as_scene(scenes.load(path), bound)

@@ -4,19 +4,21 @@ from __future__ import annotations
 
 import textwrap
 
+from ..cl.device import get_context
+from ..compile.dnf import DEFAULT_TERM_LIMIT
 from ..errors import UsageError
-from ..io.outputs import write_json
-from .app import (UNRESOLVED_HELP, _jsonable, add_subcommand, bound_diagonal, parse_bound, parse_floats, parse_radius,
+from ..pipeline import Pipeline
+from ..writers.output_files import check_output, check_samples_output, write_json, write_samples
+from .app import (SUMMARIES, UNRESOLVED_HELP, _jsonable, add_subcommand, parse_bound, parse_floats, parse_radius,
                   positive_int)
+from .runs import Run, load_scene
 
 
 def add_parser(subparsers):
-    from ..compile.dnf import DEFAULT_TERM_LIMIT
-
     p = add_subcommand(
         subparsers,
         "sample",
-        help="sample the CSG surface and write a PLY point cloud (or .npz)",
+        help=SUMMARIES["sample"],
         description="""
             Generate samples on the exact CSG surface (paper: Trettner & Kobbelt 2021): every
             sample lies on the surface, and every point of the surface has a sample on the
@@ -69,11 +71,6 @@ def write_stats(path, stats) -> None:
 
 
 def run(args) -> int:
-    from ..cl.device import get_context
-    from ..io.outputs import check_output, check_samples_output
-    from ..sampling.sampler import sample
-    from .runs import Run, load_scene
-
     fmt = check_samples_output(args.output)  # before any work: `-o x.png` fails at once
     if args.stats:
         check_output(args.stats, ".json", "statistics", "--stats")
@@ -84,19 +81,16 @@ def run(args) -> int:
         raise UsageError("--float32 applies to PLY output; .npz keeps the samples in double precision")
     ctx = get_context(args.device)
     run = Run("sample")
-    scene = load_scene(run, args.scene, bound)
-    radius = radius_spec.value
+    pipe = Pipeline(load_scene(run, args.scene, bound), ctx, args.normal_form, args.term_limit)
     if radius_spec.relative:
         with run.step("compile", "compiling the scene (the radius is relative to its bound)"):
-            radius = radius_spec.of(bound_diagonal(scene.compile(args.normal_form, args.term_limit).bound))
+            radius = pipe.radius(radius_spec)
+    else:
+        radius = pipe.radius(radius_spec)
     with run.step("sample", "sampling: compiling the scene, building the OpenCL program"):
-        s = sample(scene, radius, device=ctx, floor=floor, normal_form=args.normal_form, term_limit=args.term_limit,
-                   progress=None, max_samples=args.max_samples)
+        s = pipe.samples(radius, floor=floor, progress=None, max_samples=args.max_samples)
     with run.step("write", f"writing {args.output}"):
-        if fmt == "PLY":
-            s.to_ply(args.output, float32=args.float32)
-        else:
-            s.save(args.output)
+        write_samples(s, args.output, float32=args.float32)
         run.wrote(args.output)
         if args.stats:
             write_stats(args.stats, s.stats)

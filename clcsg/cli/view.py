@@ -5,6 +5,14 @@ from __future__ import annotations
 import sys
 
 from ..errors import UsageError
+from .app import SUMMARIES, add_subcommand, positive_int
+from ..cl.device import get_context
+from ..model.colors import ColorError, scheme_color
+from ..viewer.frames import warm_up
+from ..viewer.server import ViewerServer, bind
+from ..viewer.session import Session, parse_radius
+from .runs import Run
+from .sample import parse_positive
 
 VIEW_DESCRIPTION = """
     Sample SCENE (.json, OpenSCAD .csg or .scad) and show it in a local web page: drag to
@@ -27,9 +35,7 @@ VIEW_EPILOG = """
 
 
 def add_parser(subparsers):
-    from .app import add_subcommand, positive_int
-
-    p = add_subcommand(subparsers, "view", help="preview a scene in the web browser, redrawn when the file changes",
+    p = add_subcommand(subparsers, "view", help=SUMMARIES["view"],
                        description=VIEW_DESCRIPTION, epilog=VIEW_EPILOG)
     p.add_argument("scene", metavar="SCENE", help="scene file (.json, OpenSCAD .csg or .scad)")
     p.add_argument("-r", "--radius", metavar="R", default=None,
@@ -82,13 +88,6 @@ def run(args) -> int:
     import signal
     import webbrowser
 
-    from ..cl.device import get_context
-    from ..io.colors import ColorError, scheme_color
-    from ..viewer.frames import warm_up
-    from ..viewer.server import ViewerServer, bind
-    from ..viewer.session import Session, parse_radius
-    from .runs import Run
-
     _require_packages()
     try:
         radius = parse_radius(args.radius)
@@ -96,8 +95,6 @@ def run(args) -> int:
         raise UsageError(f"--radius: {e}") from None
     floor = None
     if args.floor is not None:
-        from .sample import parse_positive
-
         floor = parse_positive(args.floor, "--floor")
     if not 0 <= args.port <= 65535:
         raise UsageError(f"--port must be from 0 to 65535, got {args.port}")

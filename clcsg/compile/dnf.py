@@ -25,7 +25,7 @@ import numpy as np
 from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..errors import DnfLimitError, SceneError, UnboundedError
 from ..model.quadric import Quadric
-from . import term_bounds as _bounds
+from .bounds import term_boxes as _bounds
 
 DEFAULT_TERM_LIMIT = 100_000
 

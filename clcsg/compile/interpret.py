@@ -21,7 +21,7 @@ import numpy as np
 
 from ..cl.constants import ROUNDING_ULPS
 from ..model.quadric import Quadric
-from .tape import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
 
 #: pruning's rounding margin, relative to the region's size and distance from the origin
 #: (the kernels' margin in float64)

@@ -6,6 +6,10 @@ import math
 
 import numpy as np
 
+from ..model.construction import Construction
+from ..model.csg import walk
+from ..model.scene import Scene
+
 
 def _plain(v):
     return v.item() if hasattr(v, "item") else v
@@ -14,20 +18,17 @@ def _plain(v):
 def constructions(shape) -> list[str]:
     """What each construction (extrusion, revolution, hull, Minkowski sum) of the graph expands
     to, one line each: 'hull of 8 spheres: 12 planes, 12 cylinders, 8 spheres'."""
-    from ..model.construction import Construction
-    from ..model.csg import walk
-
     return [n.describe() for n in walk(shape) if isinstance(n, Construction)]
 
 
 def scene_info(scene, normal_form: str = "tree", term_limit: int | None = None, bound=None,
                listing: bool = False) -> dict:
-    """Statistics of ``scene`` (a Scene, Shape or path): the tape's, the number of DNF terms
+    """Statistics of ``scene`` (a Scene or Shape): the tape's, the number of DNF terms
     (counted without building them; None past 1e300), with ``normal_form="dnf"`` the built
     DNF's too, and the bound.  ``bound`` ((2, 3) or None) overrides the scene's bound."""
-    from ..model.scene import as_scene
-
-    sc = as_scene(scene, bound)
+    sc = scene if isinstance(scene, Scene) else Scene(scene)
+    if bound is not None:
+        sc = Scene(sc.shape, np.asarray(bound, dtype=float), sc.source)
     tape = sc.compile("tree")
     st = {k: _plain(v) for k, v in tape.stats.items()}
     terms = st.pop("dnf_terms")

@@ -41,14 +41,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_NAMES, OP_OR
 from ..errors import ParameterError, SceneError, UnboundedError
 from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.quadric import COEFFICIENT_INDEX, Quadric
-from .exact_boxes import kind_boxes, kind_face_boxes
-from .term_bounds import term_box
+from .bounds.exact_boxes import kind_boxes, kind_face_boxes
+from .bounds.term_boxes import term_box
+from .bounds import tree as bounds
+from ..errors import UsageError
+from .dnf import DEFAULT_TERM_LIMIT, normalize
 
-OP_LEAF, OP_AND, OP_OR, OP_COPY, OP_CONST = 0, 1, 2, 3, 4
-OP_NAMES = ("LEAF", "AND", "OR", "COPY", "CONST")
 
 #: canonical coefficients closer than this are the same quadric
 SAME_QUADRIC = 1e-9
@@ -311,8 +313,8 @@ class _WorldLiterals:
 def instances_of(shape: Shape, table: QuadricTable, source: str = "scene", world=None) -> list[Instance]:
     """The primitive instances of ``shape`` in tree order (iterative depth-first walk; a shared
     sub-graph under the same transform is walked once).  Their boxes are the primitives' exact
-    boxes (:func:`~clcsg.compile.exact_boxes.kind_boxes`, in one batch; the polytope box of
-    :func:`~clcsg.compile.term_bounds.term_box` for kinds without a closed form)."""
+    boxes (:func:`~clcsg.compile.bounds.exact_boxes.kind_boxes`, in one batch; the polytope box of
+    :func:`~clcsg.compile.bounds.term_boxes.term_box` for kinds without a closed form)."""
     world = _WorldLiterals(table, source) if world is None else world
     out: list[Instance] = []
     seen = set()
@@ -574,7 +576,6 @@ def scene_bound(shape, instances, root, user_bound, source):
     """(bound (2, 3), empty) of the solid."""
     if root == _FALSE:
         return np.zeros((2, 3)), True
-    from . import bounds
 
     if hasattr(bounds, "shape_bound"):
         return bounds.shape_bound(shape, user_bound=user_bound, source=source)
@@ -606,15 +607,12 @@ NORMAL_FORMS = ("tree", "dnf")
 
 def compile_scene(scene, normal_form: str = "tree", term_limit: int | None = None) -> Tape:
     """The tape of a :class:`~clcsg.model.scene.Scene` in the given normal form."""
-    from ..errors import UsageError
-
     if normal_form not in NORMAL_FORMS:
         raise UsageError(f"normal form must be one of {', '.join(NORMAL_FORMS)}, got {normal_form!r}")
     table = QuadricTable()
     tree = compile_shape(scene.shape, scene.bound, scene.source, table)
     if normal_form == "tree":
         return tree
-    from .dnf import DEFAULT_TERM_LIMIT, normalize
 
     dnf = normalize(scene.shape, DEFAULT_TERM_LIMIT if term_limit is None else term_limit, scene.bound,
                     scene.source, table=table)

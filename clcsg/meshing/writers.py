@@ -59,7 +59,7 @@ def _trimesh_bytes(mesh, ext: str) -> bytes:
 
 
 def write(mesh, path) -> int:
-    """Write ``mesh`` (a :class:`~clcsg.meshing.pipeline.Mesh`) to ``path``; returns the bytes
+    """Write ``mesh`` (a :class:`~clcsg.meshing.mesher.Mesh`) to ``path``; returns the bytes
     written.  The format comes from the extension (:data:`FORMATS`)."""
     ext = check_output(path)
     data = stl_bytes(mesh.vertices, mesh.triangles) if ext == ".stl" else _trimesh_bytes(mesh, ext)

@@ -251,7 +251,33 @@ def contains(shape: Shape, points) -> np.ndarray:
 
 
 def _contains(shape: Shape, x: np.ndarray) -> np.ndarray:
-    """Post-order evaluation with an explicit stack.
+    """Post-order evaluation with an explicit stack (:class:`_Membership`)."""
+    return _Membership(x).evaluate(shape)
+
+
+def _combine(node, vals: list, n: int) -> np.ndarray:
+    """The membership of an operation node from its operands' memberships."""
+    if isinstance(node, Union):
+        out = np.zeros(n, dtype=bool)
+        for v in vals:
+            out |= v
+    elif isinstance(node, Intersection):
+        out = np.ones(n, dtype=bool)
+        for v in vals:
+            out &= v
+    elif isinstance(node, Difference):
+        out = vals[0].copy()
+        for v in vals[1:]:
+            out &= ~v
+    elif isinstance(node, Complement):
+        out = ~vals[0]
+    else:  # Transformed
+        out = vals[0]
+    return out
+
+
+class _Membership:
+    """Which points ``x`` lie in a CSG graph, evaluated post-order with an explicit stack.
 
     A *frame* is the point array in the coordinates of a node: frame 0 is ``x``; the operand
     of a Transformed node T seen in frame f is in frame (T, f), whose points are f's points
@@ -259,14 +285,20 @@ def _contains(shape: Shape, x: np.ndarray) -> np.ndarray:
     by (node, frame); a result is dropped once all its parents have used it and a frame once
     its Transformed node is done, so memory follows the depth of the graph, not its size.
     """
-    frame_ids: dict = {}  # (id(Transformed), parent frame) -> frame id
 
-    def child_frames(node, f):
+    def __init__(self, x: np.ndarray):
+        self.x = x
+        self.frame_ids: dict = {}  # (id(Transformed), parent frame) -> frame id
+        self.frames = {0: x}
+        self.uses: dict = {}  # (id(node), frame) -> parents that have not used it yet
+        self.results: dict = {}
+
+    def child_frames(self, node, f):
         if isinstance(node, Transformed):
             key = (id(node), f)
-            cf = frame_ids.get(key)
+            cf = self.frame_ids.get(key)
             if cf is None:
-                cf = frame_ids[key] = len(frame_ids) + 1
+                cf = self.frame_ids[key] = len(self.frame_ids) + 1
             return [(node.operand, cf)]
         if isinstance(node, (Union, Intersection, Difference)):
             return [(c, f) for c in node.operands]
@@ -276,70 +308,57 @@ def _contains(shape: Shape, x: np.ndarray) -> np.ndarray:
             return []
         raise OperandError(f"not a CSG node: {type(node).__name__}")
 
-    # pass 1: how many parents use each (node, frame)
-    uses: dict = {}
-    seen = set()
-    stack = [(shape, 0)]
-    while stack:
-        node, f = stack.pop()
-        key = (id(node), f)
-        if key in seen:
-            continue
-        seen.add(key)
-        for c, cf in child_frames(node, f):
-            ck = (id(c), cf)
-            uses[ck] = uses.get(ck, 0) + 1
-            if ck not in seen:
-                stack.append((c, cf))
+    def count_uses(self, shape) -> None:
+        """Pass 1: how many parents use each (node, frame)."""
+        seen = set()
+        stack = [(shape, 0)]
+        while stack:
+            node, f = stack.pop()
+            key = (id(node), f)
+            if key in seen:
+                continue
+            seen.add(key)
+            for c, cf in self.child_frames(node, f):
+                ck = (id(c), cf)
+                self.uses[ck] = self.uses.get(ck, 0) + 1
+                if ck not in seen:
+                    stack.append((c, cf))
 
-    # pass 2: evaluate
-    frames = {0: x}
-    results: dict = {}
+    def take(self, key):
+        n = self.uses[key] - 1
+        self.uses[key] = n
+        return self.results.pop(key) if n == 0 else self.results[key]
 
-    def take(key):
-        n = uses[key] - 1
-        uses[key] = n
-        return results.pop(key) if n == 0 else results[key]
+    def leaf(self, node, f) -> np.ndarray:
+        pts = self.frames[f]
+        out = np.ones(len(pts), dtype=bool)
+        for q in node.quadrics():
+            out &= q.value(pts) <= 0.0
+        return out
 
-    stack = [(shape, 0, False)]
-    while stack:
-        node, f, expanded = stack.pop()
-        key = (id(node), f)
-        if key in results:
-            continue
-        kids = child_frames(node, f)
-        if not expanded and kids:
-            stack.append((node, f, True))
-            for c, cf in reversed(kids):
-                if (id(c), cf) not in results:
-                    if isinstance(node, Transformed) and cf not in frames:
-                        inv = np.linalg.inv(node.matrix)
-                        frames[cf] = frames[f] @ inv[:3, :3].T + inv[:3, 3]
-                    stack.append((c, cf, False))
-            continue
-        if isinstance(node, Primitive):
-            pts = frames[f]
-            out = np.ones(len(pts), dtype=bool)
-            for q in node.quadrics():
-                out &= q.value(pts) <= 0.0
-        else:
-            vals = [take((id(c), cf)) for c, cf in kids]
-            if isinstance(node, Union):
-                out = np.zeros(len(x), dtype=bool)
-                for v in vals:
-                    out |= v
-            elif isinstance(node, Intersection):
-                out = np.ones(len(x), dtype=bool)
-                for v in vals:
-                    out &= v
-            elif isinstance(node, Difference):
-                out = vals[0].copy()
-                for v in vals[1:]:
-                    out &= ~v
-            elif isinstance(node, Complement):
-                out = ~vals[0]
-            else:  # Transformed: its frame is no longer needed
-                out = vals[0]
-                frames.pop(kids[0][1], None)
-        results[key] = out
-    return results[(id(shape), 0)]
+    def evaluate(self, shape) -> np.ndarray:
+        """Pass 2: every (node, frame) after its operands."""
+        self.count_uses(shape)
+        stack = [(shape, 0, False)]
+        while stack:
+            node, f, expanded = stack.pop()
+            key = (id(node), f)
+            if key in self.results:
+                continue
+            kids = self.child_frames(node, f)
+            if not expanded and kids:
+                stack.append((node, f, True))
+                for c, cf in reversed(kids):
+                    if (id(c), cf) not in self.results:
+                        if isinstance(node, Transformed) and cf not in self.frames:
+                            inv = np.linalg.inv(node.matrix)
+                            self.frames[cf] = self.frames[f] @ inv[:3, :3].T + inv[:3, 3]
+                        stack.append((c, cf, False))
+                continue
+            if isinstance(node, Primitive):
+                self.results[key] = self.leaf(node, f)
+                continue
+            self.results[key] = _combine(node, [self.take((id(c), cf)) for c, cf in kids], len(self.x))
+            if isinstance(node, Transformed):  # its operand's frame is no longer needed
+                self.frames.pop(kids[0][1], None)
+        return self.results[(id(shape), 0)]

@@ -39,6 +39,7 @@ from .minkowski import minkowski_ball, z_prism
 from .polytope import convex_polytope, polytope_solid
 from .profile import ProfileError, polygon
 from .profile_ops import hull_disks, offset_r
+from .quadric import frame_z_to
 
 
 @dataclass
@@ -267,8 +268,6 @@ def _many_spheres(c, r, color):
 
 
 def _frame(w):
-    from .quadric import frame_z_to
-
     return frame_z_to(w)
 
 

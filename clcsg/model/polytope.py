@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .construction import plane
+from .construction import Construction, plane
 from .csg import Intersection
 from .profile import ProfileError
 
@@ -141,8 +141,6 @@ def convex_polyhedron(points, faces, color=None):
     face planes.  Convex means every face lies in one face plane of the hull of its points and
     every point on the hull's boundary (a closed surface inside the hull's boundary is all of
     it); otherwise a :class:`ProfileError`."""
-    from .construction import Construction
-
     poly = convex_polytope(points)
     if poly.dim < 3:
         raise ProfileError("polyhedron() is flat: it has no volume")

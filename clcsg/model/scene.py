@@ -1,20 +1,17 @@
 """A scene: a CSG shape plus the optional bound that unbounded terms are clipped to.
 
-``load`` and ``save`` pick the format from the file name: ``.json`` is clcsg's own scene
-format (:mod:`clcsg.io.scenefile`), ``.csg`` is OpenSCAD's CSG export (:mod:`clcsg.io.openscad`)
-and ``.scad`` an OpenSCAD program, exported to CSG by the ``openscad`` binary first
-(:mod:`clcsg.io.scad`).
+Scene files are read and written by :mod:`clcsg.readers.scenes` (``clcsg.load``, ``clcsg.save``).
+:meth:`Scene.compile` and :meth:`Scene.normalize` are the one place where the model reaches up
+to ``compile``: they import it when called, so the model imports nothing of ours above it.
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .csg import Shape
-from ..errors import SceneError
 
 
 @dataclass
@@ -50,48 +47,3 @@ class Scene:
             user_bound=self.bound,
             source=self.source,
         )
-
-
-def as_scene(obj, bound=None) -> Scene:
-    """A :class:`Scene` from a Scene, a Shape or a path."""
-    if isinstance(obj, Scene):
-        if bound is not None:
-            return Scene(obj.shape, np.asarray(bound, dtype=float), obj.source)
-        return obj
-    if isinstance(obj, Shape):
-        return Scene(obj, None if bound is None else np.asarray(bound, dtype=float))
-    if isinstance(obj, (str, os.PathLike)):
-        sc = load(obj)
-        return as_scene(sc, bound)
-    raise SceneError(f"expected a Shape, a Scene or a scene file path, got {type(obj).__name__}")
-
-
-def load(path) -> Scene:
-    """Load a scene file (``.json``, OpenSCAD ``.csg``, or OpenSCAD ``.scad`` via ``openscad``)."""
-    p = os.fspath(path)
-    if not os.path.exists(p):
-        raise SceneError(f"{p}: no such file")
-    ext = os.path.splitext(p)[1].lower()
-    if ext == ".json":
-        from ..io.scenefile import load_json
-
-        return load_json(p)
-    if ext == ".csg":
-        from ..io.openscad import load_csg
-
-        return load_csg(p)
-    if ext == ".scad":
-        from ..io.scad import load_scad
-
-        return load_scad(p)
-    raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json, .csg or .scad)")
-
-
-def save(obj, path) -> None:
-    """Save a Shape or Scene as a ``.json`` scene file."""
-    p = os.fspath(path)
-    if os.path.splitext(p)[1].lower() != ".json":
-        raise SceneError(f"{p}: scenes are saved as .json")
-    from ..io.scenefile import save_json
-
-    save_json(as_scene(obj), p)

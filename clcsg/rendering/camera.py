@@ -44,6 +44,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import UsageError
+from ..cl.device import context_of
 
 #: default view direction of :meth:`Camera.fit` (from the target towards the eye): a 3/4 view
 #: from the front-right and above, with z up.
@@ -302,7 +303,6 @@ class Camera:
         the points its pixels see (each pixel's corners at its hit depth); ``passes`` times.
         One pass frames within about one probe pixel.  ``scene``: a Shape, Scene, path, Tape or
         Samples; ``device`` as in :func:`clcsg.raytrace`."""
-        from ..cl.device import context_of
         from .raytracer import as_tape, trace
 
         tape = as_tape(scene)

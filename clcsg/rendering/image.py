@@ -6,7 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..io.outputs import png_bytes, write_image, write_json, write_npy
+from ..errors import UsageError
+from ..writers.output_files import png_bytes, write_image, write_json, write_npy
 
 
 @dataclass
@@ -43,7 +44,7 @@ class Image:
     def save(self, path) -> None:
         """Write the color image; the format is the extension's: ``.png``, ``.jpg`` / ``.jpeg``
         (no alpha: the alpha channel is dropped), ``.webp`` (lossless) or ``.tif`` / ``.tiff``
-        (see :mod:`clcsg.io.outputs`).  Another extension is a UsageError."""
+        (see :mod:`clcsg.writers.output_files`).  Another extension is a UsageError."""
         write_image(self.rgba, path)
 
     def _repr_png_(self) -> bytes:

@@ -18,6 +18,8 @@ import time
 
 import numpy as np
 
+from ..compile.tape import Tape
+from ..readers.scenes import as_scene
 from ..cl.device import choose_real, context_of
 from ..cl.programs import build, event_seconds, kernel
 from ..cl.memory import device_buffer, upload
@@ -25,7 +27,8 @@ from ..cl.records import TAPE_OP_DTYPE, SceneBuffers, pack
 from ..errors import UsageError
 from .camera import Camera
 from .image import Image
-from .view import Shading, pack_view
+from .shading import Shading, pack_view
+from .supersample import supersample
 
 TILE = 16
 #: depth slabs per tile, each with its own pruned tape
@@ -45,9 +48,6 @@ def pixel_range(width: int, height: int) -> tuple[tuple[int, int], tuple[int, in
 
 def as_tape(obj, normal_form: str = "tree"):
     """A :class:`~clcsg.compile.tape.Tape` from a Tape, Samples, Scene, Shape or scene file path."""
-    from ..compile.tape import Tape
-    from ..model.scene import as_scene
-
     if isinstance(obj, Tape):
         return obj
     tape = getattr(obj, "tape", None)
@@ -74,11 +74,9 @@ def raytrace(scene, camera: Camera | None = None, device=None, background=(1.0, 
     Context.  ``background``: RGBA/RGB in [0, 1].  ``precision``: ``"auto"`` (double where the
     device has fp64), ``"double"`` or ``"float"``.  ``normal_form``: ``"tree"`` or ``"dnf"``
     (the same image either way).  ``aa``: N x N supersampling (see :func:`clcsg.render`).
-    Further keywords are :class:`~clcsg.rendering.view.Shading` options (ambient, diffuse,
+    Further keywords are :class:`~clcsg.rendering.shading.Shading` options (ambient, diffuse,
     specular, shininess, gamma, key).
     """
-    from .supersample import supersample
-
     tape = as_tape(scene, normal_form)
     cam = camera_or_fit(camera, tape.bound)
     shade = Shading().with_options(background=background, **shading)

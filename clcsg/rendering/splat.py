@@ -31,7 +31,9 @@ from ..cl.memory import device_buffer, upload
 from ..errors import UsageError
 from .image import Image
 from .raytracer import camera_or_fit, pixel_range
-from .view import Shading, pack_view
+from .shading import Shading, pack_view
+from .supersample import supersample
+from ..compile.interpret import contains
 
 #: fixed work-group size of the splat pass (see raytracer.PIXEL_GROUP: a size chosen by the
 #: runtime would recompile the kernel for every new sample count)
@@ -59,8 +61,6 @@ def render(samples, camera=None, device=None, background=(1.0, 1.0, 1.0), precis
     :func:`clcsg.raytrace`.  Requires 64-bit atomics (``cl_khr_int64_extended_atomics``), else
     :class:`~clcsg.errors.DeviceError`.
     """
-    from .supersample import supersample
-
     if not hasattr(samples, "device_buffers"):
         raise UsageError(f"render needs Samples (see clcsg.sample), got {type(samples).__name__}")
     cam = camera_or_fit(camera, samples.tape.bound)
@@ -75,8 +75,6 @@ def render(samples, camera=None, device=None, background=(1.0, 1.0, 1.0), precis
 
 def eye_inside(tape, eye) -> bool:
     """Is the eye inside (or on) the solid?  Back-face culling is only valid from outside."""
-    from ..compile.interpret import contains
-
     if tape.empty:
         return False
     return bool(contains(tape.ops, tape.quadrics, np.asarray(eye, dtype=np.float64).reshape(1, 3))[0])

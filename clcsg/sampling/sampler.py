@@ -4,7 +4,7 @@ on the CSG tape.
 Decomposition
 -------------
 Every unique quadric q that a leaf of the tape uses is sampled from each of the three sampling
-planes of its principal frame (:mod:`clcsg.compile.frames`) and, for two-sheet heightfields,
+planes of its principal frame (:mod:`clcsg.compile.quadric_frames`) and, for two-sheet heightfields,
 from both sheets.  A *task* is one (quadric, plane, sheet); its root cell is the box of the
 primitive instances that have q as a literal (the CSG surface lies on the union of the
 primitives' boundaries), cut by the scene bound, projected into the plane's local (x, y).
@@ -82,14 +82,16 @@ from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build
 from ..cl.memory import check_allocation, device_buffer, upload
+from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
-from ..compile.frames import principal_frame
+from ..compile.quadric_frames import principal_frame
 from ..compile.root_tapes import prune_root_tapes
-from ..compile.tape import OP_LEAF
 from ..errors import LimitError, UsageError
 from ..model.quadric import Quadric
-from ..model.scene import as_scene
+from ..readers.scenes import as_scene
 from .samples import Samples
+from ..compile.bounds import estimates as guard
+from ..progress import for_option
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
@@ -249,7 +251,7 @@ SPLIT_LARGER = 1 - SPLIT_AT
 
 
 class _Progress:
-    """Progress of the level loop on the current reporter (:mod:`clcsg.io.progress`: a bar on
+    """Progress of the level loop on the current reporter (:mod:`clcsg.progress`: a bar on
     a terminal, JSON lines with ``--progress json``, nothing in a pipe or with ``progress=False``).
 
     The work left is forecast in seconds.  Cells: after level L, with c children queued, the
@@ -264,12 +266,10 @@ class _Progress:
     the largest seen so far: it never goes back, and reaches 100% when the last level is done;
     the bar counts cells, its total is done / fraction, so its ETA (rate so far times the cells
     left) is the forecast.  The samples so far and the expected count
-    (:func:`clcsg.sampling.guard.expected_samples`) are shown next to the bar.
+    (:func:`clcsg.compile.bounds.estimates.expected_samples`) are shown next to the bar.
     """
 
     def __init__(self, enabled, estimate=0, roots=None, radius=None, max_levels=400):
-        from ..io.progress import for_option
-
         self.reporter = for_option(enabled)
         self.estimate = int(estimate)
         self.max_levels = max_levels
@@ -360,7 +360,7 @@ def sample(
     diagonal)).  ``distortion``: use the interval
     distortion bound (True) or the worst case max(sqrt 3, bound) (False).  ``capacity``: initial
     (cells, samples[, arena[, clip]]) buffer sizes (tests force tiny ones).
-    ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.sampling.guard`;
+    ``max_samples`` / ``max_memory``: limits of the resource guard (:mod:`clcsg.compile.bounds.tree.estimates`;
     None: 50 million samples / 80% of the device's global memory); past them
     :class:`~clcsg.errors.LimitError` is raised before anything is allocated.
     """
@@ -388,8 +388,6 @@ def sample(
     if len(roots) == 0 or tape.empty:
         warnings.warn(f"{sc.source}: the solid is empty; no samples", stacklevel=2)
         return _empty(radius, tape, packed, stats)
-
-    from . import guard
 
     stats["expected_samples"] = guard.expected_samples(tape, est)
     sub, finisher = _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity,
@@ -444,8 +442,6 @@ def _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, m
     """The resource guard's estimate, checked against the limits before anything is allocated.
     The estimate bounds the area from above: before refusing, measure (a run whose estimate is
     small) and refuse only if the extrapolated real count does not fit."""
-    from . import guard
-
     limits = dict(max_samples=max_samples, max_memory=max_memory, source=sc.source)
     est = guard.estimate_tape(tape, radius, real.itemsize)
     try:

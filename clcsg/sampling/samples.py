@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..cl.memory import upload
+from ..model.colors import parse_color, recolor_defaults
 from ..cl.records import PackedScene, SceneBuffers, pack, sample_dtype, tape_rows
 
 
@@ -97,46 +98,10 @@ class Samples:
 
     def with_default_color(self, color) -> int:
         """Give the primitives that have clcsg's default colour the colour ``color`` (RGBA or
-        any colour :func:`clcsg.io.colors.parse_color` reads, e.g. OpenSCAD's ``"#f9d72c"``);
+        any colour :func:`clcsg.model.colors.parse_color` reads, e.g. OpenSCAD's ``"#f9d72c"``);
         returns how many primitives changed.  The device buffers are packed again."""
-        from ..io.colors import parse_color, recolor_defaults
-
         n = recolor_defaults(self.tape, parse_color(color))
         if n:
             self.packed = pack(self.tape, self.packed.real, self.packed.origin)
             self._device.clear()
         return n
-
-    # -- output -------------------------------------------------------------------------------
-    def to_ply(self, path, float32: bool = False) -> None:
-        """Binary PLY (Open3D, MeshLab, plyfile read it); see :func:`clcsg.io.ply.write_samples`."""
-        from ..io.ply import write_samples
-
-        write_samples(self, path, float32=float32)
-
-    def save(self, path) -> None:
-        """Write the samples and their tape as ``.npz`` (:mod:`clcsg.io.samples_npz`):
-        :func:`load_samples` reads them back, ``clcsg render samples.npz`` renders them."""
-        from ..io.samples_npz import save_samples
-
-        save_samples(self, path)
-
-    def to_open3d(self):
-        """An ``open3d.geometry.PointCloud`` (points, normals, colours); needs ``pip install open3d``."""
-        from ..io.interop import to_open3d
-
-        return to_open3d(self)
-
-    def to_trimesh(self):
-        """A ``trimesh.PointCloud`` (vertices, RGBA colours; normals and ids in ``metadata``);
-        needs ``pip install trimesh``."""
-        from ..io.interop import to_trimesh
-
-        return to_trimesh(self)
-
-
-def load_samples(path) -> Samples:
-    """Samples written by :meth:`Samples.save` (``.npz``), ready to render again."""
-    from ..io.samples_npz import load_samples as _load
-
-    return _load(path)

@@ -24,7 +24,12 @@ import numpy as np
 
 from ..errors import UsageError
 from ..rendering.camera import Camera
-from ..rendering.supersample import MAX_SUBPIXELS, check_aa
+from ..rendering.raytracer import trace
+from ..rendering.shading import Shading
+from ..rendering.splat import OUTPUTS, rasterize
+from ..rendering.supersample import MAX_SUBPIXELS, check_aa, supersample
+from ..writers.output_files import png_bytes
+from ..writers.ply import write_samples
 
 #: the largest frame side the page may ask for
 MAX_SIDE = 4096
@@ -105,11 +110,6 @@ def render(context, model, camera, method: str = "splat", aa: int = 1, complete:
     samples, device buffers uploaded once per model) or ``"raytrace"`` (its tape).
     ``complete=False``: a frame for the page (splats: colour and ids read back, no depth or
     primitives; supersampled ids from a subpixel, no extra plain render)."""
-    from ..rendering.raytracer import trace
-    from ..rendering.splat import OUTPUTS, rasterize
-    from ..rendering.supersample import supersample
-    from ..rendering.view import Shading
-
     shading = Shading()
     if method == "splat":
         def at(cam):
@@ -224,11 +224,10 @@ def download(context, model, query, kind: str) -> tuple[bytes, str]:
     except ValueError:
         raise UsageError("view: not valid JSON") from None
     cam = camera_of(view, query.get("width"), query.get("height"))
+
     aa = check_aa(_side(query.get("aa", 1), "aa"), cam.width, cam.height)
     img = render(context, model, cam, query.get("method", "splat"), aa)
     if kind == "png":
-        from ..io.outputs import png_bytes
-
         return png_bytes(img.rgba), "image/png"
     buf = io.BytesIO()
     np.savez_compressed(buf, rgba=img.rgba, depth=img.depth, ids=img.ids,
@@ -242,6 +241,6 @@ def _ply_bytes(samples) -> bytes:
 
     with tempfile.TemporaryDirectory(prefix="clcsg-view-") as tmp:
         path = os.path.join(tmp, "samples.ply")
-        samples.to_ply(path)
+        write_samples(samples, path)
         with open(path, "rb") as f:
             return f.read()

@@ -32,6 +32,7 @@ from concurrent.futures import ThreadPoolExecutor
 from ..errors import ClcsgError, UsageError
 from . import frames
 from .watch import watch
+from ..progress import using
 
 ASSETS = {"/": ("index.html", "text/html; charset=utf-8"),
           "/viewer.js": ("viewer.js", "text/javascript; charset=utf-8")}
@@ -301,7 +302,6 @@ class ViewerServer:
         """``fn(*args)`` (a new model or None) as a progress step, then the model's warm-up."""
         import contextlib
 
-        from ..io.progress import using
 
         with contextlib.ExitStack() as stack:
             if self.reporter is not None:

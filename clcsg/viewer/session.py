@@ -10,35 +10,19 @@ server calls them from its single device thread, one at a time.
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from ..errors import ClcsgError
+from ..pipeline import resolve_radius as radius_for
 from ..sampling.radius import Radius
+from ..readers.scenes import load
+from ..sampling.sampler import sample
+from ..readers.scad import load_scad
 
 #: the viewer's default sample limit (the resource guard's; ``clcsg view --max-samples``)
 DEFAULT_MAX_SAMPLES = 5_000_000
-
-
-#: the automatic radius (``clcsg render``'s default)
-AUTO_RADIUS = Radius(0.01, relative=True)
-
-
-def diagonal(bound) -> float:
-    return float(np.linalg.norm(np.asarray(bound[1]) - np.asarray(bound[0])))
-
-
-def radius_for(radius: Radius | None, bound) -> float:
-    """``radius`` (None: :data:`AUTO_RADIUS`) for a scene of this bound; 1 for an empty or
-    degenerate bound."""
-    diag = diagonal(bound)
-    if not (diag > 0 and math.isfinite(diag)):
-        return 1.0 if radius is None or radius.relative else radius.value
-    return (radius or AUTO_RADIUS).of(diag)
 
 
 def parse_radius(value) -> Radius | None:
@@ -105,11 +89,7 @@ class Session:
     # -- loading ----------------------------------------------------------------------------------
     def read(self):
         """The scene from the file; for ``.scad`` also records the files OpenSCAD read."""
-        from ..model.scene import load
-
         if self.path.lower().endswith(".scad") and os.path.isfile(self.path):
-            from ..io.scad import load_scad
-
             scene, deps = load_scad(self.path, with_dependencies=True)
             self.files = deps
             return scene
@@ -117,8 +97,6 @@ class Session:
 
     def sample(self, scene, radius: Radius | None, times: dict) -> Model:
         """A new model of ``scene`` at ``radius`` (None: automatic); raises ClcsgError."""
-        from ..sampling.sampler import sample
-
         t = time.perf_counter()
         tape = scene.compile(self.normal_form)
         times["compile_s"] = time.perf_counter() - t

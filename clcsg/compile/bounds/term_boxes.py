@@ -21,8 +21,8 @@ from itertools import combinations
 
 import numpy as np
 
-from ..model.quadric import Quadric
-from .frames import principal_frame
+from ...model.quadric import Quadric
+from ..quadric_frames import principal_frame
 #: far box used to detect unbounded polytopes
 FAR = 1e9
 _WORLD = np.eye(3)

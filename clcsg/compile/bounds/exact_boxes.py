@@ -12,9 +12,9 @@ from itertools import combinations
 
 import numpy as np
 
-from ..model.csg import _vec3
-from ..model.quadric import Quadric, frame_z_to
-from .term_bounds import FAR, term_box
+from ...model.csg import _vec3
+from ...model.quadric import Quadric, frame_z_to
+from .term_boxes import FAR, term_box
 
 # The box of a compact set S = {x : Q(x) <= 0, n_i . x <= d_i} is given by the extremes of the
 # coordinates x_k over S.  A maximizer of the linear function e_k . x satisfies the Fritz John

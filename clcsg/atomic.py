@@ -20,7 +20,7 @@ import contextlib
 import os
 import secrets
 
-from ..errors import OutputError
+from .errors import OutputError
 
 #: the permission bits of a new output file before the umask (as ``open(path, "w")``)
 _MODE = 0o666

@@ -4,13 +4,13 @@ clcsg does not interpret the OpenSCAD language.  ``load_scad("model.scad")`` run
 
     openscad -o TMPDIR/model.csg /abs/path/model.scad
 
-in a fresh temporary directory and reads the export with :func:`clcsg.io.openscad.parse_csg`.
+in a fresh temporary directory and reads the export with :func:`clcsg.readers.openscad.parse_csg`.
 The returned :class:`~clcsg.model.scene.Scene` keeps ``model.scad`` as its ``source``.
 
 * The binary is ``$OPENSCAD`` if that is set (a path or a command name), else ``openscad`` on
   ``PATH``.
 * OpenSCAD's ``WARNING:`` and ``DEPRECATED:`` lines are re-emitted as
-  :class:`~clcsg.io.openscad.OpenScadWarning`.  Any ``ERROR:`` line fails the load, also when
+  :class:`~clcsg.readers.openscad.OpenScadWarning`.  Any ``ERROR:`` line fails the load, also when
   OpenSCAD exits with status 0 (OpenSCAD 2021.01 does so after a failed ``assert`` or a
   recursion error, having written an empty export).
 * OpenSCAD gets :data:`DEFAULT_TIMEOUT` seconds (``$CLCSG_OPENSCAD_TIMEOUT`` or the
@@ -37,6 +37,7 @@ import warnings
 
 from ..errors import SceneError
 from ..model.scene import Scene
+from .openscad import OpenScadWarning, parse_csg
 
 __all__ = ["load_scad", "export_csg", "find_openscad", "parse_dependencies", "DEFAULT_TIMEOUT"]
 
@@ -174,8 +175,6 @@ def load_scad(path, *, timeout: float | None = None, with_dependencies: bool = F
     the absolute paths of every file the program read: itself and what it ``include``s and
     ``use``s, directly or not).
     """
-    from .openscad import OpenScadWarning, parse_csg
-
     p = os.fspath(path)
     if not os.path.isfile(p):
         raise SceneError(f"{p}: no such file" if not os.path.exists(p) else f"{p}: not a file")

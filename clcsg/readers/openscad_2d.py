@@ -1,6 +1,6 @@
 """OpenSCAD's constructions read exactly: 2-D shapes, extrusions, hulls and Minkowski sums.
 
-The evaluator of :mod:`clcsg.io.openscad` mixes :class:`Constructions` in.  A
+The evaluator of :mod:`clcsg.readers.openscad` mixes :class:`Constructions` in.  A
 ``linear_extrude`` or ``rotate_extrude`` evaluates its children as a 2-D :class:`Profile`
 (``square``, ``circle``, ``polygon`` with ``paths``, ``offset``, 2-D ``hull``, and ``group`` /
 ``union`` / ``difference`` / ``intersection`` / ``multmatrix`` / ``color`` / ``render`` over

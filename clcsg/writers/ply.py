@@ -8,7 +8,7 @@ import os
 import numpy as np
 
 from ..errors import SceneError
-from .atomic import atomic_open
+from ..atomic import atomic_open
 
 
 def _vertex_dtype(float32: bool) -> np.dtype:

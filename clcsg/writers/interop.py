@@ -18,7 +18,7 @@ def _require(module: str, package: str, what: str):
 
 def to_open3d(samples):
     """An ``open3d.geometry.PointCloud`` with the positions, normals and colours (RGB in [0, 1])."""
-    o3d = _require("open3d", "open3d", "Samples.to_open3d()")
+    o3d = _require("open3d", "open3d", "clcsg.to_open3d()")
     vec = o3d.utility.Vector3dVector
     pc = o3d.geometry.PointCloud()
     pc.points = vec(np.ascontiguousarray(samples.positions, dtype=np.float64))
@@ -30,7 +30,7 @@ def to_open3d(samples):
 def to_trimesh(samples):
     """A ``trimesh.PointCloud`` with the positions and RGBA colours (uint8); normals, radii and
     quadric / primitive ids are in its ``metadata``."""
-    trimesh = _require("trimesh", "trimesh", "Samples.to_trimesh()")
+    trimesh = _require("trimesh", "trimesh", "clcsg.to_trimesh()")
     rgba = np.round(255 * np.clip(samples.colors, 0.0, 1.0)).astype(np.uint8).reshape(-1, 4)
     meta = {"normals": np.asarray(samples.normals), "radii": np.asarray(samples.radii),
             "quadrics": np.asarray(samples.quadrics), "primitives": np.asarray(samples.primitives),

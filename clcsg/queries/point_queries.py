@@ -26,7 +26,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import UsageError
+from ..cl.device import context_of, real_dtype
+from ..cl.programs import build, kernel
+from ..cl.records import SceneBuffers, pack
+from ..errors import UnboundedError, UsageError
+from ..readers.scenes import as_scene
 
 #: points per kernel launch (bounds the device buffers)
 CHUNK = 1 << 20
@@ -40,9 +44,6 @@ def _tape(scene, pts):
         return scene
     if hasattr(scene, "tape") and hasattr(scene, "positions"):
         return scene.tape
-    from ..errors import UnboundedError
-    from ..model.scene import as_scene
-
     sc = as_scene(scene)
     try:
         return sc.compile()
@@ -66,10 +67,6 @@ def _points(points) -> tuple[np.ndarray, tuple]:
 def _run(scene, points, device, kernel_name: str, out_dtype):
     """Kernel ``kernel_name`` of ``query.cl`` over ``points``; one output per point."""
     import pyopencl as cl
-
-    from ..cl.device import context_of, real_dtype
-    from ..cl.programs import build, kernel
-    from ..cl.records import SceneBuffers, pack
 
     pts, shape = _points(points)
     tape = _tape(scene, pts)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.quadric import Quadric
+from ...model.quadric import Quadric
 from .exact_boxes import is_empty, literals_box, meet
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compile.tape import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
 from ..errors import SceneError
 
 #: the most registers a tape read from a file may use (the kernels keep them in private memory)

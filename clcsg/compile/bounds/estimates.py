@@ -2,7 +2,7 @@
 
 :func:`estimate` bounds the area of the CSG surface from the DNF alone (no device work) and
 turns it into a sample count and a memory size; :func:`estimate_regions` does the same from
-per-quadric regions computed on the CSG tree (:func:`clcsg.compile.regions.quadric_regions`:
+per-quadric regions computed on the CSG tree (:func:`clcsg.compile.bounds.regions.quadric_regions`:
 the boxes of the faces of the primitive instances holding each quadric, within the instances'
 boxes and the scene bound).  :func:`check` (for a DNF or an :class:`Estimate`) and
 :func:`check_estimate` raise :class:`~clcsg.errors.LimitError` (exit code 5) when a limit is
@@ -58,7 +58,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import LimitError, UsageError
+from ...errors import LimitError, UsageError
+from ...model.quadric import Quadric
+from .term_boxes import literal_box
+from ..interpret import surface_in_boxes
+from .regions import quadric_regions
 
 __all__ = [
     "DEFAULT_MAX_SAMPLES",
@@ -226,9 +230,6 @@ def estimate(dnf, radius: float, real_itemsize: int = 8) -> Estimate:
 
     ``real_itemsize``: 8 for the fp64 path, 4 for float32 (device buffer sizes).
     """
-    from ..model.quadric import Quadric
-    from ..compile.term_bounds import literal_box
-
     r = float(radius)
     if not (math.isfinite(r) and r > 0):
         raise UsageError(f"radius must be a positive finite number, got {radius}")
@@ -281,8 +282,6 @@ def _surface_meets(matrix, lo, hi) -> np.ndarray:
     (the range of the linear function over the box holds 0), for other quadrics the
     conservative distance at the box center against the half-diagonal (|d| never exceeds the
     distance to the surface, so a surface farther than the half-diagonal misses the box)."""
-    from ..model.quadric import Quadric
-
     m = np.asarray(matrix, dtype=np.float64)
     c = 0.5 * (lo + hi)
     half = 0.5 * (hi - lo)
@@ -301,7 +300,7 @@ def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: in
     """The :class:`Estimate` of sampling the surface at ``radius`` from per-quadric regions.
 
     ``quadric_matrices``: (U, 4, 4) the unique quadrics; ``regions``: U arrays (k_u, 2, 3), the
-    boxes where quadric u can carry CSG surface (:func:`clcsg.compile.regions.quadric_regions`:
+    boxes where quadric u can carry CSG surface (:func:`clcsg.compile.bounds.regions.quadric_regions`:
     the faces of the primitive instances holding u, within their boxes and the scene bound).
     The area of u is bounded as in :func:`estimate`: per region box (intersected with the box
     of u's surface, dropped where the surface misses it) by the plane / convex / saddle rules,
@@ -309,9 +308,6 @@ def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: in
     ``tasks``: the number of sampling tasks; None for 6 per quadric that carries surface
     (3 sampling planes x 2 sheets).
     """
-    from ..model.quadric import Quadric
-    from ..compile.term_bounds import literal_box
-
     r = float(radius)
     if not (math.isfinite(r) and r > 0):
         raise UsageError(f"radius must be a positive finite number, got {radius}")
@@ -495,8 +491,6 @@ def refine_regions(tape, regions, levels: int = REFINE_LEVELS, max_boxes: int = 
     (:func:`clcsg.compile.interpret.surface_in_boxes`).  Kept boxes are split in 8 and tested
     again, ``levels`` times (while the boxes number at most ``max_boxes``), so the regions
     follow the CSG surface instead of the primitives' boxes."""
-    from ..compile.interpret import surface_in_boxes
-
     boxes = [np.asarray(r, dtype=np.float64).reshape(-1, 2, 3) for r in regions]
     q = np.concatenate([np.full(len(b), u) for u, b in enumerate(boxes)]) if boxes else np.zeros(0, int)
     if not len(q):
@@ -519,10 +513,8 @@ def refine_regions(tape, regions, levels: int = REFINE_LEVELS, max_boxes: int = 
 def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
     """The :class:`Estimate` of sampling a compiled tape: the regions of its quadrics are the
     face boxes of the primitive instances holding them, within the scene bound
-    (:func:`clcsg.compile.regions.quadric_regions`), refined by tape pruning
+    (:func:`clcsg.compile.bounds.regions.quadric_regions`), refined by tape pruning
     (:func:`refine_regions`) when the first estimate is past :data:`REFINE_FROM` samples."""
-    from ..compile.regions import quadric_regions
-
     if tape.empty:
         return _make_estimate(float(radius), 0.0, 0.0, 0, real_itemsize)
     regions = quadric_regions(tape.quadrics, tape.instances, tape.bound)

@@ -23,8 +23,9 @@ import difflib
 import math
 import numbers
 import re
+from collections.abc import Mapping
 
-from PIL import ImageColor
+from .csg import DEFAULT_COLOR
 
 #: OpenSCAD's default face colour, "opencsg-face-front" / "cgal-face-front" of its default
 #: colour scheme "Cornfield" (color-schemes/render/cornfield.json): ``clcsg render --colors
@@ -37,11 +38,33 @@ OPENSCAD_BACKGROUND = "#ffffe5"
 #: default (:data:`clcsg.model.csg.DEFAULT_COLOR`, light grey)
 SCHEMES = {"clcsg": None, "openscad": OPENSCAD_FACE}
 
+class _NamedColors(Mapping):
+    """Pillow's colour table, read on first use: a command that names no colour does not
+    import Pillow (it costs a tenth of the start of ``clcsg sample``)."""
+
+    def __init__(self):
+        self._table: dict | None = None
+
+    def _load(self) -> dict:
+        if self._table is None:
+            from PIL import ImageColor
+
+            self._table = {**{name: ImageColor.getrgb(name) for name in sorted(ImageColor.colormap)},
+                           "transparent": (0, 0, 0, 0)}  # OpenSCAD's own addition
+        return self._table
+
+    def __getitem__(self, name):
+        return self._load()[name]
+
+    def __iter__(self):
+        return iter(self._load())
+
+    def __len__(self) -> int:
+        return len(self._load())
+
+
 #: every colour name: 0-255 RGB (or RGBA) per lower-case name, as Pillow defines them
-NAMED_COLORS: dict[str, tuple[int, ...]] = {
-    **{name: ImageColor.getrgb(name) for name in sorted(ImageColor.colormap)},
-    "transparent": (0, 0, 0, 0),  # OpenSCAD's own addition
-}
+NAMED_COLORS: Mapping[str, tuple[int, ...]] = _NamedColors()
 
 _HEX = re.compile(r"#(?:[0-9a-fA-F]{3,4}|[0-9a-fA-F]{6}|[0-9a-fA-F]{8})\Z")
 FORMS = 'a color name such as "steelblue", "#rgb", "#rgba", "#rrggbb" or "#rrggbbaa"'
@@ -63,7 +86,8 @@ def from_string(text: str) -> tuple[float, float, float, float]:
     if low in NAMED_COLORS:
         return _rgba(NAMED_COLORS[low], 255.0)
     if _HEX.match(s):
-        return _rgba(ImageColor.getrgb(s), 255.0)
+        digits = s[1:] if len(s) > 5 else "".join(2 * c for c in s[1:])  # #rgb(a) -> #rrggbb(aa)
+        return _rgba([int(digits[k:k + 2], 16) for k in range(0, len(digits), 2)], 255.0)
     if s.startswith("#"):
         raise ColorError(f"{text!r} is not a hex color: use #rgb, #rgba, #rrggbb or #rrggbbaa")
     close = difflib.get_close_matches(low, list(NAMED_COLORS), n=1, cutoff=0.75)
@@ -125,8 +149,6 @@ def recolor_defaults(tape, color) -> int:
     """Give every primitive instance of ``tape`` that has clcsg's default colour the colour
     ``color`` (RGBA); returns how many were changed.  Only what rendering reads changes (the
     instances' ``color``), so the tape must be packed again afterwards."""
-    from ..model.csg import DEFAULT_COLOR
-
     if color is None:
         return 0
     default = tuple(float(x) for x in DEFAULT_COLOR)

@@ -10,6 +10,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import UsageError
+from ..model.colors import ColorError
+from ..model.colors import parse_color as parse
 
 #: the float options of :class:`Shading` (non-negative numbers), in ``view_rec`` order
 _WEIGHTS = ("ambient", "ground", "diffuse", "headlight", "key_light", "fill_light", "rim", "specular", "shininess",
@@ -30,10 +32,7 @@ def view_dtype(real) -> np.dtype:
 
 def parse_color(c, what="background") -> tuple[float, float, float, float]:
     """RGBA in [0, 1] from 3 or 4 numbers in [0, 1] (alpha defaults to 1) or a colour name or
-    ``#hex`` string (:func:`clcsg.io.colors.parse_color`)."""
-    from ..io.colors import ColorError
-    from ..io.colors import parse_color as parse
-
+    ``#hex`` string (:func:`clcsg.model.colors.parse_color`)."""
     try:
         return parse(c)
     except ColorError as e:

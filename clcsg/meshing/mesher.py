@@ -23,7 +23,7 @@ import numpy as np
 
 from ..compile.interpret import contains
 from ..errors import SceneError, UsageError
-from ..model.scene import as_scene
+from ..readers.scenes import as_scene
 from ..sampling.radius import Radius
 from . import planar, refine
 from .collapse import collapse_coincident

@@ -1,7 +1,7 @@
 """clcsg's JSON scene format (version 1): load, validate and save CSG graphs.
 
 A scene file is one JSON object (full description in ``docs/scene-format.md``, JSON Schema in
-``clcsg/io/schema/scene.schema.json``)::
+``clcsg/readers/schema/scene.schema.json``)::
 
     {"clcsg": 1,
      "bound": [[-2, -2, -2], [2, 2, 2]],                      (optional)
@@ -21,10 +21,10 @@ identity) and writes them once under ``defs``.  Floats are written with ``repr``
 a saved graph loads back bit for bit.
 
 Validation: the structure (keys, types, ranges, transform steps, colors) is checked by
-``jsonschema`` against the shipped schema (:mod:`clcsg.io.scene_schema`, one node at a time);
+``jsonschema`` against the shipped schema (:mod:`clcsg.readers.scene_schema`, one node at a time);
 this module checks what a schema cannot say: finite numbers and unique keys (Python's ``json``
 accepts NaN, Infinity and duplicates), the integer version, ``lo < hi`` in the bound, defined
-and acyclic refs, color names (:mod:`clcsg.io.colors`), the solids' own rules (a cone needs
+and acyclic refs, color names (:mod:`clcsg.model.colors`), the solids' own rules (a cone needs
 r1 > 0 or r2 > 0, a slab lo < hi, a quadric matrix symmetric and non-zero) and non-singular
 affine transforms.
 
@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..errors import SceneError, TransformError
 from ..model import solids
 from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
@@ -65,9 +66,9 @@ from ..model.extrude import extrude
 from ..model.hull import hull, minkowski
 from ..model.revolve import revolve
 from ..model.scene import Scene
+from ..model.colors import ColorError, parse_color
 from .budget import JSON_FACTOR, check_file, check_input
 from .profile_json import profile_from_json
-from .colors import ColorError, parse_color
 from .scene_schema import CONSTRUCTIONS, FORMAT_VERSION, TOP_KEYS, TRANSFORM_STEPS, UNARY, join, jtype, key, scene_schema, suggest
 from .trampoline import run
 
@@ -148,8 +149,6 @@ def dumps(data) -> str:
 
 def save_json(scene, path) -> None:
     """Write a Scene (or a bare Shape) as a ``.json`` scene file."""
-    from .atomic import atomic_open
-
     text = dumps(scene_to_dict(scene))
     with atomic_open(path, "w", "scene") as f:
         f.write(text)

@@ -3,15 +3,15 @@
 Images (:func:`write_image`, via Pillow): ``.png``, ``.jpg`` / ``.jpeg``, ``.webp`` (lossless,
 so the pixels are exact) and ``.tif`` / ``.tiff``; RGBA where the format has alpha, RGB for
 JPEG (the alpha channel is dropped: transparent pixels show the background colour).  Samples:
-``.ply`` (binary PLY, :mod:`clcsg.io.ply`) and ``.npz`` (everything needed to render them
-again, :mod:`clcsg.io.samples_npz`).  Per-pixel arrays are ``.npy``, statistics ``.json``.
+``.ply`` (binary PLY, :mod:`clcsg.writers.ply`) and ``.npz`` (everything needed to render them
+again, :mod:`clcsg.writers.samples_npz`).  Per-pixel arrays are ``.npy``, statistics ``.json``.
 
 :func:`check_output` raises a one-line :class:`~clcsg.errors.UsageError` for an unknown
 extension, a missing folder or a path that is a directory, and an
 :class:`~clcsg.errors.OutputError` for a folder this process cannot write in, so that
 ``clcsg sample -o x.png`` fails at once instead of after the sampling.
 
-Every writer here goes through :func:`clcsg.io.atomic.atomic_open`: a temporary in the
+Every writer here goes through :func:`clcsg.atomic.atomic_open`: a temporary in the
 target's folder, synced, then renamed over the target; a failure (full disk, ...) is an
 :class:`~clcsg.errors.OutputError` (exit code 6) and leaves the old file intact.
 """
@@ -24,8 +24,9 @@ import os
 
 import numpy as np
 
+from ..atomic import atomic_open
 from ..errors import OutputError, UsageError
-from .atomic import atomic_open
+from . import ply, samples_npz
 
 #: image extension -> Pillow format
 IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WEBP", ".tif": "TIFF", ".tiff": "TIFF"}
@@ -71,6 +72,20 @@ def check_image_output(path, option: str | None = "-o") -> str:
 
 def check_samples_output(path, option: str | None = "-o") -> str:
     return check_output(path, SAMPLE_FORMATS, "sample", option)
+
+
+def write_samples(samples, path, float32: bool = False) -> None:
+    """Write :class:`~clcsg.sampling.samples.Samples` in the format of ``path``'s extension:
+    ``.ply`` (binary PLY, double precision unless ``float32``: Open3D, MeshLab, plyfile read it)
+    or ``.npz`` (the samples with their tape: :func:`clcsg.load_samples` reads them back,
+    ``clcsg render samples.npz`` renders them again)."""
+    fmt = check_samples_output(path, None)
+    if fmt == "PLY":
+        ply.write_samples(samples, path, float32=float32)
+    elif float32:
+        raise UsageError(f"{path}: float32 applies to PLY output; .npz keeps the samples in double precision")
+    else:
+        samples_npz.save_samples(samples, path)
 
 
 def _pil_image(rgba: np.ndarray, fmt: str):

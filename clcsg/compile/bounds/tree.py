@@ -3,7 +3,7 @@
 :func:`tree_bounds` walks the graph iteratively (bottom-up and top-down passes over
 (node, transform, polarity) instances), then refines the root box by the graph's conservative
 distance; :func:`shape_bound` is the scene bound alone.  The boxes of the primitive instances
-feed :func:`clcsg.compile.regions.quadric_regions` (the resource guard's regions).
+feed :func:`clcsg.compile.bounds.regions.quadric_regions` (the resource guard's regions).
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SceneError, UnboundedError
-from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
-from ..model.quadric import Quadric
+from ...errors import SceneError, UnboundedError
+from ...model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
+from ...model.quadric import Quadric
+from ..sparse_distance import SparseDistance
 from .exact_boxes import empty_box, is_empty, kind_boxes, literals_box, meet, primitive_box
-from .sparse_distance import SparseDistance
 
 # The graph is walked once (iteratively) into *instances*: a node under one accumulated world
 # transform M and one polarity (complements pushed to the leaves, De Morgan), memoized on

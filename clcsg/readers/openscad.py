@@ -19,7 +19,7 @@ ignored: the surfaces are exact, not tessellated), ``multmatrix`` a transform an
 (``polyhedron``, ``linear_extrude``, ``hull``, ...) are rejected with a one-line
 :class:`~clcsg.errors.SceneError` naming file, line and column.
 
-The text is tokenized and parsed by :mod:`clcsg.io.openscad_tokens` (grammar there); this
+The text is tokenized and parsed by :mod:`clcsg.readers.openscad_tokens` (grammar there); this
 module evaluates the nodes.  Semantics follow OpenSCAD's own evaluator (2021.01 and later), including its quirks:
 
 * ``group``/``union``/``render`` are the union of their children, ``difference`` is the first
@@ -35,7 +35,7 @@ module evaluates the nodes.  Semantics follow OpenSCAD's own evaluator (2021.01 
   ``#`` (highlight) renders it normally and ``!`` makes that subtree the whole model (without
   the transforms and colors of its ancestors, like OpenSCAD; the first ``!`` wins).
 * ``color`` takes ``[r, g, b]``, ``[r, g, b, a]``, a CSS/SVG color name or ``"#rgb"``, ``"#rgba"``, ``"#rrggbb"``, ``"#rrggbbaa"`` (parsed by
-  :mod:`clcsg.io.colors`), optionally with an ``alpha``.
+  :mod:`clcsg.model.colors`), optionally with an ``alpha``.
   As in OpenSCAD the *outermost* color wins: ``color("red") color("blue") cube(1);`` is red
   (openscad/openscad#4057, #5446).  Colors OpenSCAD could not parse are exported as
   ``color([-1, -1, -1, a])``, which sets no color.
@@ -53,7 +53,7 @@ parsed recursively; vectors nested deeper than :data:`MAX_DEPTH` (100) levels ar
 (CSG export nests them 2 deep).  Code that walks the resulting :class:`Shape` graph must not
 recurse per level either.
 
-``.scad`` programs are exported by the ``openscad`` binary first: :mod:`clcsg.io.scad`.
+``.scad`` programs are exported by the ``openscad`` binary first: :mod:`clcsg.readers.scad`.
 """
 from __future__ import annotations
 
@@ -67,11 +67,12 @@ import numpy as np
 from ..errors import SceneError
 from ..model.csg import Difference, Intersection, Shape, Transformed, Union
 from ..model.scene import Scene
+from ..model.colors import NAMED_COLORS, ColorError, from_string
 from .budget import CSG_FACTOR, check_file, check_input
-from .colors import NAMED_COLORS, ColorError, from_string
 from .openscad_2d import PARAMS_2D, REFUSED, Constructions
 from .openscad_tokens import SOURCE_HINT, UNDEF, Node, OpenScadWarning, Parser, Source, fmt, is_num
 from .trampoline import run
+from ..model import solids
 
 __all__ = [
     "load_csg", "parse_csg", "OpenScadWarning", "WEB_COLORS", "SUPPORTED_NODES", "MAX_DEPTH", "MAX_NODE_DEPTH",
@@ -87,7 +88,7 @@ MAX_DEPTH = 100
 MAX_NODE_DEPTH = 100_000
 
 #: CSS Color Module Level 4 named colors (0-255), as OpenSCAD's ColorNode.cc lists them, plus
-#: OpenSCAD's own "transparent": Pillow's table, see :data:`clcsg.io.colors.NAMED_COLORS`.
+#: OpenSCAD's own "transparent": Pillow's table, see :data:`clcsg.model.colors.NAMED_COLORS`.
 WEB_COLORS = NAMED_COLORS
 
 _PRIMITIVES = frozenset(("cube", "sphere", "cylinder"))
@@ -344,8 +345,6 @@ class _Evaluator(Constructions):
         return False
 
     def _make(self, node, factory, ctx, **params):
-        from ..model import solids
-
         try:
             return getattr(solids, factory)(color=ctx.color, **params)
         except (SceneError, ValueError, ArithmeticError, TypeError) as e:

@@ -22,9 +22,13 @@ import os
 
 import numpy as np
 
-from ..errors import SceneError
-from .atomic import atomic_open
-from .budget import available_memory
+from ..atomic import atomic_open
+from ..cl.records import pack
+from ..compile.tape import Instance, Tape
+from ..errors import LimitError, SceneError
+from ..readers.budget import available_memory
+from ..sampling.samples import Samples
+from .validate import MAX_REGS, Checker, check_programs, check_spans, max_register
 
 FORMAT = "clcsg-samples"
 VERSION = 1
@@ -97,8 +101,6 @@ def _read_arrays(p: str) -> dict:
     with z:
         size = sum(info.file_size for info in z.zip.infolist())
         if size > MEMORY_FRACTION * available_memory():
-            from ..errors import LimitError
-
             raise LimitError(f"{p}: its arrays take {size / 2**20:.0f} MiB, more than half of the memory "
                              "available; free memory or use a machine with more")
         out = {}
@@ -136,8 +138,7 @@ def _check_json(chk, name: str) -> dict:
 
 
 def _check_tape(chk) -> dict:
-    """The tape's arrays, checked (see :mod:`clcsg.io.validate`)."""
-    from .validate import MAX_REGS, check_programs, max_register
+    """The tape's arrays, checked (see :mod:`clcsg.writers.validate`)."""
 
     ops = chk.get("tape_ops", "int", (None, 4))
     n_regs = chk.scalar("tape_n_regs", "int")
@@ -191,7 +192,6 @@ def _check_instances(chk, n_quadrics: int) -> list:
 
 def _check_samples(chk, n_quadrics: int, n_instances: int, n_regs: int) -> dict:
     """The per-sample arrays, checked, in the dtypes :class:`Samples` uses."""
-    from .validate import check_programs, check_spans
 
     pos = chk.finite("positions", chk.get("positions", "float", (None, 3)))
     n = len(pos)
@@ -219,14 +219,10 @@ def load_samples(path):
     """The :class:`~clcsg.sampling.samples.Samples` saved by :func:`save_samples`.
 
     The file is untrusted: every array is checked (dtype, shape, finite values, every index
-    and count in range, the tape and clip programs well-formed: :mod:`clcsg.io.validate`)
+    and count in range, the tape and clip programs well-formed: :mod:`clcsg.writers.validate`)
     before anything is packed for a device; anything else is a one-line
     :class:`~clcsg.errors.SceneError` (exit code 3).
     """
-    from ..cl.records import pack
-    from ..compile.tape import Instance, Tape
-    from ..sampling.samples import Samples
-    from .validate import Checker
 
     p = os.fspath(path)
     chk = Checker(_read_arrays(p), p)

@@ -88,7 +88,7 @@ def _num(v) -> str:
 
 def load_schema() -> dict:
     """The shipped scene schema (draft 2020-12)."""
-    text = resources.files("clcsg").joinpath("io", "schema", "scene.schema.json").read_text(encoding="utf-8")
+    text = resources.files("clcsg").joinpath("readers", "schema", "scene.schema.json").read_text(encoding="utf-8")
     return json.loads(text)
 
 

@@ -1,7 +1,7 @@
-"""The tokenizer and parser of OpenSCAD's CSG export (the syntax half of :mod:`clcsg.io.openscad`).
+"""The tokenizer and parser of OpenSCAD's CSG export (the syntax half of :mod:`clcsg.readers.openscad`).
 
 Grammar (a hand-written tokenizer and recursive-descent parser, no dependencies; the rules
-for statements and nodes run on an explicit stack, :func:`clcsg.io.trampoline.run`)::
+for statements and nodes run on an explicit stack, :func:`clcsg.readers.trampoline.run`)::
 
     file       := statement* EOF
     statement  := ';'  |  '{' statement* '}'  |  modifier* NAME '(' arguments ')' child

@@ -1,0 +1,55 @@
+"""Scene files in and out, the format picked from the file name: ``.json`` is clcsg's own
+scene format (:mod:`clcsg.readers.scenefile`), ``.csg`` is OpenSCAD's CSG export
+(:mod:`clcsg.readers.openscad`) and ``.scad`` an OpenSCAD program, exported to CSG by the
+``openscad`` binary first (:mod:`clcsg.readers.scad`).  :func:`as_scene` is what every API
+that takes "a Shape, a Scene or a path" calls."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..errors import SceneError
+from ..model.csg import Shape
+from ..model.scene import Scene
+from .openscad import load_csg
+from .scad import load_scad
+from .scenefile import load_json, save_json
+
+
+def as_scene(obj, bound=None) -> Scene:
+    """A :class:`Scene` from a Scene, a Shape or a path."""
+    if isinstance(obj, Scene):
+        if bound is not None:
+            return Scene(obj.shape, np.asarray(bound, dtype=float), obj.source)
+        return obj
+    if isinstance(obj, Shape):
+        return Scene(obj, None if bound is None else np.asarray(bound, dtype=float))
+    if isinstance(obj, (str, os.PathLike)):
+        sc = load(obj)
+        return as_scene(sc, bound)
+    raise SceneError(f"expected a Shape, a Scene or a scene file path, got {type(obj).__name__}")
+
+
+def load(path) -> Scene:
+    """Load a scene file (``.json``, OpenSCAD ``.csg``, or OpenSCAD ``.scad`` via ``openscad``)."""
+    p = os.fspath(path)
+    if not os.path.exists(p):
+        raise SceneError(f"{p}: no such file")
+    ext = os.path.splitext(p)[1].lower()
+    if ext == ".json":
+        return load_json(p)
+    if ext == ".csg":
+        return load_csg(p)
+    if ext == ".scad":
+        return load_scad(p)
+    raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json, .csg or .scad)")
+
+
+def save(obj, path) -> None:
+    """Save a Shape or Scene as a ``.json`` scene file."""
+    p = os.fspath(path)
+    if os.path.splitext(p)[1].lower() != ".json":
+        raise SceneError(f"{p}: scenes are saved as .json")
+    save_json(as_scene(obj), p)
