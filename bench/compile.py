@@ -10,7 +10,7 @@ primitives:
 
 Per scene, process CPU time (``time.process_time``, best of the repeats: the machine is
 shared) of ``Scene.compile`` (tape, tree bounds, quadric table), of the tree bounds alone
-(:func:`clcsg.compile.bounds.tree_bounds`), and of the sampler's root tasks with their pruned
+(:func:`clcsg.compile.bounds.tree.tree_bounds`), and of the sampler's root tasks with their pruned
 root tapes (:func:`clcsg.sampling.sampler.root_tasks`, radius 1% of the bound's diagonal), the
 full tape's rows and the root tapes' mean rows.  Microseconds per primitive staying flat as the
 size grows is what linear means.  Writes ``bench/results/compile.json``.
@@ -26,8 +26,8 @@ import numpy as np
 
 import clcsg
 from clcsg.cl.records import pack
-from clcsg.compile.bounds import tree_bounds
-from clcsg.compile.frames import principal_frame
+from clcsg.compile.bounds.tree import tree_bounds
+from clcsg.compile.quadric_frames import principal_frame
 from clcsg.model.csg import Difference, Union
 from clcsg.model.quadric import Quadric
 from clcsg.model.scene import Scene

@@ -15,8 +15,8 @@ import pytest
 import clcsg
 import tree_oracle
 from clcsg.cl.records import pack
-from clcsg.compile.bounds import tree_bounds
-from clcsg.compile.frames import principal_frame
+from clcsg.compile.bounds.tree import tree_bounds
+from clcsg.compile.quadric_frames import principal_frame
 from clcsg.compile.interpret import contains, member
 from clcsg.compile.root_tapes import prune_root_tapes
 from clcsg.model.csg import Difference, Union

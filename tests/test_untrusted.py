@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from clcsg.errors import SceneError
-from clcsg.writers.ply import read_samples
+from clcsg.writers.ply import read_samples, write_samples
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLES = int(os.environ.get("CLCSG_FUZZ_EXAMPLES", "60"))
@@ -226,7 +226,7 @@ def test_ply_reader_refuses_damaged_files(tmp_path, reference):
     arrays, _ = reference
     np.savez(tmp_path / "ok.npz", **arrays)
     s = load_samples(tmp_path / "ok.npz")
-    s.to_ply(tmp_path / "ok.ply")
+    write_samples(s, tmp_path / "ok.ply")
     back = read_samples(tmp_path / "ok.ply")
     assert np.array_equal(back["positions"], s.positions)
     data = (tmp_path / "ok.ply").read_bytes()

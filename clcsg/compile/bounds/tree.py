@@ -15,7 +15,7 @@ import numpy as np
 from ...errors import SceneError, UnboundedError
 from ...model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ...model.quadric import Quadric
-from ..sparse_distance import SparseDistance
+from .sparse_distance import SparseDistance
 from .exact_boxes import empty_box, is_empty, kind_boxes, literals_box, meet, primitive_box
 
 # The graph is walked once (iteratively) into *instances*: a node under one accumulated world

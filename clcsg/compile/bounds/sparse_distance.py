@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.quadric import ray_distance
-from .bvh import BoxTree
+from ...model.quadric import ray_distance
+from ..bvh import BoxTree
 
 LEAF, AND, OR = 0, 1, 2
 
