@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.csg import Primitive, Shape
-from .tape import _AND, _FALSE, _OR, _TRUE, _Builder, _children, _emit
+from .tape import _FALSE, _OR, _TRUE, _Builder, _children, _emit
 
 
 def instance_program(shape: Shape, instances) -> tuple[np.ndarray, int]:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .refine import _compact, common, edges_of
+from .refine import common, edges_of
 
 #: relative area mismatch beyond which a re-triangulated patch is rejected
 AREA_TOL = 1e-6

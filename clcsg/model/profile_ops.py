@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from .polytope import hull2d
-from .profile import Profile, ProfileError, circle, intersection2d, line_through, polygon, union2d, difference2d
+from .profile import Profile, ProfileError, circle, difference2d, polygon, union2d
 
 
 def _rect(a, b, r) -> Profile:

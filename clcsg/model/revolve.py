@@ -64,12 +64,11 @@ def revolve(profile: Profile, angle=360.0, color=None):
     if profile.bbox is None:
         raise ProfileError("rotate_extrude() profile has no bound")
     x0, _, x1, _ = profile.bbox
-    mirror = False
     if x0 < 0:
         if x1 > 0:
             raise ProfileError("rotate_extrude() profile has points on both sides of the axis x = 0; "
                                "OpenSCAD refuses this too: keep the profile in x >= 0")
-        profile, mirror = profile.mirror((1, 0)), True
+        profile = profile.mirror((1, 0))
     body = profile.map(lambda n: _leaf(n, color), Union, Intersection, lambda k: Difference(k), lambda: Union([]))
     if abs(ang) < 360:
         wedge = _wedge(abs(ang), color)

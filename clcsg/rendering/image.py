@@ -6,7 +6,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import UsageError
 from ..writers.output_files import png_bytes, write_image, write_json, write_npy
 
 
