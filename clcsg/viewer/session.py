@@ -15,10 +15,9 @@ import time
 from dataclasses import dataclass, field
 
 from ..errors import ClcsgError
-from ..pipeline import resolve_radius as radius_for
+from ..pipeline import Pipeline
 from ..sampling.radius import Radius
 from ..readers.scenes import load
-from ..sampling.sampler import sample
 from ..readers.scad import load_scad
 
 #: the viewer's default sample limit (the resource guard's; ``clcsg view --max-samples``)
@@ -97,13 +96,13 @@ class Session:
 
     def sample(self, scene, radius: Radius | None, times: dict) -> Model:
         """A new model of ``scene`` at ``radius`` (None: automatic); raises ClcsgError."""
+        pipe = Pipeline(scene, self.context, self.normal_form)
         t = time.perf_counter()
-        tape = scene.compile(self.normal_form)
+        pipe.tape  # compiled once; the radius and the sampler share it
         times["compile_s"] = time.perf_counter() - t
-        r = radius_for(radius, tape.bound)
+        r = pipe.radius(radius)
         t = time.perf_counter()
-        samples = sample(scene, r, device=self.context, normal_form=self.normal_form, progress=None,
-                         max_samples=self.max_samples, floor=self.floor)
+        samples = pipe.samples(r, progress=None, max_samples=self.max_samples, floor=self.floor)
         times["sample_s"] = time.perf_counter() - t
         if self.default_color is not None:
             samples.with_default_color(self.default_color)
