@@ -27,7 +27,7 @@ from ..readers.scenes import as_scene
 from ..sampling.radius import Radius
 from . import planar, refine
 from .collapse import collapse_coincident
-from .colors import triangle_owners
+from .owners import triangle_owners
 from .crossings import crossings
 from .octree import surface_cells
 from .tetra import triangulate

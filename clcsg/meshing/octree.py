@@ -5,7 +5,7 @@ The grid: cubes of side h, the lattice shifted off the scene's round numbers by 
 irrational fraction of h (so that no axis-aligned face of a part falls on grid points), padded
 by two cells around the bound (every outermost grid point is outside the solid).  The root
 cube has 2^L cells per side; each level keeps the boxes whose tape is not constant
-(:func:`~clcsg.meshing.regions.box_states`) and splits them in eight, down to level L.
+(:func:`~clcsg.meshing.box_states.box_states`) and splits them in eight, down to level L.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .regions import _LIVE, box_states
+from .box_states import _LIVE, box_states
 
 #: the lattice's shift, as a fraction of a cell (irrational, away from 0, 1/2 and 1/3)
 GRID_SHIFT = (math.sqrt(2.0) - 1.0) * 0.25
