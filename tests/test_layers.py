@@ -235,3 +235,12 @@ def test_every_public_name_resolves():
     missing = [name for name in clcsg.__all__ if getattr(clcsg, name, None) is None]
     assert not missing, missing
     assert {"sample", "render", "write_samples", "load_samples", "to_open3d", "to_trimesh"} <= set(clcsg.__all__)
+
+
+def test_no_two_modules_share_a_name():
+    """A module's name says its one job: the same file name in two folders would be two jobs."""
+    seen = {}
+    for _module, path in modules():
+        if path.name != "__init__.py":
+            seen.setdefault(path.name, []).append(str(path.relative_to(ROOT.parent)))
+    assert not {k: v for k, v in seen.items() if len(v) > 1}
