@@ -71,10 +71,12 @@ def cache_dir() -> str | None:
 
 def _binary_path(context, key) -> str | None:
     """The cache file of a program: named by the hash of its key and of the device and driver
-    (a new driver or device never loads an old binary)."""
+    (a new driver or device never loads an old binary).  None for Oclgrind: the simulator is
+    there to check the kernels, and pyopencl's build of a program from binaries makes an API
+    call (a kernel lookup) that Oclgrind reports as an error."""
     folder = cache_dir()
     devices = context.ctx.devices
-    if folder is None or len(devices) != 1:
+    if folder is None or len(devices) != 1 or "oclgrind" in devices[0].platform.name.lower():
         return None
     d = devices[0]
     ident = repr((key[1:], d.name, d.version, d.driver_version, d.platform.name, d.platform.version))

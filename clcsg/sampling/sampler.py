@@ -529,7 +529,11 @@ class _Subdivision:
         self.arena_peak = 0
 
     def _buffer(self, nbytes, what):
-        return device_buffer(self.ctx, nbytes, what)
+        """A zeroed device buffer from host memory: the level's outputs are read by the next
+        level, and Oclgrind's uninitialized-value checker only trusts host-initialized memory
+        or bytes a kernel wrote (a tape row's unused operand fields are never written)."""
+        check_allocation(self.ctx, nbytes, what)
+        return upload(self.ctx, np.zeros(max(int(nbytes), 16), dtype=np.uint8), writable=True, what=what)
 
     def _grown_copy(self, old, used_bytes, new_bytes, what):
         """A larger buffer holding the first ``used_bytes`` of ``old``, made from host memory (a
@@ -589,7 +593,7 @@ class _Subdivision:
         import pyopencl as cl
 
         tape = self.scene.packed.tape
-        self.arena_in, self.cap_in = upload(self.ctx, self.root_rows), len(self.root_rows)
+        self.arena_in, self.cap_in = upload(self.ctx, self.root_rows, writable=True), len(self.root_rows)
         self.cap_out = self.cap_arena
         self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
         cells_in = upload(self.ctx, self.roots, writable=True)
