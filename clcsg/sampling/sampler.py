@@ -593,7 +593,11 @@ class _Subdivision:
         import pyopencl as cl
 
         tape = self.scene.packed.tape
-        self.arena_in, self.cap_in = upload(self.ctx, self.root_rows, writable=True), len(self.root_rows)
+        # level 0 reads the root tapes; its arena then takes the next level's output, so it
+        # gets the same capacity as the other
+        first = np.zeros(max(self.cap_arena, len(self.root_rows)), dtype=tape.dtype)
+        first[:len(self.root_rows)] = self.root_rows
+        self.arena_in, self.cap_in = upload(self.ctx, first, writable=True, what="tape arena"), len(first)
         self.cap_out = self.cap_arena
         self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
         cells_in = upload(self.ctx, self.roots, writable=True)
