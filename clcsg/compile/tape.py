@@ -298,7 +298,8 @@ class _WorldLiterals:
         q = np.array([q.matrix for n, _ in pairs for q in n.quadrics()]).reshape(-1, 4, 4)
         with np.errstate(all="ignore"):
             w = np.einsum("nji,njk,nkl->nil", im[owner], q, im[owner])
-            bad = ~np.all(np.isfinite(w), axis=(1, 2)) | ~(np.abs(w).max(axis=(1, 2)) > 0)
+            norm = np.sqrt((w * w).sum(axis=(1, 2)))  # the quadric table divides by it
+            bad = ~np.all(np.isfinite(w), axis=(1, 2)) | ~(np.abs(w).max(axis=(1, 2)) > 0) | ~np.isfinite(norm)
         if bad.any():
             node = pairs[owner[np.flatnonzero(bad)[0]]][0]
             raise SceneError(f"{self.source}: {node!r}: its quadric overflows float64 after the transforms "
