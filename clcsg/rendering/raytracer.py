@@ -117,9 +117,11 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
                 real)
     ntx, nty = -(-width // TILE), -(-height // TILE)
     nt, n = ntx * nty, len(scene.packed.tape)
-    tiles = device_buffer(context, 8 * nt, "tile tapes", True)
-    tile_z = device_buffer(context, 2 * np.dtype(real).itemsize * nt, "tile depths", True)
-    slabs = device_buffer(context, 16 * nt * SLABS, "slab tapes", True)
+    # zeroed from host memory: tiles off the bound get no entries from the pruning kernels, and
+    # Oclgrind's uninitialized-value checker trusts only host-initialized or written bytes
+    tiles = upload(context, np.zeros(8 * nt, np.uint8), writable=True, what="tile tapes")
+    tile_z = upload(context, np.zeros(2 * np.dtype(real).itemsize * nt, np.uint8), writable=True, what="tile depths")
+    slabs = upload(context, np.zeros(16 * nt * SLABS, np.uint8), writable=True, what="slab tapes")
     counters = np.zeros(6, dtype=np.uint32)
 
     def run_tiles(caps):
