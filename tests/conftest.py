@@ -5,6 +5,10 @@ default (``PYOPENCL_CTX`` if set, else the first GPU, else the first CPU; never 
 ``PYOPENCL_CTX=1:0 pytest`` runs the same tests on another device.  Without any OpenCL device
 the tests that use it are skipped, except under CI (``CI`` set), where that is a failure.
 
+Tests marked ``oclgrind`` (the kernels under the simulator, ~1000x slower than a device) are
+deselected unless ``CLCSG_OCLGRIND=1``: CI runs them as a job of their own, not as skips.
+Optional libraries: ``optional_libs.require_module``.
+
 ``tmp_scene``: ``tmp_scene(shape_or_scene, name="scene.json") -> path`` writes a scene file
 into the test's tmp_path.
 """
@@ -27,6 +31,17 @@ try:
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 except ImportError:  # pragma: no cover - hypothesis is in the [test] extra
     pass
+
+
+def pytest_collection_modifyitems(config, items):
+    if os.environ.get("CLCSG_OCLGRIND") == "1":
+        return
+    chosen, deselected = [], []
+    for item in items:
+        (deselected if item.get_closest_marker("oclgrind") else chosen).append(item)
+    if deselected:
+        config.hook.pytest_deselected(items=deselected)
+        items[:] = chosen
 
 
 @pytest.fixture(scope="session")

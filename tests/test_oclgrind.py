@@ -47,10 +47,8 @@ import textwrap
 
 import pytest
 
-needs_oclgrind = pytest.mark.skipif(
-    os.environ.get("CLCSG_OCLGRIND") != "1",
-    reason="Oclgrind job: set CLCSG_OCLGRIND=1 (needs the oclgrind package; ~1000x slower than a device)",
-)
+#: deselected (not skipped) by conftest.py unless CLCSG_OCLGRIND=1: the Oclgrind job runs them
+needs_oclgrind = pytest.mark.oclgrind
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
