@@ -32,9 +32,10 @@ class Samples:
     edge length over the floor); a feature thinner than the floor can be missed (pass a
     smaller ``floor`` to :func:`clcsg.sample`).
 
-    Output: :meth:`to_ply` (binary PLY, double precision), :meth:`save` / :func:`load_samples`
-    (``.npz`` with the tape: render again without the scene), :meth:`to_open3d` and
-    :meth:`to_trimesh` (point clouds of those libraries).
+    A plain data type; its conversions live with the writers: :func:`clcsg.write_samples`
+    (binary PLY, double precision, or ``.npz`` with the tape: render again without the scene;
+    :func:`clcsg.load_samples` reads it back), :func:`clcsg.to_open3d` and
+    :func:`clcsg.to_trimesh` (point clouds of those libraries).
     """
 
     positions: np.ndarray
