@@ -72,15 +72,8 @@ inline uint slab_member(__global const tape_op *t, int n, const ray_roots *rr, r
                 r[o.out] = o.b > 0 ? 1 : 2;
             else
                 r[o.out] = o.b * ray_sign(rr, o.a, tt) <= 0 ? 3 : 0;
-        } else if (o.op == OP_AND) {
-            r[o.out] = r[o.a] & r[o.b];
-        } else if (o.op == OP_OR) {
-            r[o.out] = r[o.a] | r[o.b];
-        } else if (o.op == OP_COPY) {
-            r[o.out] = r[o.a];
-        } else {
-            r[o.out] = o.a ? 3 : 0;
-        }
+        } else
+            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, 3, 0);
     }
     return r[t[n - 1].out];
 }

@@ -63,15 +63,8 @@ inline uint instance_lanes(PRIMITIVE_TABLE, __global const quadric_rec *qs, int 
             for (int c = 1; c < nc; ++c)
                 if (cand[c] == o.a) w ^= 3u << (2 * c);
             r[o.out] = o.b > 0 ? w : ~w & all;
-        } else if (o.op == OP_AND) {
-            r[o.out] = r[o.a] & r[o.b];
-        } else if (o.op == OP_OR) {
-            r[o.out] = r[o.a] | r[o.b];
-        } else if (o.op == OP_COPY) {
-            r[o.out] = r[o.a];
-        } else {
-            r[o.out] = o.a ? all : 0;
-        }
+        } else
+            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, all, 0);
     }
     return r[inst_tape[inst_rows - 1].out];
 }

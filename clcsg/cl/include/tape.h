@@ -21,6 +21,21 @@ typedef struct {
     int op, out, a, b;
 } tape_op;
 
+/* A tape's rows other than OP_LEAF, on register file r of any type: AND and OR by the
+ * interpreter's operators, COPY, and CONST (a != 0: TRUE) as its values of TRUE and FALSE.
+ * Used as `if (o.op == OP_LEAF) { ... } else TAPE_BOOLEAN_ROW(...);`. */
+#define TAPE_BOOLEAN_ROW(r, o, AND, OR, TRUE_VALUE, FALSE_VALUE)          \
+    if ((o).op == OP_AND)                                                 \
+        (r)[(o).out] = AND((r)[(o).a], (r)[(o).b]);                       \
+    else if ((o).op == OP_OR)                                             \
+        (r)[(o).out] = OR((r)[(o).a], (r)[(o).b]);                        \
+    else if ((o).op == OP_COPY)                                           \
+        (r)[(o).out] = (r)[(o).a];                                        \
+    else                                                                  \
+        (r)[(o).out] = (o).a ? (TRUE_VALUE) : (FALSE_VALUE)
+#define BITS_AND(x, y) ((x) & (y))
+#define BITS_OR(x, y) ((x) | (y))
+
 inline real literal_distance(__global const quadric_rec *qs, int q, int sign, real3 p)
 {
     /* d(-Q, p) = -d(Q, p) */
@@ -43,15 +58,8 @@ inline real2 tape_eval(__global const tape_op *t, int n, __global const quadric_
                 r[o.out] = (real2)(d, d);
                 ++*leaves;
             }
-        } else if (o.op == OP_AND) {
-            r[o.out] = fmax(r[o.a], r[o.b]);
-        } else if (o.op == OP_OR) {
-            r[o.out] = fmin(r[o.a], r[o.b]);
-        } else if (o.op == OP_COPY) {
-            r[o.out] = r[o.a];
-        } else {
-            r[o.out] = o.a ? (real2)(-INFINITY, -INFINITY) : (real2)(INFINITY, INFINITY);
-        }
+        } else
+            TAPE_BOOLEAN_ROW(r, o, fmax, fmin, (real2)(-INFINITY, -INFINITY), (real2)(INFINITY, INFINITY));
     }
     return r[t[n - 1].out];
 }
@@ -72,15 +80,8 @@ inline uint tape_member(__global const tape_op *t, int n, __global const quadric
                 r[o.out] = o.b > 0 ? 1 : 2;
             else
                 r[o.out] = o.b * quadric_value(quadric_load(qs, o.a), p) <= 0 ? 3 : 0;
-        } else if (o.op == OP_AND) {
-            r[o.out] = r[o.a] & r[o.b];
-        } else if (o.op == OP_OR) {
-            r[o.out] = r[o.a] | r[o.b];
-        } else if (o.op == OP_COPY) {
-            r[o.out] = r[o.a];
-        } else {
-            r[o.out] = o.a ? 3 : 0;
-        }
+        } else
+            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, 3, 0);
     }
     return r[t[n - 1].out];
 }
