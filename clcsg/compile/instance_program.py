@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.csg import Primitive, Shape
-from .tape import _FALSE, _OR, _TRUE, _Builder, _children, _emit
+from ..model.csg import Shape
+from .tape import _Builder, _emit, fold_shape
 
 
 def instance_program(shape: Shape, instances) -> tuple[np.ndarray, int]:
@@ -22,28 +22,5 @@ def instance_program(shape: Shape, instances) -> tuple[np.ndarray, int]:
     of :func:`clcsg.compile.tape.instances_of`, matched on (node, world matrix))."""
     index = {(id(i.node), i.matrix.tobytes()): i.index for i in instances}
     b = _Builder()
-    memo: dict = {}
-    stack = [(shape, np.eye(4), False, False)]
-    while stack:
-        node, m, neg, expanded = stack.pop()
-        key = (id(node), m.tobytes(), neg)
-        if key in memo:
-            continue
-        if isinstance(node, Primitive):
-            memo[key] = b.leaf(index[(id(node), m.tobytes())], -1 if neg else 1)
-            continue
-        kind, kids = _children(node, m, neg)
-        keys = [(id(c), cm.tobytes(), cn) for c, cm, cn in kids]
-        if not expanded:
-            stack.append((node, m, neg, True))
-            stack.extend((c, cm, cn, False) for (c, cm, cn), k in zip(reversed(kids), reversed(keys))
-                         if k not in memo)
-            continue
-        ids = [memo[k] for k in keys]
-        if kind is None:
-            memo[key] = ids[0]
-        elif not ids:
-            memo[key] = _FALSE if kind == _OR else _TRUE
-        else:
-            memo[key] = b.combine(kind, ids)
-    return _emit(b, memo[(id(shape), np.eye(4).tobytes(), False)])
+    root = fold_shape(shape, b, lambda node, m, neg: b.leaf(index[(id(node), m.tobytes())], -1 if neg else 1))
+    return _emit(b, root)

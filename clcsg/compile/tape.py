@@ -355,10 +355,11 @@ def _instance_boxes(instances: list, table: QuadricTable) -> None:
             inst.box = term_box(quads)
 
 
-def _expression(shape: Shape, world: _WorldLiterals, b: _Builder, prims: list | None = None) -> int:
-    """The root expression id of ``shape`` (iterative post-order walk, memoized on
-    (node, transform, negated)); ``prims`` collects (node id, transform bytes, negated,
-    expression) of every primitive."""
+def fold_shape(shape: Shape, b: _Builder, leaf) -> int:
+    """The root expression id of ``shape`` in builder ``b``: an iterative post-order walk of
+    the CSG graph, memoized on (node, transform, negated), complements pushed to the leaves
+    (:func:`_children`); ``leaf(node, m, neg)`` gives a primitive's expression.  The
+    expressions of (node, m, neg) and (node, m, not neg) are recorded as complements."""
     memo: dict = {}
     stack = [(shape, np.eye(4), False, False)]
     while stack:
@@ -367,14 +368,8 @@ def _expression(shape: Shape, world: _WorldLiterals, b: _Builder, prims: list | 
         if key in memo:
             continue
         if isinstance(node, Primitive):
-            lits = world(node, m)
-            if neg:
-                memo[key] = b.combine(_OR, [b.leaf(q, -s) for q, s in lits])
-            else:
-                memo[key] = b.combine(_AND, [b.leaf(q, s) for q, s in lits])
+            memo[key] = leaf(node, m, neg)
             _pair(b, memo, key)
-            if prims is not None:
-                prims.append(key + (memo[key],))
             continue
         kind, kids = _children(node, m, neg)
         keys = [(id(c), cm.tobytes(), cn) for c, cm, cn in kids]
@@ -393,6 +388,23 @@ def _expression(shape: Shape, world: _WorldLiterals, b: _Builder, prims: list | 
             memo[key] = b.combine(kind, ids)
         _pair(b, memo, key)
     return memo[(id(shape), np.eye(4).tobytes(), False)]
+
+
+def _expression(shape: Shape, world: _WorldLiterals, b: _Builder, prims: list | None = None) -> int:
+    """The root expression id of ``shape`` over quadric literals; ``prims`` collects (node id,
+    transform bytes, negated, expression) of every primitive."""
+
+    def leaf(node, m, neg):
+        lits = world(node, m)
+        if neg:
+            e = b.combine(_OR, [b.leaf(q, -s) for q, s in lits])
+        else:
+            e = b.combine(_AND, [b.leaf(q, s) for q, s in lits])
+        if prims is not None:
+            prims.append((id(node), m.tobytes(), neg, e))
+        return e
+
+    return fold_shape(shape, b, leaf)
 
 
 def _pair(b: _Builder, memo: dict, key) -> None:
