@@ -1,0 +1,163 @@
+"""Closed triangle meshes as CSG operands: ``clcsg.polyhedron(vertices, faces)``.
+
+A mesh is accepted if it bounds a solid: finite points, at least 4 faces, faces of at least
+3 distinct points with no zero area, and every edge used by exactly two faces in opposite
+directions (closed and consistently oriented).  Either orientation is taken (OpenSCAD lists
+faces clockwise seen from outside, STL counter-clockwise): the faces are turned outward by the
+sign of the enclosed volume.  The first failing check is one :class:`MeshError` naming the
+source and the first bad face or edge.
+
+The solid is exact: :func:`clcsg.model.bsp.bsp_expression` writes it as a Boolean expression of
+its face planes, which the rest of the pipeline samples, prunes and ray traces like any planes
+(a mesh box is the quadric box).  Coplanar faces share one plane.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import SceneError
+from .bsp import bsp_expression, triangle_planes
+from .construction import Construction, plane
+from .csg import Complement, Intersection, Union
+
+
+class MeshError(SceneError):
+    """A mesh that does not bound a solid (open, inconsistently oriented, degenerate)."""
+
+
+#: relative tolerance (of the mesh's size) for points on a plane
+PLANE_EPS = 1e-9
+
+
+def _arrays(vertices, faces, source):
+    try:
+        v = np.asarray(vertices, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise MeshError(f"{source}: mesh points are not numbers") from None
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise MeshError(f"{source}: mesh points must be [x, y, z] triples, got shape {v.shape}")
+    bad = np.flatnonzero(~np.all(np.isfinite(v), axis=1))
+    if len(bad):
+        raise MeshError(f"{source}: mesh point {bad[0]} is not finite: {v[bad[0]].tolist()}")
+    fs = [list(f) for f in faces]
+    if len(fs) < 4:
+        raise MeshError(f"{source}: a closed mesh needs at least 4 faces, got {len(fs)}")
+    for k, f in enumerate(fs):
+        if len(f) < 3 or any(int(i) != i or not 0 <= i < len(v) for i in f):
+            raise MeshError(f"{source}: face {k} = {f} is not a list of at least 3 point indices below {len(v)}")
+    return v, [[int(i) for i in f] for f in fs]
+
+
+def _triangulate(v, faces, source):
+    """Fan triangles (k, 3) of convex planar polygons; a non-convex or non-planar face is an
+    error (triangulate it first)."""
+    tris, owner = [], []
+    scale = max(float(np.abs(v).max()), 1e-300)
+    for k, f in enumerate(faces):
+        if len(set(f)) != len(f):
+            raise MeshError(f"{source}: face {k} = {f} repeats a point")
+        fan = [(f[0], f[i], f[i + 1]) for i in range(1, len(f) - 1)]
+        tris.extend(fan)
+        owner.extend([k] * len(fan))
+    t = np.array(tris, dtype=np.int64)
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    area = np.linalg.norm(n, axis=1)
+    zero = np.flatnonzero(area <= 1e-12 * scale * scale)
+    if len(zero):
+        raise MeshError(f"{source}: face {owner[zero[0]]} has no area (its points are on a line)")
+    unit = n / area[:, None]
+    owner = np.array(owner)
+    for k in np.unique(owner[np.r_[False, owner[1:] == owner[:-1]]]):
+        sel = owner == k
+        if np.any(unit[sel] @ unit[sel][0] < 1 - 1e-9):
+            raise MeshError(f"{source}: face {k} is not a flat convex polygon; triangulate it")
+    return t
+
+
+def _check_edges(v, faces, source):
+    """Every edge in exactly two faces, in opposite directions."""
+    count: dict = {}
+    for k, f in enumerate(faces):
+        for i in range(len(f)):
+            e = (f[i], f[(i + 1) % len(f)])
+            if e in count:
+                a, b = e
+                raise MeshError(f"{source}: edge {a}-{b} {_pts(v, a, b)} is used twice in the same direction "
+                                f"(faces {count[e]} and {k}): the faces are not consistently oriented")
+            count[e] = k
+    for (a, b), k in count.items():
+        if (b, a) not in count:
+            raise MeshError(f"{source}: edge {a}-{b} {_pts(v, a, b)} of face {k} has no opposite face: "
+                            "the mesh is open (not closed)")
+
+
+def _pts(v, a, b):
+    return f"({', '.join(f'{x:g}' for x in v[a])} to {', '.join(f'{x:g}' for x in v[b])})"
+
+
+def check_mesh(vertices, faces, source: str = "polyhedron"):
+    """(points (n, 3), triangles (k, 3) turned outward) of a mesh that bounds a solid; else a
+    one-line :class:`MeshError` naming ``source`` and the first bad face or edge."""
+    v, fs = _arrays(vertices, faces, source)
+    _check_edges(v, fs, source)
+    t = _triangulate(v, fs, source)
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0
+    scale = float(np.ptp(v, axis=0).max())
+    if not abs(volume) > 1e-12 * scale ** 3:
+        raise MeshError(f"{source}: the mesh encloses no volume")
+    return v, (t if volume > 0 else t[:, ::-1].copy())
+
+
+def _planes(tri, eps):
+    """Unique face planes (normals, offsets) and each triangle's plane index; triangles whose
+    planes agree within ``eps`` share the first one's plane."""
+    n, d = triangle_planes(tri)
+    key = np.round(np.c_[n, d / max(eps, 1e-300) * 1e-9], 9)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return n[first], d[first], inverse.reshape(-1)
+
+
+def _shape(expr, normals, offsets, color):
+    """The nested tuple expression of :func:`bsp_expression` as Shapes (without recursion)."""
+    leaves = {}
+
+    def leaf(p):
+        if p not in leaves:
+            leaves[p] = plane(normals[p], offsets[p], color)
+        return leaves[p]
+
+    out: dict = {}
+    stack = [(expr, False)]
+    while stack:
+        e, done = stack.pop()
+        if e[0] == "plane":
+            out[id(e)] = leaf(e[1])
+        elif not done:
+            stack.append((e, True))
+            stack.extend((c, False) for c in (e[1] if e[0] in ("and", "or") else [e[1]]))
+        elif e[0] == "not":
+            out[id(e)] = Complement(out[id(e[1])])
+        else:
+            kids = [out[id(c)] for c in e[1]]
+            out[id(e)] = Intersection(kids) if e[0] == "and" else Union(kids)
+    return out[id(expr)]
+
+
+def polyhedron(vertices, faces, color=None, source: str = "polyhedron", label: str | None = None) -> Construction:
+    """The solid bounded by a closed, consistently oriented mesh (faces: lists of point
+    indices, convex planar polygons, either orientation), exactly: a Boolean expression of its
+    face planes (:mod:`clcsg.model.bsp`), bounded by the mesh's box."""
+    v, t = check_mesh(vertices, faces, source)
+    scale = float(np.abs(v).max()) or 1.0
+    eps = PLANE_EPS * scale
+    tri = v[t]
+    normals, offsets, owner = _planes(tri, eps)
+    expr = bsp_expression(tri, owner, normals, offsets, eps)
+    body = _shape(expr, normals, offsets, color)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    what = label or f"mesh of {len(t)} triangles"
+    c = Construction("mesh", what, body, v, (lo, hi))
+    c.spec = {"mesh": {"points": v.tolist(), "faces": t.tolist()}}
+    return c
