@@ -68,3 +68,139 @@ def test_either_orientation_and_the_box_is_six_planes():
     inside = np.all((pts >= 0) & (pts <= [1, 2, 3]), axis=1)
     assert np.array_equal(clcsg.contains(a, pts), inside)
     assert np.array_equal(clcsg.contains(b, pts), inside)
+
+
+# -- membership against an independent oracle: the winding number ---------------------------------
+def winding_number(v, faces, pts):
+    """The generalized winding number of points (Van Oosterom and Strackee's solid angles, in
+    float64): 1 inside a closed outward mesh, 0 outside."""
+    t = np.asarray(faces, dtype=np.int64)
+    a, b, c = (v[t[:, k]][None, :, :] - pts[:, None, :] for k in range(3))
+    la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+    det = np.einsum("pti,pti->pt", a, np.cross(b, c))
+    den = la * lb * lc + np.einsum("pti,pti->pt", a, b) * lc + np.einsum("pti,pti->pt", b, c) * la \
+        + np.einsum("pti,pti->pt", c, a) * lb
+    return np.arctan2(det, den).sum(axis=1) / (2 * np.pi)
+
+
+@pytest.mark.parametrize("name", ["l_prism", "dented_tetra", "annulus", "two_boxes_touching"])
+def test_membership_equals_the_winding_number(name):
+    import trimesh
+
+    if name == "l_prism":
+        v, f = l_prism()
+    elif name == "dented_tetra":  # the non-convex polyhedron the reader refused before
+        v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.1, 0.1, 0.1]], float)
+        f = [[2, 1, 0], [1, 3, 0], [3, 2, 0], [4, 3, 1], [2, 4, 1], [2, 3, 4]]
+    elif name == "annulus":
+        m = trimesh.creation.annulus(0.5, 1.0, 0.6, sections=24)
+        v, f = m.vertices, m.faces
+    else:  # an L of two boxes that share part of a face: the shared part is inside
+        (v1, f1), (v2, f2) = box_mesh((0, 0, 0), (2, 1, 1)), box_mesh((0, 1, 0), (1, 2, 1))
+        m = trimesh.boolean.union([trimesh.Trimesh(v1, f1), trimesh.Trimesh(v2, f2)], engine="manifold")
+        v, f = m.vertices, m.faces
+    v = np.asarray(v, float)
+    shape = clcsg.polyhedron(v, f)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    pts = np.random.default_rng(7).uniform(lo - 0.1, hi + 0.1, (3000, 3))
+    w = winding_number(v, f, pts)
+    inside = clcsg.contains(shape, pts)
+    assert np.all((w > 0.5) == inside), f"{np.sum((w > 0.5) != inside)} points disagree"
+    assert np.all(np.abs(w - np.round(w)) < 1e-6)  # no point on the surface: the test is sharp
+
+
+# -- files: every format, OpenSCAD, the scene file ------------------------------------------------
+def write_box(path, lo=(-1, -1, -1), hi=(1, 1, 1), **kw):
+    import trimesh
+
+    v, f = box_mesh(lo, hi)
+    trimesh.Trimesh(v, f, process=False).export(str(path), **kw)
+    return path
+
+
+@pytest.mark.parametrize("name,kw", [("box.stl", {}), ("ascii.stl", {"file_type": "stl_ascii"}), ("box.off", {}),
+                                     ("box.obj", {}), ("box.3mf", {}), ("box.ply", {})])
+def test_load_mesh_formats(name, kw, tmp_path):
+    shape = clcsg.load_mesh(write_box(tmp_path / name, (0, 0, 0), (1, 2, 3), **kw))
+    assert shape.describe() == f"mesh {name} of 12 triangles: 6 planes"
+    pts = np.random.default_rng(2).uniform(-0.5, 3.5, (2000, 3))
+    assert np.array_equal(clcsg.contains(shape, pts), np.all((pts >= 0) & (pts <= [1, 2, 3]), axis=1))
+
+
+@needs_openscad
+def test_openscad_import_and_polyhedron_equal_the_quadric_model(tmp_path, cl_context):
+    sub = tmp_path / "parts"
+    sub.mkdir()
+    write_box(sub / "block.stl")
+    v, f = l_prism()
+    pts = ", ".join(f"[{x:g}, {y:g}, {z:g}]" for x, y, z in v)
+    faces = ", ".join(f"[{c}, {b}, {a}]" for a, b, c in f)  # OpenSCAD: clockwise seen from outside
+    scad = (f'difference() {{ import("parts/block.stl"); cylinder(h = 3, r = 0.5, center = true); }}\n'
+            f"translate([3, 0, 0]) polyhedron(points = [{pts}], faces = [{faces}]);")
+    cut = clcsg.cylinder(3, 0.5)
+    l_ref = clcsg.box((2, 1, 1), center=(4, 0.5, 0.5)) | clcsg.box((1, 2, 1), center=(3.5, 1, 0.5))
+    check_against(export(scad, tmp_path).shape, (clcsg.box(2) - cut) | l_ref, cl_context)
+    (tmp_path / "model.scad").write_text(scad)
+    scene = clcsg.load(tmp_path / "model.scad")  # relative to the .scad, not the working directory
+    assert np.allclose(scene.compile().bound, [[-1, -1, -1], [5, 2, 1]])
+
+
+def test_scene_file_mesh_nodes_round_trip(tmp_path):
+    write_box(tmp_path / "block.stl")
+    (tmp_path / "s.json").write_text('{"clcsg": 1, "root": {"difference": [{"mesh": {"file": "block.stl"}, "color": "red"}, '
+                                     '{"mesh": {"points": [[0,0,0],[2,0,0],[0,2,0],[0,0,2]], '
+                                     '"faces": [[0,2,1],[0,1,3],[0,3,2],[1,2,3]]}}]}}')
+    scene = clcsg.load(tmp_path / "s.json")
+    clcsg.save(scene, tmp_path / "t.json")
+    again = clcsg.load(tmp_path / "t.json")
+    pts = np.random.default_rng(3).uniform(-1.5, 1.5, (3000, 3))
+    expect = np.all(np.abs(pts) <= 1, axis=1) & ~(np.all(pts >= 0, axis=1) & (pts.sum(axis=1) <= 2))
+    assert np.array_equal(clcsg.contains(scene.shape, pts), expect)
+    assert np.array_equal(clcsg.contains(again.shape, pts), expect)
+
+
+# -- bad input: one line, naming the file and the first bad edge ------------------------------------
+def _cli_error(path):
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-m", "clcsg", "info", str(path)], capture_output=True, text=True, timeout=120)
+    lines = [ln for ln in p.stderr.splitlines() if ln.startswith("clcsg: error:")]
+    assert p.returncode == 3 and len(lines) == 1 and "Traceback" not in p.stderr, p.stderr
+    return lines[0]
+
+
+def _scene_with(tmp_path, node):
+    import json
+
+    (tmp_path / "s.json").write_text(json.dumps({"clcsg": 1, "root": node}))
+    return tmp_path / "s.json"
+
+
+def test_bad_meshes_are_one_line_errors(tmp_path):
+    import trimesh
+
+    v, f = box_mesh((0, 0, 0), (1, 1, 1))
+    trimesh.Trimesh(v, f[:-1], process=False).export(str(tmp_path / "open.stl"))
+    (tmp_path / "odd.xyz").write_text("1 2 3\n")
+    (tmp_path / "empty.off").write_text("OFF\n0 0 0\n")
+    flipped = f.copy()
+    flipped[0] = flipped[0][::-1]
+    nan = v.copy()
+    nan[3, 1] = np.nan
+    cases = {
+        "missing": ({"mesh": {"file": "nope.stl"}}, f"{tmp_path / 'nope.stl'}: no such file"),
+        "format": ({"mesh": {"file": "odd.xyz"}}, "unknown mesh format '.xyz'; known: .3mf, .obj, .off, .ply, .stl"),
+        "open": ({"mesh": {"file": "open.stl"}}, "has no opposite face: the mesh is open"),
+        "zero faces": ({"mesh": {"file": "empty.off"}}, "the file has no faces"),
+        "orientation": ({"mesh": {"points": v.tolist(), "faces": flipped.tolist()}},
+                        "edge 0-3 (0, 0, 0 to 1, 1, 0) is used twice in the same direction (faces 0 and 1): the faces are not consistently oriented"),
+    }
+    for name, (node, expected) in cases.items():
+        line = _cli_error(_scene_with(tmp_path, node))
+        assert str(tmp_path / "s.json") in line and expected in line, (name, line)
+    with pytest.raises(SceneError) as info:
+        clcsg.polyhedron(nan, f, source="part")
+    assert str(info.value) == "part: mesh point 3 is not finite: [1.0, nan, 0.0]"
+    with pytest.raises(SceneError, match="at least 4 faces, got 0"):
+        clcsg.polyhedron(v, [])
