@@ -204,3 +204,24 @@ def test_bad_meshes_are_one_line_errors(tmp_path):
     assert str(info.value) == "part: mesh point 3 is not finite: [1.0, nan, 0.0]"
     with pytest.raises(SceneError, match="at least 4 faces, got 0"):
         clcsg.polyhedron(v, [])
+
+
+# -- the front ends take them unchanged ---------------------------------------------------------
+def test_cli_render_sample_and_viewer_files(tmp_path, cl_context):
+    import subprocess
+    import sys
+
+    from clcsg.viewer.session import Session
+
+    write_box(tmp_path / "block.stl")
+    scene = _scene_with(tmp_path, {"difference": [{"mesh": {"file": "block.stl"}},
+                                                  {"cylinder": {"height": 3, "radius": 0.5}}]})
+    for args in (["sample", str(scene), "-r", "2%", "-o", str(tmp_path / "s.ply")],
+                 ["render", str(scene), "--size", "64x48", "-o", str(tmp_path / "s.png")],
+                 ["render", str(scene), "--method", "raytrace", "--size", "64x48", "-o", str(tmp_path / "e.png")]):
+        p = subprocess.run([sys.executable, "-m", "clcsg", *args], capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr
+    assert (tmp_path / "s.ply").stat().st_size > 1000
+    session = Session(scene, cl_context)
+    session.read()
+    assert session.files == [str(scene), str(tmp_path / "block.stl")]  # the viewer reloads on either

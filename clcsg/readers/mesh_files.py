@@ -13,6 +13,8 @@ import os
 import numpy as np
 
 from ..errors import SceneError
+from ..model.construction import Construction
+from ..model.csg import walk
 from ..model.polyhedron import MeshError, polyhedron
 
 #: file extension -> trimesh's file type
@@ -63,3 +65,13 @@ def load_mesh(path, color=None, source: str | None = None):
     shape = polyhedron(v, f, color=color, source=who, label=f"mesh {os.path.basename(p)} of {len(f)} triangles")
     shape.spec = {"mesh": {"file": os.path.abspath(p)}}
     return shape
+
+
+def mesh_files(shape) -> list[str]:
+    """The mesh files a shape was read from (absolute paths, first-use order), for watchers."""
+    out: list = []
+    for node in walk(shape):
+        spec = getattr(node, "spec", None) if isinstance(node, Construction) else None
+        if isinstance(spec, dict) and "file" in spec.get("mesh", {}) and spec["mesh"]["file"] not in out:
+            out.append(spec["mesh"]["file"])
+    return out
