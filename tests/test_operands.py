@@ -225,3 +225,31 @@ def test_cli_render_sample_and_viewer_files(tmp_path, cl_context):
     session = Session(scene, cl_context)
     session.read()
     assert session.files == [str(scene), str(tmp_path / "block.stl")]  # the viewer reloads on either
+
+
+def _two_shells(outer, inner, inner_flipped):
+    (v1, f1), (v2, f2) = box_mesh(*outer), box_mesh(*inner)
+    f2 = f2[:, ::-1] if inner_flipped else f2
+    return np.r_[v1, v2], np.r_[f1, f2 + 8]
+
+
+def test_self_intersecting_and_nested_meshes_are_refused():
+    v, f = _two_shells(((0, 0, 0), (2, 2, 2)), ((1, 1, 1), (3, 3, 3)), False)
+    with pytest.raises(SceneError) as info:
+        clcsg.polyhedron(v, f, source="two.stl")
+    assert str(info.value).startswith("two.stl: faces ") and str(info.value).endswith(
+        "cross each other: the mesh intersects itself")
+    v, f = _two_shells(((0, 0, 0), (4, 4, 4)), ((1, 1, 1), (2, 2, 2)), False)
+    with pytest.raises(SceneError, match="two.stl: the shell of face 12 is nested in a shell of the same orientation"):
+        clcsg.polyhedron(v, f, source="two.stl")
+
+
+def test_a_cavity_is_an_inward_shell(cl_context):
+    v, f = _two_shells(((-2, -2, -2), (2, 2, 2)), ((-1, -1, -1), (1, 1, 1)), True)
+    shape = clcsg.polyhedron(v, f)
+    pts = np.random.default_rng(4).uniform(-2.5, 2.5, (4000, 3))
+    expect = np.all(np.abs(pts) <= 2, axis=1) & ~np.all(np.abs(pts) <= 1, axis=1)
+    assert np.array_equal(clcsg.contains(shape, pts), expect)
+    ref = clcsg.box(4) - clcsg.box(2)
+    cut = clcsg.box((4, 4, 4), center=(2, 2, 2))  # opens the cavity to the camera
+    check_against(shape - cut, ref - cut, cl_context)

@@ -1,8 +1,9 @@
 """Closed triangle meshes as CSG operands: ``clcsg.polyhedron(vertices, faces)``.
 
 A mesh is accepted if it bounds a solid: finite points, at least 4 faces, faces of at least
-3 distinct points with no zero area, and every edge used by exactly two faces in opposite
-directions (closed and consistently oriented).  Either orientation is taken (OpenSCAD lists
+3 distinct points with no zero area, every edge used by exactly two faces in opposite
+directions (closed and consistently oriented), and no two faces that share no point crossing
+each other (:mod:`clcsg.model.mesh_intersections`).  Either orientation is taken (OpenSCAD lists
 faces clockwise seen from outside, STL counter-clockwise): the faces are turned outward by the
 sign of the enclosed volume.  The first failing check is one :class:`MeshError` naming the
 source and the first bad face or edge.
@@ -19,6 +20,7 @@ import numpy as np
 from ..errors import SceneError
 from .bsp import bsp_expression, triangle_planes
 from .construction import Construction, plane
+from .mesh_intersections import first_bad_shell, first_intersection
 from .csg import Complement, Intersection, Union
 
 
@@ -72,7 +74,7 @@ def _triangulate(v, faces, source):
         sel = owner == k
         if np.any(unit[sel] @ unit[sel][0] < 1 - 1e-9):
             raise MeshError(f"{source}: face {k} is not a flat convex polygon; triangulate it")
-    return t
+    return t, owner
 
 
 def _check_edges(v, faces, source):
@@ -101,13 +103,22 @@ def check_mesh(vertices, faces, source: str = "polyhedron"):
     one-line :class:`MeshError` naming ``source`` and the first bad face or edge."""
     v, fs = _arrays(vertices, faces, source)
     _check_edges(v, fs, source)
-    t = _triangulate(v, fs, source)
+    t, owner = _triangulate(v, fs, source)
     a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
     volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0
     scale = float(np.ptp(v, axis=0).max())
     if not abs(volume) > 1e-12 * scale ** 3:
         raise MeshError(f"{source}: the mesh encloses no volume")
-    return v, (t if volume > 0 else t[:, ::-1].copy())
+    hit = first_intersection(v, t, PLANE_EPS * max(float(np.abs(v).max()), 1e-300))
+    if hit is not None:
+        fi, fj = (int(owner[k]) for k in hit)
+        raise MeshError(f"{source}: faces {fi} and {fj} cross each other: the mesh intersects itself")
+    t = t if volume > 0 else t[:, ::-1].copy()
+    shell = first_bad_shell(v, t, PLANE_EPS * max(float(np.abs(v).max()), 1e-300))
+    if shell is not None:
+        raise MeshError(f"{source}: the shell of face {int(owner[shell])} is nested in a shell of the same orientation "
+                        "(or is an inward shell outside all others): the mesh bounds no solid")
+    return v, t
 
 
 def _planes(tri, eps):
