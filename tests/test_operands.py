@@ -253,3 +253,42 @@ def test_a_cavity_is_an_inward_shell(cl_context):
     ref = clcsg.box(4) - clcsg.box(2)
     cut = clcsg.box((4, 4, 4), center=(2, 2, 2))  # opens the cavity to the camera
     check_against(shape - cut, ref - cut, cl_context)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_unions_of_boxes_equal_the_winding_number(seed):
+    """Non-convex meshes with many face planes in general position (unions and differences of
+    rotated boxes by manifold3d): the BSP expression contains exactly the points the winding
+    number puts inside."""
+    import manifold3d as mf
+
+    rng = np.random.default_rng(seed)
+    m = mf.Manifold.cube([2.0, 2.0, 2.0], center=True)
+    for k in range(6):
+        part = mf.Manifold.cube(rng.uniform(0.4, 1.5, 3).tolist(), center=True)
+        part = part.rotate(rng.uniform(0, 90, 3).tolist()).translate(rng.uniform(-1.2, 1.2, 3).tolist())
+        m = m + part if k % 2 == 0 else m - part
+    mesh = m.to_mesh()
+    v, f = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
+    shape = clcsg.polyhedron(v, f)
+    pts = rng.uniform(v.min(axis=0) - 0.1, v.max(axis=0) + 0.1, (1500, 3))
+    w = winding_number(v, f, pts)
+    sharp = np.abs(w - np.round(w)) < 1e-3
+    assert sharp.mean() > 0.99
+    assert np.array_equal(clcsg.contains(shape, pts[sharp]), w[sharp] > 0.5)
+
+
+def test_plate_with_bosses_equals_the_union_of_boxes(cl_context):
+    """A manifold3d mesh (a plate and 4 bosses): many triangles on few planes, concave edges."""
+    import manifold3d as mf
+
+    m = mf.Manifold.cube([4.0, 4.0, 1.0])
+    for i in range(2):
+        for j in range(2):
+            m = m + mf.Manifold.cube([1.0, 1.0, 1.0]).translate([2.0 * i + 0.5, 2.0 * j + 0.5, 0.5])
+    mesh = m.to_mesh()
+    v, f = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
+    ref = clcsg.union(clcsg.box((4.0, 4.0, 1.0), center=(2, 2, 0.5)),
+                      *[clcsg.box(1.0, center=(2.0 * i + 1.0, 2.0 * j + 1.0, 1.0)) for i in range(2) for j in range(2)])
+    cut = clcsg.cylinder(4, 0.4, center=(1, 1, 0))
+    check_against(clcsg.polyhedron(v, f) - cut, ref - cut, cl_context)

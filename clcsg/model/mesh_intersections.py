@@ -5,7 +5,7 @@ the pairs that share a point (neighbours meet along their shared edge or corner 
 Each candidate is tested exactly as Moeller's interval test does it, in float64: the corners
 of each triangle on both sides of the other's plane, then the two segments in which the
 triangles meet the line of the two planes overlap by more than the tolerance.  Coplanar pairs
-are left out (they cannot cross without an edge of one entering the other's plane elsewhere,
+(normals within 1e-6 radians) are left out (they cannot cross without an edge of one entering the other's plane elsewhere,
 which a neighbouring pair then shows, or they overlap in the plane: a doubled face, whose edges
 the edge check already counts).
 """
@@ -18,6 +18,9 @@ import numpy as np
 
 #: rows of the box-overlap matrix per block (memory: block x triangles booleans)
 _BLOCK = 512
+#: sine of the angle below which two triangles count as coplanar (their line is ill-conditioned;
+#: meshes written in float32 have neighbouring triangles of one flat face this far apart)
+_PARALLEL = 1e-6
 
 
 def _candidates(lo, hi, t, tol):
@@ -70,7 +73,7 @@ def first_intersection(v: np.ndarray, t: np.ndarray, tol: float):
     straddle = ~(np.all(da > tol, axis=1) | np.all(da < -tol, axis=1) | np.all(db > tol, axis=1) | np.all(db < -tol, axis=1))
     line = np.cross(na, nb)
     norm = np.linalg.norm(line, axis=1)
-    keep = straddle & (norm > 1e-9) & ~np.all(np.abs(da) <= tol, axis=1)
+    keep = straddle & (norm > _PARALLEL) & ~np.all(np.abs(da) <= tol, axis=1)
     if not np.any(keep):
         return None
     a, b, da, db, i, j = a[keep], b[keep], da[keep], db[keep], i[keep], j[keep]

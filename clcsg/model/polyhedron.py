@@ -15,6 +15,8 @@ its face planes, which the rest of the pipeline samples, prunes and ray traces l
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from ..errors import SceneError
@@ -30,6 +32,11 @@ class MeshError(SceneError):
 
 #: relative tolerance (of the mesh's size) for points on a plane
 PLANE_EPS = 1e-9
+#: relative tolerance below which two triangles' planes are one face plane
+FACE_PLANE_EPS = 1e-6
+#: relative depth by which two faces must cross to be a self-intersection (above float32's
+#: rounding: many meshes are written in single precision)
+CROSSING_EPS = 1e-6
 
 
 def _arrays(vertices, faces, source):
@@ -109,7 +116,7 @@ def check_mesh(vertices, faces, source: str = "polyhedron"):
     scale = float(np.ptp(v, axis=0).max())
     if not abs(volume) > 1e-12 * scale ** 3:
         raise MeshError(f"{source}: the mesh encloses no volume")
-    hit = first_intersection(v, t, PLANE_EPS * max(float(np.abs(v).max()), 1e-300))
+    hit = first_intersection(v, t, CROSSING_EPS * max(float(np.abs(v).max()), 1e-300))
     if hit is not None:
         fi, fj = (int(owner[k]) for k in hit)
         raise MeshError(f"{source}: faces {fi} and {fj} cross each other: the mesh intersects itself")
@@ -121,13 +128,51 @@ def check_mesh(vertices, faces, source: str = "polyhedron"):
     return v, t
 
 
-def _planes(tri, eps):
-    """Unique face planes (normals, offsets) and each triangle's plane index; triangles whose
-    planes agree within ``eps`` share the first one's plane."""
+def _merge_neighbours(keys):
+    """Labels of grid keys (k, 4) where keys one step apart on every axis are one plane (so a
+    plane near a rounding boundary is not split in two)."""
+    index = {tuple(row): i for i, row in enumerate(keys.tolist())}
+    parent = list(range(len(keys)))
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    steps = [s for s in itertools.product((-1, 0, 1), repeat=4) if any(s)]
+    for i, row in enumerate(keys.tolist()):
+        for s in steps:
+            j = index.get((row[0] + s[0], row[1] + s[1], row[2] + s[2], row[3] + s[3]))
+            if j is not None:
+                parent[find(j)] = find(i)
+    roots = [find(i) for i in range(len(keys))]
+    return np.unique(roots, return_inverse=True)[1].reshape(-1)
+
+
+def _planes(tri, scale):
+    """Unique face planes (normals, offsets), each triangle's plane index, and the largest
+    distance of a corner from its plane.  Triangles whose planes agree to FACE_PLANE_EPS (on a
+    grid: normals, and offsets relative to ``scale``) share one plane: their area-weighted
+    mean normal, through the mean of their centroids along it.  Meshes written in float32 put
+    the triangles of one flat face about 1e-7 apart; they are one face of the solid."""
     n, d = triangle_planes(tri)
-    key = np.round(np.c_[n, d / max(eps, 1e-300) * 1e-9], 9)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return n[first], d[first], inverse.reshape(-1)
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    key = np.round(np.c_[n, d / scale] / FACE_PLANE_EPS).astype(np.int64)
+    keys, inverse = np.unique(key, axis=0, return_inverse=True)
+    inverse = _merge_neighbours(keys)[inverse.reshape(-1)]
+    k = int(inverse.max()) + 1
+    normals = np.zeros((k, 3))
+    np.add.at(normals, inverse, n * area[:, None])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    centre = tri.mean(axis=1)
+    offsets = np.zeros(k)
+    np.add.at(offsets, inverse, np.einsum("ij,ij->i", normals[inverse], centre) * area)
+    weight = np.zeros(k)
+    np.add.at(weight, inverse, area)
+    offsets /= weight
+    dev = np.abs(np.einsum("tki,ti->tk", tri, normals[inverse]) - offsets[inverse, None]).max()
+    return normals, offsets, inverse, float(dev)
 
 
 def _shape(expr, normals, offsets, color):
@@ -143,6 +188,8 @@ def _shape(expr, normals, offsets, color):
     stack = [(expr, False)]
     while stack:
         e, done = stack.pop()
+        if not done and id(e) in out:  # shared (the consensus terms): built once
+            continue
         if e[0] == "plane":
             out[id(e)] = leaf(e[1])
         elif not done:
@@ -162,9 +209,9 @@ def polyhedron(vertices, faces, color=None, source: str = "polyhedron", label: s
     face planes (:mod:`clcsg.model.bsp`), bounded by the mesh's box."""
     v, t = check_mesh(vertices, faces, source)
     scale = float(np.abs(v).max()) or 1.0
-    eps = PLANE_EPS * scale
     tri = v[t]
-    normals, offsets, owner = _planes(tri, eps)
+    normals, offsets, owner, dev = _planes(tri, scale)
+    eps = max(PLANE_EPS * scale, 2.0 * dev)
     expr = bsp_expression(tri, owner, normals, offsets, eps)
     body = _shape(expr, normals, offsets, color)
     lo, hi = v.min(axis=0), v.max(axis=0)
