@@ -1,6 +1,6 @@
 """Whether a closed mesh intersects itself: the first pair of triangles that cross.
 
-Candidate pairs are the triangles whose bounding boxes overlap (in row blocks, numpy), minus
+Candidate pairs are the triangles whose bounding boxes overlap (a sweep along x in blocks), minus
 the pairs that share a point (neighbours meet along their shared edge or corner by design).
 Each candidate is tested exactly as Moeller's interval test does it, in float64: the corners
 of each triangle on both sides of the other's plane, then the two segments in which the
@@ -24,19 +24,25 @@ _PARALLEL = 1e-6
 
 
 def _candidates(lo, hi, t, tol):
-    """(i, j), i < j, of the triangles whose boxes overlap and that share no point."""
+    """(i, j), i < j, of the triangles whose boxes overlap and that share no point: a sweep
+    along x (triangles sorted by their boxes' low x; a block of them meets only the ones that
+    start before the block's largest high x)."""
+    order = np.argsort(lo[:, 0], kind="stable")
+    lo, hi, t = lo[order], hi[order], t[order]
     out_i, out_j = [], []
     n = len(lo)
     for s in range(0, n, _BLOCK):
         e = min(n, s + _BLOCK)
-        ov = np.all((lo[s:e, None, :] <= hi[None, :, :] + tol) & (hi[s:e, None, :] >= lo[None, :, :] - tol), axis=2)
-        ov &= np.arange(n)[None, :] > np.arange(s, e)[:, None]
+        end = int(np.searchsorted(lo[:, 0], hi[s:e, 0].max() + tol, side="right"))
+        ov = np.all((lo[s:e, None, :] <= hi[None, s:end, :] + tol) & (hi[s:e, None, :] >= lo[None, s:end, :] - tol), axis=2)
+        ov &= np.arange(s, end)[None, :] > np.arange(s, e)[:, None]
         i, j = np.nonzero(ov)
-        i = i + s
+        i, j = i + s, j + s
         shared = np.any(t[i][:, :, None] == t[j][:, None, :], axis=(1, 2))
-        out_i.append(i[~shared])
-        out_j.append(j[~shared])
-    return np.concatenate(out_i), np.concatenate(out_j)
+        out_i.append(order[i[~shared]])
+        out_j.append(order[j[~shared]])
+    i, j = np.concatenate(out_i), np.concatenate(out_j)
+    return np.minimum(i, j), np.maximum(i, j)
 
 
 def _interval(p, d, axis_dir, tol):
