@@ -81,6 +81,7 @@ def _ours(v, f, holes, ctx):
     trace_s, exact = _cpu(lambda: clcsg.raytrace(tape, cam, device=ctx))
     return {"face_planes": int(mesh.surfaces.get("plane", 0)), "quadrics": tape.stats["quadrics"],
             "instructions": tape.stats["instructions"], "radius": radius, "samples": len(samples),
+            "unresolved_cells": int(samples.stats.get("unresolved", 0)),
             "build_cpu_s": build_s, "compile_cpu_s": compile_s, "sample_cpu_s": sample_s,
             "render_cpu_s": render_s, "raytrace_cpu_s": trace_s,
             "mask_agreement": float((img.mask == exact.mask).mean())}
