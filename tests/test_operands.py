@@ -145,6 +145,21 @@ def test_openscad_import_and_polyhedron_equal_the_quadric_model(tmp_path, cl_con
     assert np.allclose(scene.compile().bound, [[-1, -1, -1], [5, 2, 1]])
 
 
+def test_import_scale_and_path_relative_to_the_csg_file(tmp_path, monkeypatch):
+    from clcsg.readers.openscad import load_csg
+
+    (tmp_path / "parts").mkdir()
+    write_box(tmp_path / "parts" / "block.stl", (0, 0, 0), (1, 1, 1))
+    (tmp_path / "m.csg").write_text('multmatrix([[1, 0, 0, 5], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) {\n'
+                                    '  import(file = "parts/block.stl", layer = "", origin = [0, 0], scale = 2, '
+                                    'convexity = 1, $fn = 0, $fa = 12, $fs = 2, timestamp = 0);\n}\n')
+    monkeypatch.chdir(tmp_path / "parts")  # not where the .csg is
+    scene = load_csg(tmp_path / "m.csg")
+    pts = np.random.default_rng(5).uniform(-1, 8, (3000, 3))
+    expect = np.all((pts >= [5, 0, 0]) & (pts <= [7, 2, 2]), axis=1)
+    assert np.array_equal(clcsg.contains(scene.shape, pts), expect)
+
+
 def test_scene_file_mesh_nodes_round_trip(tmp_path):
     write_box(tmp_path / "block.stl")
     (tmp_path / "s.json").write_text('{"clcsg": 1, "root": {"difference": [{"mesh": {"file": "block.stl"}, "color": "red"}, '
@@ -184,6 +199,7 @@ def test_bad_meshes_are_one_line_errors(tmp_path):
     trimesh.Trimesh(v, f[:-1], process=False).export(str(tmp_path / "open.stl"))
     (tmp_path / "odd.xyz").write_text("1 2 3\n")
     (tmp_path / "empty.off").write_text("OFF\n0 0 0\n")
+    trimesh.PointCloud(v).export(str(tmp_path / "cloud.ply"))
     flipped = f.copy()
     flipped[0] = flipped[0][::-1]
     nan = v.copy()
@@ -193,6 +209,7 @@ def test_bad_meshes_are_one_line_errors(tmp_path):
         "format": ({"mesh": {"file": "odd.xyz"}}, "unknown mesh format '.xyz'; known: .3mf, .obj, .off, .ply, .stl"),
         "open": ({"mesh": {"file": "open.stl"}}, "has no opposite face: the mesh is open"),
         "zero faces": ({"mesh": {"file": "empty.off"}}, "the file has no faces"),
+        "points only": ({"mesh": {"file": "cloud.ply"}}, "a point cloud (a file without faces): point operands (surfels) are not supported"),
         "orientation": ({"mesh": {"points": v.tolist(), "faces": flipped.tolist()}},
                         "edge 0-3 (0, 0, 0 to 1, 1, 0) is used twice in the same direction (faces 0 and 1): the faces are not consistently oriented"),
     }

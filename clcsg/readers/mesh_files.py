@@ -46,7 +46,14 @@ def read_mesh(path, source: str | None = None):
     except ImportError:
         raise SceneError(f"{who}: reading mesh files needs trimesh: pip install 'clcsg[mesh]'") from None
     try:
-        m = trimesh.load(p, file_type=MESH_FORMATS[ext], force="mesh", process=False)
+        m = trimesh.load(p, file_type=MESH_FORMATS[ext], process=False)
+        if isinstance(m, trimesh.PointCloud) and len(m.vertices):
+            raise MeshError(f"{who}: a point cloud (a file without faces): point operands (surfels) are not supported; "
+                            "give a closed mesh")
+        if isinstance(m, trimesh.Scene):  # 3MF, OBJ with several objects: one mesh
+            m = trimesh.load(p, file_type=MESH_FORMATS[ext], force="mesh", process=False)
+    except MeshError:
+        raise
     except Exception as e:  # trimesh raises many types for malformed files
         raise SceneError(f"{who}: cannot read the mesh: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
     v = np.asarray(getattr(m, "vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
