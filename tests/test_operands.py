@@ -277,16 +277,8 @@ def test_random_unions_of_boxes_equal_the_winding_number(seed):
     """Non-convex meshes with many face planes in general position (unions and differences of
     rotated boxes by manifold3d): the BSP expression contains exactly the points the winding
     number puts inside."""
-    import manifold3d as mf
-
-    rng = np.random.default_rng(seed)
-    m = mf.Manifold.cube([2.0, 2.0, 2.0], center=True)
-    for k in range(6):
-        part = mf.Manifold.cube(rng.uniform(0.4, 1.5, 3).tolist(), center=True)
-        part = part.rotate(rng.uniform(0, 90, 3).tolist()).translate(rng.uniform(-1.2, 1.2, 3).tolist())
-        m = m + part if k % 2 == 0 else m - part
-    mesh = m.to_mesh()
-    v, f = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
+    v, f = _random_mesh(seed)
+    rng = np.random.default_rng(100 + seed)
     shape = clcsg.polyhedron(v, f)
     pts = rng.uniform(v.min(axis=0) - 0.1, v.max(axis=0) + 0.1, (1500, 3))
     w = winding_number(v, f, pts)
@@ -309,3 +301,25 @@ def test_plate_with_bosses_equals_the_union_of_boxes(cl_context):
                       *[clcsg.box(1.0, center=(2.0 * i + 1.0, 2.0 * j + 1.0, 1.0)) for i in range(2) for j in range(2)])
     cut = clcsg.cylinder(4, 0.4, center=(1, 1, 0))
     check_against(clcsg.polyhedron(v, f) - cut, ref - cut, cl_context)
+
+
+def _random_mesh(seed):
+    import manifold3d as mf
+
+    rng = np.random.default_rng(seed)
+    m = mf.Manifold.cube([2.0, 2.0, 2.0], center=True)
+    for k in range(6):
+        part = mf.Manifold.cube(rng.uniform(0.4, 1.5, 3).tolist(), center=True)
+        part = part.rotate(rng.uniform(0, 90, 3).tolist()).translate(rng.uniform(-1.2, 1.2, 3).tolist())
+        m = m + part if k % 2 == 0 else m - part
+    mesh = m.to_mesh()
+    return np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64)
+
+
+def test_a_float32_mesh_in_general_position_samples_and_renders_exactly(cl_context):
+    """Rotated boxes cut from and added to a cube by manifold3d (float32 points): the samples
+    lie on the mesh solid's surface by the float64 tree oracle, cover it, and the splats equal
+    the exact ray tracer's image."""
+    v, f = _random_mesh(2)
+    shape = clcsg.polyhedron(v, f) - clcsg.cylinder(4, 0.3)
+    check_against(shape, shape, cl_context)
