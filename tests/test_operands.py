@@ -219,6 +219,9 @@ def test_bad_meshes_are_one_line_errors(tmp_path):
     with pytest.raises(SceneError) as info:
         clcsg.polyhedron(nan, f, source="part")
     assert str(info.value) == "part: mesh point 3 is not finite: [1.0, nan, 0.0]"
+    with pytest.raises(clcsg.ClcsgError, match=r"^part: the mesh has 6 distinct face planes; at most 5 are sampled") as info:
+        clcsg.polyhedron(v, f, source="part", max_planes=5)
+    assert info.value.exit_code == 5
     with pytest.raises(SceneError, match="at least 4 faces, got 0"):
         clcsg.polyhedron(v, [])
 

@@ -19,7 +19,7 @@ import itertools
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import LimitError, SceneError
 from .bsp import bsp_expression, triangle_planes
 from .construction import Construction, plane
 from .mesh_intersections import first_bad_shell, first_intersection
@@ -32,6 +32,8 @@ class MeshError(SceneError):
 
 #: relative tolerance (of the mesh's size) for points on a plane
 PLANE_EPS = 1e-9
+#: the most distinct face planes a mesh operand may have (compiling 1,280 takes about a minute)
+MAX_FACE_PLANES = 4096
 #: relative tolerance below which two triangles' planes are one face plane
 FACE_PLANE_EPS = 1e-6
 #: relative depth by which two faces must cross to be a self-intersection (above float32's
@@ -203,14 +205,20 @@ def _shape(expr, normals, offsets, color):
     return out[id(expr)]
 
 
-def polyhedron(vertices, faces, color=None, source: str = "polyhedron", label: str | None = None) -> Construction:
+def polyhedron(vertices, faces, color=None, source: str = "polyhedron", label: str | None = None,
+               max_planes: int = MAX_FACE_PLANES) -> Construction:
     """The solid bounded by a closed, consistently oriented mesh (faces: lists of point
     indices, convex planar polygons, either orientation), exactly: a Boolean expression of its
-    face planes (:mod:`clcsg.model.bsp`), bounded by the mesh's box."""
+    face planes (:mod:`clcsg.model.bsp`), bounded by the mesh's box.  More than ``max_planes``
+    distinct face planes is a :class:`~clcsg.errors.LimitError`."""
     v, t = check_mesh(vertices, faces, source)
     scale = float(np.abs(v).max()) or 1.0
     tri = v[t]
     normals, offsets, owner, dev = _planes(tri, scale)
+    if len(normals) > max_planes:
+        raise LimitError(f"{source}: the mesh has {len(normals)} distinct face planes; at most {max_planes} are "
+                         "sampled (a mesh operand is an expression of its face planes, and the cost grows faster "
+                         "than their number): simplify or decimate the mesh")
     eps = max(PLANE_EPS * scale, 2.0 * dev)
     expr = bsp_expression(tri, owner, normals, offsets, eps)
     body = _shape(expr, normals, offsets, color)
