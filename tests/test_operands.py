@@ -260,8 +260,17 @@ def test_self_intersecting_and_nested_meshes_are_refused():
     assert str(info.value).startswith("two.stl: faces ") and str(info.value).endswith(
         "cross each other: the mesh intersects itself")
     v, f = _two_shells(((0, 0, 0), (4, 4, 4)), ((1, 1, 1), (2, 2, 2)), False)
-    with pytest.raises(SceneError, match="two.stl: the shell of face 12 is nested in a shell of the same orientation"):
+    with pytest.raises(SceneError, match="two.stl: the shell of face 12 encloses no volume, or is nested in a shell"):
         clcsg.polyhedron(v, f, source="two.stl")
+    v, f = _two_shells(((0, 0, 0), (1, 1, 1)), ((1, 1, 1), (2, 2, 2)), False)
+    f[f == 8] = 7  # the second box's corner (1, 1, 1) is the first one's: they touch at a point
+    with pytest.raises(SceneError, match=r"touch.stl: point 7 \(1, 1, 1\) joins 12 faces in more than one fan"):
+        clcsg.polyhedron(v, f, source="touch.stl")
+    v, f = box_mesh((0, 0, 0), (1, 1, 1))  # and a triangle with its reverse, apart: a fin of no volume
+    v = np.r_[v, [[3, 0, 0], [4, 0, 0], [3, 1, 0]]]
+    f = np.r_[f, [[8, 9, 10], [8, 10, 9]]]
+    with pytest.raises(SceneError, match="fin.off: the shell of face 12 encloses no volume"):
+        clcsg.polyhedron(v, f, source="fin.off")
 
 
 def test_a_cavity_is_an_inward_shell(cl_context):

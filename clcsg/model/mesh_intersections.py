@@ -128,7 +128,8 @@ def winding(v, t, p):
 def first_bad_shell(v, t, tol):
     """The first triangle of a shell (a connected component) with a winding number other than 0
     or 1 on either side of it (nested shells of the same orientation, an inward shell outside
-    every other), or None.  The winding number is read on both sides of the centre of each
+    every other) or with none of its own on either side (a shell without volume, such as a face
+    and its reverse), or None.  The winding number is read on both sides of the centre of each
     shell's largest triangle: the other shells' there, plus the shell's own on that side."""
     label = _components(t, len(v))
     if label.max() == 0:
@@ -143,6 +144,6 @@ def first_bad_shell(v, t, tol):
         others = t[label != k]
         base = round(winding(v, others, centre))  # the other shells do not pass here
         sides = [round(winding(v, t[own], centre + s * 10 * tol * unit)) for s in (1, -1)]
-        if any(base + w not in (0, 1) for w in sides):
+        if any(base + w not in (0, 1) for w in sides) or not any(sides):  # not any: a shell without volume
             return int(own[big])
     return None

@@ -2,7 +2,8 @@
 
 A mesh is accepted if it bounds a solid: finite points, at least 4 faces, faces of at least
 3 distinct points with no zero area, every edge used by exactly two faces in opposite
-directions (closed and consistently oriented), and no two faces that share no point crossing
+directions (closed and consistently oriented), one fan of faces around every point
+(2-manifold), no shell without volume or wrongly nested, and no two faces that share no point crossing
 each other (:mod:`clcsg.model.mesh_intersections`).  Either orientation is taken (OpenSCAD lists
 faces clockwise seen from outside, STL counter-clockwise): the faces are turned outward by the
 sign of the enclosed volume.  The first failing check is one :class:`MeshError` naming the
@@ -103,6 +104,25 @@ def _check_edges(v, faces, source):
                             "the mesh is open (not closed)")
 
 
+def _check_vertices(v, faces, source):
+    """Around every point its faces form one fan (the link is one cycle): two solids touching
+    at a point, or a fin hanging from one, are no 2-manifold.  With the edges checked, the
+    link's edges (next -> previous corner of each face at the point) form cycles."""
+    link: dict = {}
+    for f in faces:
+        for i, p in enumerate(f):
+            link.setdefault(p, {})[f[(i + 1) % len(f)]] = f[i - 1]
+    for p, nxt in link.items():
+        start = next(iter(nxt))
+        q, n = nxt[start], 1
+        while q != start:
+            q, n = nxt[q], n + 1
+        if n != len(nxt):
+            x = ", ".join(f"{c:g}" for c in v[p])
+            raise MeshError(f"{source}: point {p} ({x}) joins {len(nxt)} faces in more than one fan: "
+                            "the mesh is not a 2-manifold there (solids touching at a point)")
+
+
 def _pts(v, a, b):
     return f"({', '.join(f'{x:g}' for x in v[a])} to {', '.join(f'{x:g}' for x in v[b])})"
 
@@ -112,6 +132,7 @@ def check_mesh(vertices, faces, source: str = "polyhedron"):
     one-line :class:`MeshError` naming ``source`` and the first bad face or edge."""
     v, fs = _arrays(vertices, faces, source)
     _check_edges(v, fs, source)
+    _check_vertices(v, fs, source)
     t, owner = _triangulate(v, fs, source)
     a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
     volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0
@@ -125,8 +146,8 @@ def check_mesh(vertices, faces, source: str = "polyhedron"):
     t = t if volume > 0 else t[:, ::-1].copy()
     shell = first_bad_shell(v, t, PLANE_EPS * max(float(np.abs(v).max()), 1e-300))
     if shell is not None:
-        raise MeshError(f"{source}: the shell of face {int(owner[shell])} is nested in a shell of the same orientation "
-                        "(or is an inward shell outside all others): the mesh bounds no solid")
+        raise MeshError(f"{source}: the shell of face {int(owner[shell])} encloses no volume, or is nested in a shell of "
+                        "the same orientation (or is an inward shell outside all others): the mesh bounds no solid")
     return v, t
 
 
