@@ -335,3 +335,12 @@ def test_a_float32_mesh_in_general_position_samples_and_renders_exactly(cl_conte
     v, f = _random_mesh(2)
     shape = clcsg.polyhedron(v, f) - clcsg.cylinder(4, 0.3)
     check_against(shape, shape, cl_context)
+
+
+def test_a_rotated_l_prism_subtracted_from_a_sphere(cl_context):
+    """The mesh as the subtracted operand (its expression complemented to the leaves) and under
+    a rotation: against the same boxes subtracted."""
+    v, f = l_prism()
+    ref = clcsg.box((2, 1, 1), center=(1, 0.5, 0.5)) | clcsg.box((1, 2, 1), center=(0.5, 1, 0.5))
+    ball = clcsg.sphere(1.2, (0.8, 0.8, 0.6))
+    check_against(ball - clcsg.polyhedron(v, f).rotate((1, 1, 0), 25), ball - ref.rotate((1, 1, 0), 25), cl_context)
