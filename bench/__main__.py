@@ -13,7 +13,8 @@ times per zoo model at 800x600 and 400x300, where the time goes, and the first f
 reload), ``mesh`` (``clcsg mesh`` against ``openscad -o part.stl`` and manifold3d: triangles,
 CPU time and measured error on the everyday parts and the zoo), ``compile`` (host compile, tree
 bounds and root tapes against the number of primitives: a perforated plate and a union of
-spheres, 100 to 5,000 primitives).  Each writes
+spheres, 100 to 5,000 primitives), ``operands`` (meshes minus 20 cylinders: a CAD-like plate with
+bosses and tessellated spheres, against manifold3d's Boolean).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -23,7 +24,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile")
+PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands")
 
 
 def main(argv=None):

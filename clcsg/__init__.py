@@ -52,6 +52,8 @@ _EXPORTS = {
     "revolve": "model.revolve",
     **dict.fromkeys(("hull", "minkowski"), "model.hull"),
     "mesh": "meshing",
+    "polyhedron": "model.polyhedron",
+    "load_mesh": "readers.mesh_files",
 }
 __all__ = ["__version__", *_EXPORTS]
 

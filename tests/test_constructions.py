@@ -191,8 +191,8 @@ REFUSALS = {
                                           "minkowski(): a difference inside is not covered"),
     "minkowski of spheres and cylinders": ("minkowski() { sphere(1); cylinder(h = 1, r = 1); }",
                                            "minkowski(): minkowski() of spheres and cylinders is not covered exactly"),
-    "non-convex polyhedron": ("polyhedron([[0,0,0],[1,0,0],[0,1,0],[0,0,1],[0.1,0.1,0.1]], [[0,1,2],[0,3,1],[0,2,3],[1,3,4],[1,4,2],[4,3,2]]);",
-                              "polyhedron(): polyhedron() is not convex (a point lies inside its hull)"),
+    "open polyhedron": ("polyhedron([[0,0,0],[1,0,0],[0,1,0],[0,0,1],[0.1,0.1,0.1]], [[0,1,2],[0,3,1],[0,2,3],[1,3,4],[1,4,2]]);",
+                        "polyhedron(): edge 2-3 (0, 1, 0 to 0, 0, 1) of face 2 has no opposite face: the mesh is open"),
     "2-D at top level": ("square(1);", "square() is a 2-D shape outside linear_extrude() or rotate_extrude()"),
 }
 

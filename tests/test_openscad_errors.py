@@ -24,8 +24,8 @@ EXAMPLES = Path(__file__).parent.parent / "examples"
 # -- errors -----------------------------------------------------------------------------------
 #: nodes without an exact quadric form (or 2-D where a solid is expected): line -> message
 UNSUPPORTED = {
-    'polyhedron(points = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.1, 0.1, 0.1]], faces = [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 4], [1, 4, 2], [4, 3, 2]], convexity = 1);':
-        "polyhedron(): polyhedron() is not convex (a point lies inside its hull); nearest exact alternative: a union of convex polyhedra or hull()",
+    'polyhedron(points = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], faces = [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 2, 3]], convexity = 1);':
+        "polyhedron(): edge 1-2 (1, 0, 0 to 0, 1, 0) is used twice in the same direction (faces 0 and 3): the faces are not consistently oriented",
     "polygon(points = [[0, 0], [1, 0], [0, 1]], paths = undef, convexity = 1);":
         "polygon() is a 2-D shape outside linear_extrude() or rotate_extrude(): it has no volume; nearest exact alternative: linear_extrude() it",
     "square(size = [1, 1], center = false);":
@@ -42,7 +42,7 @@ UNSUPPORTED = {
     'text(text = "hi", size = 10, spacing = 1, font = "", direction = "ltr", language = "en", script = "Latn", halign = "left", valign = "baseline", $fn = 0, $fa = 12, $fs = 2);':
         "text() is not supported: text() outlines glyphs with Bezier curves, not lines and arcs; nearest exact alternative: none (model lettering with polygons)",
     'import(file = "foo.stl", layer = "", origin = [0, 0], scale = 1, convexity = 1, $fn = 0, $fa = 12, $fs = 2, timestamp = 0);':
-        "import() is not supported: import() reads a mesh or a drawing, not exact geometry",
+        "import(): foo.stl: no such file",
     "hull() { sphere(r = 1); cube(1); }":
         "hull(): hull() of 1 sphere and 1 cube is not covered exactly (hulls of cubes and points, of spheres, or of parallel "
         "cylinders with the same caps are); nearest exact alternative: hull the spheres, the cubes or the cylinders separately",

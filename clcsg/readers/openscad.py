@@ -135,6 +135,8 @@ _PARAMS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 @dataclass
 class _Evaluator(Constructions):
     src: Source
+    #: the file that relative import() paths are relative to (the .csg or .scad file)
+    base: str | None = None
 
     def warn(self, pos: int, message: str):
         self.src.warn(pos, message)
@@ -434,9 +436,10 @@ def _union(shapes: list) -> Shape | None:
 
 
 # -- entry points -----------------------------------------------------------------------------
-def parse_csg(text: str, source: str = "<string>") -> Scene:
+def parse_csg(text: str, source: str = "<string>", base: str | None = None) -> Scene:
     """Parse OpenSCAD CSG export ``text`` into a :class:`Scene`.
 
+    ``base``: the file relative ``import()`` paths are relative to (default ``source``).
     Raises :class:`SceneError` (one line: ``<source>:<line>:<col>: ...``) and nothing else for
     any text; emits :class:`OpenScadWarning` for what OpenSCAD also skips with a warning.  An
     empty model is an empty union (a scene with no DNF terms).
@@ -449,7 +452,7 @@ def parse_csg(text: str, source: str = "<string>") -> Scene:
     try:
         src = Source(text, str(source))
         nodes = Parser(src, MAX_NODE_DEPTH, MAX_DEPTH).parse_file()
-        shape = _Evaluator(src).shape(nodes)
+        shape = _Evaluator(src, source if base is None else base).shape(nodes)
     except SceneError:
         raise
     except RecursionError:

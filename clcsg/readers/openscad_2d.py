@@ -22,9 +22,10 @@ from ..model.extrude import extrude
 from ..model.hull import hull, minkowski
 from ..model.profile import Profile, circle, difference2d, intersection2d, polygon, square, union2d
 from ..model.profile_ops import hull2d_of, offset
-from ..model.polytope import convex_polyhedron
+from ..model.polyhedron import polyhedron
 from ..model.revolve import revolve
 from .openscad_tokens import fmt, is_num
+from .mesh_files import load_mesh, resolve
 
 #: positional and named-only parameters of the nodes read here
 PARAMS_2D = {
@@ -37,13 +38,13 @@ PARAMS_2D = {
     "hull": ((), ()),
     "minkowski": (("convexity",), ()),
     "polyhedron": (("points", "faces", "convexity"), ("triangles",)),
+    "import": (("file", "layer", "convexity", "origin", "scale"), ("timestamp", "dpi", "center", "id")),
 }
 
 #: nodes that have no exact quadric form: the reason, and the nearest exact alternative
 REFUSED = {
     "text": "text() outlines glyphs with Bezier curves, not lines and arcs; nearest exact alternative: none "
             "(model lettering with polygons)",
-    "import": "import() reads a mesh or a drawing, not exact geometry",
     "surface": "surface() is a height-map mesh",
     "projection": "projection() of a 3-D solid to 2-D has curved outlines of higher degree",
     "resize": "resize() depends on the child's mesh bounding box; nearest exact alternative: scale()",
@@ -129,9 +130,25 @@ class Constructions:
         if not (isinstance(faces, list) and all(isinstance(f, list) and all(is_num(v) and 0 <= v < len(pts) for v in f) for f in faces)):
             raise self.src.error(node.pos, f"polyhedron(): faces = {fmt(faces)} is not a list of point index lists")
         try:
-            return convex_polyhedron(np.array(pts, dtype=float), [[int(v) for v in f] for f in faces], ctx.color)
+            return polyhedron(np.array(pts, dtype=float), [[int(v) for v in f] for f in faces], ctx.color,
+                              source=f"{self.src.where(node.pos)}: polyhedron()")
         except SceneError as e:
-            self._fail(node, e)
+            raise SceneError(str(e)) from None
+
+    def n_import(self, node, ctx):
+        self._no_children(node)
+        p = self.bind(node)
+        name = p.get("file")
+        if not isinstance(name, str) or not name:
+            raise self.src.error(node.pos, f"import(): file = {fmt(name)} is not a file name")
+        scale = p.get("scale", 1.0)
+        try:
+            shape = load_mesh(resolve(name, self.base), ctx.color, source=f"{self.src.where(node.pos)}: import()")
+        except SceneError as e:
+            raise SceneError(str(e)) from None
+        if is_num(scale) and scale != 1.0 and scale > 0:
+            shape = shape.scale(float(scale))
+        return shape
 
     # -- 2-D nodes where a solid is expected, and refused nodes ---------------------------------
     def _flat(self, node, ctx):

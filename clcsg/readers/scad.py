@@ -195,6 +195,6 @@ def load_scad(path, *, timeout: float | None = None, with_dependencies: bool = F
             raise SceneError(f"{p}: cannot read OpenSCAD's export: {e.strerror or e}") from None
     for note in notes:
         warnings.warn(_one_line(f"{p}: OpenSCAD: {note}"), OpenScadWarning, stacklevel=2)
-    scene = parse_csg(text, source=f"{p} (CSG export)")
+    scene = parse_csg(text, source=f"{p} (CSG export)", base=p)
     scene = Scene(scene.shape, scene.bound, p)
     return (scene, deps) if with_dependencies else scene

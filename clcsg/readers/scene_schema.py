@@ -30,8 +30,8 @@ from ..model import solids
 #: variadic operations, then the unary one and ``ref``: the node kinds besides primitives
 OPERATIONS = ("union", "intersection", "difference")
 UNARY = ("complement",)
-#: constructions: solids built exactly from a 2-D profile or from other nodes
-CONSTRUCTIONS = ("extrude", "revolve", "hull", "minkowski")
+#: constructions: solids built exactly from a 2-D profile, from other nodes or from a closed mesh
+CONSTRUCTIONS = ("extrude", "revolve", "hull", "minkowski", "mesh")
 TOP_KEYS = ("clcsg", "bound", "defs", "root", "comment", "$schema")
 TRANSFORM_STEPS = ("translate", "rotate", "scale", "matrix")
 FORMAT_VERSION = 1

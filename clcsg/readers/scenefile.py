@@ -64,10 +64,12 @@ from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Pri
 from ..model.construction import Construction, first_color
 from ..model.extrude import extrude
 from ..model.hull import hull, minkowski
+from ..model.polyhedron import polyhedron
 from ..model.revolve import revolve
 from ..model.scene import Scene
 from ..model.colors import ColorError, parse_color
 from .budget import JSON_FACTOR, check_file, check_input
+from .mesh_files import load_mesh, resolve
 from .profile_json import profile_from_json
 from .scene_schema import CONSTRUCTIONS, FORMAT_VERSION, TOP_KEYS, TRANSFORM_STEPS, UNARY, join, jtype, key, scene_schema, suggest
 from .trampoline import run
@@ -302,7 +304,7 @@ class _Loader:
             for i, c in enumerate(arg):
                 operands.append((yield self._node(c, f"{kpath}[{i}]")))
             shape = self.construction(kind, operands, color, kpath)
-        elif kind in ("extrude", "revolve"):
+        elif kind in ("extrude", "revolve", "mesh"):
             color = self.color(v["color"], key(path, "color")) if "color" in v else None
             shape = self.construction(kind, arg, color, kpath)
         else:
@@ -334,6 +336,8 @@ class _Loader:
                 return hull(*arg, color=color)
             if kind == "minkowski":
                 return minkowski(*arg, color=color)
+            if kind == "mesh":
+                return self.mesh(arg, color, path)
             prof = profile_from_json(arg["profile"], key(path, "profile"), self.fail)
             if kind == "extrude":
                 return extrude(prof, arg.get("height", 1.0), center=arg.get("center", False),
@@ -343,6 +347,13 @@ class _Loader:
             if str(e).startswith(self.source):
                 raise
             self.fail(path, str(e))
+
+    def mesh(self, arg, color, path) -> Shape:
+        """A ``mesh`` node: a file relative to the scene file, or points and faces."""
+        if "file" in arg:
+            return load_mesh(resolve(arg["file"], None if self.source.startswith("<") else self.source), color,
+                             source=f"{self.source}: {key(path, 'file')}")
+        return polyhedron(arg["points"], arg["faces"], color, source=f"{self.source}: {path}")
 
     def primitive(self, kind, params, color, path) -> Primitive:
         m = params.get("matrix") if kind == "quadric" else None

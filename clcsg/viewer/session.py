@@ -19,6 +19,7 @@ from ..pipeline import Pipeline
 from ..sampling.radius import Radius
 from ..readers.scenes import load
 from ..readers.scad import load_scad
+from ..readers.mesh_files import mesh_files
 
 #: the viewer's default sample limit (the resource guard's; ``clcsg view --max-samples``)
 DEFAULT_MAX_SAMPLES = 5_000_000
@@ -92,7 +93,9 @@ class Session:
             scene, deps = load_scad(self.path, with_dependencies=True)
             self.files = deps
             return scene
-        return load(self.path)
+        scene = load(self.path)
+        self.files = [self.path, *mesh_files(scene.shape)]
+        return scene
 
     def sample(self, scene, radius: Radius | None, times: dict) -> Model:
         """A new model of ``scene`` at ``radius`` (None: automatic); raises ClcsgError."""
