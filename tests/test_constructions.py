@@ -185,8 +185,10 @@ REFUSALS = {
     "twist": ("linear_extrude(height = 2, twist = 90) square(1);",
               "linear_extrude(): twist = 90 sweeps helicoids, which are not quadric surfaces; nearest exact alternative"),
     "text": ('linear_extrude(1) text("hi");', "text() is not supported: text() outlines glyphs with Bezier curves"),
-    "hull of mixed shapes": ("hull() { cube(1); sphere(1); }",
-                             "hull(): hull() of 1 cube and 1 sphere is not covered exactly"),
+    "hull of mixed shapes": ("hull() { sphere(1); translate([3, 0, 0]) cylinder(h = 1, r = 1); }",
+                             "hull(): hull() of 1 sphere and 1 cylinder is not covered exactly"),
+    "hull of skew cylinders": ("hull() { cylinder(h = 1, r = 1); rotate([90, 0, 0]) cylinder(h = 1, r = 1); }",
+                               "hull(): cylinders and cones whose axes are not parallel are not covered exactly"),
     "minkowski of a non-convex operand": ("minkowski() { difference() { cube(2); cube(1); } sphere(0.2); }",
                                           "minkowski(): a difference inside is not covered"),
     "minkowski of spheres and cylinders": ("minkowski() { sphere(1); cylinder(h = 1, r = 1); }",
@@ -242,7 +244,7 @@ def test_scene_file_round_trip(name, tmp_scene):
      "$.root.extrude.profile.polygon: polygon path 0 crosses itself: not a simple polygon with holes"),
     ({"revolve": {"profile": {"circle": {"radius": 1, "center": [3, 0]}}}},
      "$.root.revolve: rotate_extrude() of a circle sweeps a torus, a quartic surface, not a quadric"),
-    ({"hull": [{"box": {"size": 1}}, {"sphere": {"radius": 1}}]}, "$.root.hull: hull() of 1 cube and 1 sphere is not covered exactly"),
+    ({"hull": [{"cylinder": {"radius": 1}}, {"sphere": {"radius": 1}}]}, "$.root.hull: hull() of 1 cylinder and 1 sphere is not covered exactly"),
     ({"extrude": {"height": 1}}, "$.root.extrude"),
 ])
 def test_scene_file_construction_errors(root, message):
