@@ -86,6 +86,12 @@ CASES = {
                         lambda: (clcsg.cylinder(1, 3, center=(0, 0, 0.5)) - clcsg.cylinder(3, 2, center=(0, 0, 0.5)))
                         & clcsg.box((4, 4, 3), center=(2, 2, 0.5))),
     "hull_two_spheres": ("hull() { sphere(2); translate([5, 0, 0]) sphere(1); }", _two_spheres),
+    "hull_coaxial_cylinders": ("hull() { cylinder(h = 1, r = 2); translate([0, 0, 3]) cylinder(h = 1, r = 1); }",
+                               lambda: clcsg.cylinder(1, 2, center=(0, 0, 0.5)) | clcsg.cone(3, 2, 1, center=(0, 0, 2.5))),
+    "minkowski_cube_x_cylinder": ("minkowski() { cube([4, 3, 2]); rotate([0, 90, 0]) cylinder(h = 1, r = 0.5, center = true); }",
+                                  lambda: clcsg.union(clcsg.box((5, 4, 2), center=(2, 1.5, 1)), clcsg.box((5, 3, 3), center=(2, 1.5, 1)),
+                                                      *[clcsg.cylinder(5, 0.5, center=(2, y, z), axis=(1, 0, 0))
+                                                        for y in (0, 3) for z in (0, 2)])),
     "hull_slot": ("hull() { cylinder(h = 2, r = 1); translate([5, 0, 0]) cylinder(h = 2, r = 1); }",
                   lambda: clcsg.box((5, 2, 2), center=(2.5, 0, 1)) | clcsg.cylinder(2, 1, center=(0, 0, 1))
                   | clcsg.cylinder(2, 1, center=(5, 0, 1))),
@@ -281,3 +287,15 @@ def test_hull_of_spheres_of_different_radii():
             assert T.contains(solid, x[None])[0]
         elif res.fun > 1e-6:
             assert not T.contains(solid, x[None])[0]
+
+
+@needs_openscad
+def test_pen_stand_example(tmp_path, cl_context):
+    """examples/pen_stand.scad: a hull of a cube and a parallel cylinder with other caps, a hull
+    of spheres of three radii and a sum of a turned cube with a cylinder across it (their sets
+    are checked against the dense-point oracle in test_round_hull.py): the samples lie on the
+    tree oracle's surface, cover it, and the splats equal the ray tracer."""
+    scene = export("pen_stand.scad", tmp_path)
+    labels = sorted(n.label for n in walk(scene.shape) if isinstance(n, Construction))
+    assert labels == ["hull of 1 cube and 1 cylinder", "hull of 3 spheres", "minkowski of 1 cube and 1 cylinder"]
+    check_against(scene.shape, scene.shape, cl_context, n_lines=3000)
