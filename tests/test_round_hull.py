@@ -234,3 +234,30 @@ def test_hull_refusals(shapes, message):
 def test_minkowski_of_skew_cylinders_is_refused():
     with pytest.raises(SceneError, match="cylinders and cones whose axes are not parallel"):
         clcsg.minkowski(clcsg.box(1), clcsg.cylinder(1, 1), clcsg.cylinder(1, 1, axis=(1, 0, 0)))
+
+
+def test_minkowski_of_a_hull_of_balls_and_a_sphere():
+    """A hull() operand is one convex item: hull(B_i) + B(s) = hull(B(c_i, r_i + s))."""
+    rng = np.random.default_rng(12)
+    balls = [Ball((0, 0, 0), 1.0), Ball((3, 0, 0), 0.5), Ball((1, 2, 1), 0.3)]
+    solid = clcsg.minkowski(clcsg.hull(*[b.shape() for b in balls]), clcsg.sphere(0.2))
+    grown = [Ball(b.c, b.r + 0.2) for b in balls]
+    agree(solid, np.vstack([b.points() for b in grown]), lambda n: np.max([b.support(n) for b in grown], axis=0), rng)
+
+
+def test_minkowski_of_a_cube_and_a_hull_of_cylinders():
+    rng = np.random.default_rng(13)
+    slot = [Frustum((0, 0, -0.5), 0.4, (0, 0, 0.5), 0.4), Frustum((1.5, 0, -0.5), 0.2, (1.5, 0, 0.5), 0.2)]
+    solid = clcsg.minkowski(clcsg.box(1), clcsg.hull(*[f.shape() for f in slot]))
+    cube = box_points((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5))
+    dense = (cube[:, None, :] + np.vstack([f.points() for f in slot])[None]).reshape(-1, 3)
+    agree(solid, dense, lambda n: (n @ cube.T).max(axis=1) + np.max([f.support(n) for f in slot], axis=0), rng)
+
+
+def test_hull_of_a_hull_is_the_hull_of_all_parts():
+    balls = [Ball((0, 0, 0), 1.0), Ball((3, 0, 0), 0.5), Ball((1, 2, 1), 0.3)]
+    inner = clcsg.hull(*[b.shape() for b in balls[:2]])
+    solid = clcsg.hull(inner, balls[2].shape())
+    flat = clcsg.hull(*[b.shape() for b in balls])
+    pts = np.random.default_rng(14).uniform(-2, 4, (20000, 3))
+    np.testing.assert_array_equal(T.contains(solid, pts), T.contains(flat, pts))

@@ -39,7 +39,7 @@ from .construction import Construction, ball, bounded, first_color
 from .csg import Primitive, Shape, Transformed, Union
 from .extrude import extrude
 from .minkowski import minkowski_ball, z_prism
-from .polytope import convex_polytope, hull2d, polytope_solid
+from .polytope import convex_polytope, polytope_solid
 from .profile import ProfileError, polygon
 from .profile_ops import hull_disks, offset_r
 from .quadric import frame_z_to
@@ -58,6 +58,7 @@ class Item:
     p1: np.ndarray = None
     r0: float = 0.0          # cap radii at p0, p1 (cones: one may be 0)
     r1: float = 0.0
+    parts: list = None       # "group": the items of a hull() operand (one convex item)
 
 
 def _similarity(lin):
@@ -110,6 +111,8 @@ def items(shape: Shape, m=None) -> list[Item]:
         node, mat = stack.pop()
         if isinstance(node, Construction) and node.vertices is not None:
             out.append(_item(node, mat))
+        elif isinstance(node, Construction) and node.kind == "hull" and isinstance(node.spec, tuple):
+            out.append(Item("group", "hull", parts=[it for k in node.spec[1] for it in items(k, mat)]))
         elif isinstance(node, Union):
             stack.extend((k, mat) for k in reversed(node.operands))
         elif isinstance(node, Transformed):
@@ -133,8 +136,16 @@ def hull(*solids: Shape, color=None) -> Construction:
     return out
 
 
+def _flat(its):
+    """A hull of hulls is the hull of all their parts."""
+    out = []
+    for it in its:
+        out += _flat(it.parts) if it.kind == "group" else [it]
+    return out
+
+
 def _hull(solids, color):
-    its = [it for s in solids for it in items(s)]
+    its = _flat([it for s in solids for it in items(s)])
     if not its:
         raise ProfileError("hull() of nothing")
     kinds = {it.kind for it in its}
@@ -247,87 +258,91 @@ def _minkowski(solids, color):
     return Construction("minkowski", what, pieces[0] if len(pieces) == 1 else Union(pieces))
 
 
+_MIXED = ("minkowski() of spheres and cylinders is not covered exactly (it is a rounded cylinder, "
+          "a torus edge); nearest exact alternative: a cube or polytope plus a sphere")
+
+
+def _round_set(it):
+    """An item as (kind, centers, radii, axis): "points", "balls" or "disks" (the hull of
+    them; a hull() operand is the hull of its parts' sets)."""
+    if it.kind == "points":
+        return "points", it.points, np.zeros(len(it.points)), None
+    if it.kind == "sphere":
+        return "balls", it.center[None], np.array([it.radius]), None
+    if it.kind == "cylinder":
+        return "disks", np.array([it.p0, it.p1]), np.array([it.r0, it.r1]), it.axis
+    sets = [_round_set(p) for p in it.parts]
+    kinds = {k for k, *_ in sets} - {"points"}
+    if len(kinds) > 1:
+        raise ProfileError(_MIXED)
+    axis = next((a for _, _, _, a in sets if a is not None), None)
+    _parallel(axis, [a for _, _, _, a in sets])
+    return (kinds.pop() if kinds else "points"), np.vstack([c for _, c, _, _ in sets]), np.concatenate([r for _, _, r, _ in sets]), axis
+
+
+def _parallel(w, axes):
+    if any(a is not None and abs(abs(a @ w) - 1) > 1e-12 for a in axes):
+        raise ProfileError("cylinders and cones whose axes are not parallel are not covered exactly (their hull or "
+                           "sum has non-quadric patches); nearest exact alternative: parallel axes")
+
+
 def _sum(its, color):
-    """The sum of convex items: points add as the hull of pairwise sums, balls as centers and
-    radii, parallel disks (the two caps of a cylinder or cone) as centers and radii; a polytope
-    plus a ball is :func:`polytope_plus_ball`, a polytope plus disks the hull of the disks
-    placed at its vertices (conv(V) + conv(D) = conv(V + D))."""
-    pts = [it.points for it in its if it.kind == "points"]
-    sph = [it for it in its if it.kind == "sphere"]
-    cyl = [it for it in its if it.kind == "cylinder"]
-    center = sum((s.center for s in sph), np.zeros(3))
-    radius = sum(s.radius for s in sph)
-    if cyl and sph:
-        raise ProfileError("minkowski() of spheres and cylinders is not covered exactly (it is a rounded cylinder, "
-                           "a torus edge); nearest exact alternative: a cube or polytope plus a sphere")
-    if not pts and not cyl:
-        return ball(center, radius, color)
-    sums = np.zeros((1, 3))
-    for p in pts:
-        sums = (sums[:, None, :] + p[None, :, :]).reshape(-1, 3)
-    if cyl:
-        return _plus_disks(sums, cyl, color)
-    poly = convex_polytope(sums)
-    if sph:
-        return minkowski_ball(poly, radius, center, color=color).operands[0]
-    if poly.dim < 3:
-        raise ProfileError("minkowski() of flat polytopes has no volume")
-    return bounded(polytope_solid(poly, color), poly.vertices.min(axis=0), poly.vertices.max(axis=0))
-
-
-def _plus_disks(points, cyl, color):
-    _, _, w = _disks(cyl)  # checks the axes are parallel
-    c, r = np.zeros((1, 3)), np.zeros(1)
-    for it in cyl:
-        dc, dr = np.array([it.p0, it.p1]), np.array([it.r0, it.r1])
-        c, r = (c[:, None, :] + dc[None]).reshape(-1, 3), (r[:, None] + dr[None]).reshape(-1)
-    v = _extreme(points) if len(points) > 1 else points
-    if len(cyl) == 1 and cyl[0].r0 == cyl[0].r1:
-        prism = _prism_cylinder(v, cyl[0], color)
+    """The sum of convex items as the hull of one set of balls or of parallel disks: the hull
+    of sets adds pairwise (B(c, r) + B(c', r') = B(c + c', r + r'), the same for parallel disks,
+    conv(A) + conv(B) = conv(A + B)); points are radius 0."""
+    kind, c, r, axis = "points", np.zeros((1, 3)), np.zeros(1), None
+    for it in its:
+        k, dc, dr, a = _round_set(it)
+        if {kind, k} == {"balls", "disks"}:
+            raise ProfileError(_MIXED)
+        if a is not None:
+            _parallel(a, [axis])
+            axis = a
+        kind = k if kind == "points" else kind
+        c, r = _prune((c[:, None, :] + dc[None]).reshape(-1, 3), (r[:, None] + dr[None]).reshape(-1))
+    if kind == "points":
+        poly = convex_polytope(c)
+        if poly.dim < 3:
+            raise ProfileError("minkowski() of flat polytopes has no volume")
+        return bounded(polytope_solid(poly, color), poly.vertices.min(axis=0), poly.vertices.max(axis=0))
+    if kind == "balls":
+        if len(c) == 1:
+            return ball(c[0], r[0], color)
+        if np.ptp(r) <= 1e-12 * r.max():
+            return minkowski_ball(convex_polytope(c), r[0], color=color).operands[0]
+        body, _ = hull_of_balls(c, r, color)
+        return bounded(body, (c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0))
+    if np.ptp(r) <= 1e-12 * r.max():
+        prism = _prism_disks(c, r[0], axis, color)
         if prism is not None:
             return prism
-    c, r = (v[:, None, :] + c[None]).reshape(-1, 3), np.tile(r, len(v))
-    c, r = _layers(c, r, w)
-    body, _ = hull_of_disks(c, r, w, color)
-    return bounded(body, *disk_box(c, r, w))
+    body, _ = hull_of_disks(c, r, axis, color)
+    return bounded(body, *disk_box(c, r, axis))
 
 
-def _layers(c, r, w):
-    """Disks of one height and radius whose center is inside the 2-D hull of the others' are
-    inside the hull of those disks: only the hull vertices of each layer are kept."""
-    rot = frame_z_to(w)
-    loc = c @ rot
-    keys = np.round(np.c_[loc[:, 2], r] / max(np.abs(loc).max(), r.max(), 1e-300), 12)
-    keep = []
-    for key in np.unique(keys, axis=0):
-        idx = np.flatnonzero(np.all(keys == key, axis=1))
-        if len(idx) <= 2:
-            keep += idx.tolist()
-            continue
-        xy = loc[idx, :2]
-        if np.linalg.matrix_rank(xy - xy.mean(axis=0), tol=1e-12 * max(np.abs(xy).max(), 1e-300)) < 2:
-            keep += idx.tolist()
-            continue
-        ext = hull2d(xy)
-        keep += [int(idx[np.argmin(np.abs(xy - e).sum(axis=1))]) for e in ext]
-    keep = sorted(set(keep))
-    return c[keep], r[keep]
+def _prune(c, r):
+    """Items of one radius whose center is not a vertex of the hull of that radius' centers
+    lie in the hull of the others (conv(C) + B(r) = conv(C + B(r))): only vertices stay."""
+    keep_c, keep_r = [], []
+    for q in np.unique(r):
+        pts = c[r == q]
+        v = convex_polytope(pts).vertices if len(pts) > 2 else np.unique(pts, axis=0)
+        keep_c.append(v)
+        keep_r.append(np.full(len(v), q))
+    return np.vstack(keep_c), np.concatenate(keep_r)
 
 
-def _prism_cylinder(v, cyl, color):
-    """A prism along the cylinder's axis plus the cylinder: the extrusion of the cross-section
-    offset by the radius, in the cylinder's frame (None if the polytope is no such prism)."""
-    rot = frame_z_to(cyl.axis)
-    poly = convex_polytope(v @ rot)
+def _prism_disks(c, radius, axis, color):
+    """conv(C) + D(radius) for a prism conv(C) along the disks' axis: the extrusion of the
+    cross-section offset by the radius, in the axis' frame (None if conv(C) is no such prism)."""
+    rot = frame_z_to(axis)
+    poly = convex_polytope(c @ rot)
     prism = z_prism(poly)
     if prism is None:
         return None
     xy, z0, z1 = prism
-    p0, p1 = rot.T @ cyl.p0, rot.T @ cyl.p1
-    lo, hi = sorted((p0[2], p1[2]))
-    prof = offset_r(polygon(xy), cyl.radius).translate(p0[:2])
-    ext = extrude(prof, (z1 - z0) + (hi - lo), color=color)
+    ext = extrude(offset_r(polygon(xy), radius), z1 - z0, color=color)
     m = np.eye(4)
     m[:3, :3] = rot
-    m[:3, 3] = rot @ np.array([0, 0, z0 + lo])
+    m[:3, 3] = rot @ np.array([0, 0, z0])
     return Transformed(ext, m)
