@@ -92,6 +92,8 @@ CASES = {
                                   lambda: clcsg.union(clcsg.box((5, 4, 2), center=(2, 1.5, 1)), clcsg.box((5, 3, 3), center=(2, 1.5, 1)),
                                                       *[clcsg.cylinder(5, 0.5, center=(2, y, z), axis=(1, 0, 0))
                                                         for y in (0, 3) for z in (0, 2)])),
+    "hull_bullet": ("hull() { cylinder(h = 3, r = 1); translate([0, 0, 3]) sphere(1); }",
+                    lambda: clcsg.cylinder(3, 1, center=(0, 0, 1.5)) | clcsg.sphere(1, (0, 0, 3))),
     "hull_slot": ("hull() { cylinder(h = 2, r = 1); translate([5, 0, 0]) cylinder(h = 2, r = 1); }",
                   lambda: clcsg.box((5, 2, 2), center=(2.5, 0, 1)) | clcsg.cylinder(2, 1, center=(0, 0, 1))
                   | clcsg.cylinder(2, 1, center=(5, 0, 1))),
@@ -250,7 +252,7 @@ def test_scene_file_round_trip(name, tmp_scene):
      "$.root.extrude.profile.polygon: polygon path 0 crosses itself: not a simple polygon with holes"),
     ({"revolve": {"profile": {"circle": {"radius": 1, "center": [3, 0]}}}},
      "$.root.revolve: rotate_extrude() of a circle sweeps a torus, a quartic surface, not a quadric"),
-    ({"hull": [{"cylinder": {"radius": 1}}, {"sphere": {"radius": 1}}]}, "$.root.hull: hull() of 1 cylinder and 1 sphere is not covered exactly"),
+    ({"hull": [{"cylinder": {"radius": 1}}, {"sphere": {"radius": 1, "center": [3, 0, 0]}}]}, "$.root.hull: hull() of 1 cylinder and 1 sphere is not covered exactly"),
     ({"extrude": {"height": 1}}, "$.root.extrude"),
 ])
 def test_scene_file_construction_errors(root, message):

@@ -261,3 +261,22 @@ def test_hull_of_a_hull_is_the_hull_of_all_parts():
     flat = clcsg.hull(*[b.shape() for b in balls])
     pts = np.random.default_rng(14).uniform(-2, 4, (20000, 3))
     np.testing.assert_array_equal(T.contains(solid, pts), T.contains(flat, pts))
+
+
+@pytest.mark.parametrize("axis", [(0, 0, 1), (2, -1, 1)])
+def test_hull_of_spheres_and_cylinders_on_one_axis(axis):
+    """Spheres centered on the cylinders' and cones' common axis: a solid of revolution."""
+    rng = np.random.default_rng(15)
+    w = np.asarray(axis, float) / np.linalg.norm(axis)
+    o = np.array([0.5, -0.2, 0.1])
+    ops = [Frustum(o, 2.0, o + w, 2.0), Ball(o + 3 * w, 1.5), Frustum(o + 4 * w, 0.5, o + 5 * w, 0.0), Ball(o - 1.5 * w, 0.7)]
+    solid = hull_check(ops, rng)
+    assert {p.kind for p in walk(solid) if isinstance(p, Primitive)} == {"cylinder", "cone", "sphere", "box"}  # box: the bound
+
+
+def test_bullet_is_a_cylinder_and_a_sphere():
+    """hull(cylinder r 1 on 0..3, sphere r 1 at the top cap's center) is their union."""
+    solid = clcsg.hull(clcsg.cylinder(3, 1, center=(0, 0, 1.5)), clcsg.sphere(1, (0, 0, 3)))
+    ref = clcsg.cylinder(3, 1, center=(0, 0, 1.5)) | clcsg.sphere(1, (0, 0, 3))
+    pts = np.random.default_rng(16).uniform(-2, 5, (20000, 3))
+    np.testing.assert_array_equal(T.contains(solid, pts), T.contains(ref, pts))

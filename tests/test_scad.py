@@ -307,7 +307,7 @@ def test_10000_levels_without_recursion_error():
     assert isinstance(scene.shape, Difference)
     # errors deep down still name line and column
     with pytest.raises(SceneError, match=r"^deep\.csg:10001:1: hull\(\): hull\(\) of 1 cylinder and 1 sphere is not covered"):
-        parse_csg("group() {\n" * n + "hull() { cylinder(h = 1, r = 1); sphere(1); }" + "}" * n, "deep.csg")
+        parse_csg("group() {\n" * n + "hull() { cylinder(h = 1, r = 1); multmatrix([[1, 0, 0, 3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) sphere(1); }" + "}" * n, "deep.csg")
     with pytest.raises(SceneError, match=r"^deep\.csg:1:\d+: syntax error: expected '\}', got end of file"):
         parse_csg("group() {" * n, "deep.csg")
 

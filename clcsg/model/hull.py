@@ -43,7 +43,7 @@ from .polytope import convex_polytope, polytope_solid
 from .profile import ProfileError, polygon
 from .profile_ops import hull_disks, offset_r
 from .quadric import frame_z_to
-from .round_hull import disk_box, hull_of_balls, hull_of_disks
+from .round_hull import disk_box, hull_coaxial, hull_of_balls, hull_of_disks
 
 
 @dataclass
@@ -162,11 +162,30 @@ def _hull(solids, color):
         if kinds == {"cylinder"} and _same_caps(its):
             return _hull_cylinders(its, what, color)
         return _hull_disks(its, what, color)
-    raise ProfileError(f"hull() of {_count(its)} is not covered exactly (spheres with cylinders or cones: the "
-                       "surface between a sphere and a circle is in general no quadric); nearest exact alternative: "
-                       "hull the spheres and the cylinders separately, or spheres only")
+    coax = _coaxial(its)
+    if coax is not None:
+        return Construction("hull", what, hull_coaxial(*coax[:4], color=color), box=coax[4])
+    raise ProfileError(f"hull() of {_count(its)} is not covered exactly (spheres with cylinders or cones off their "
+                       "axis: the surface between a sphere and a circle is in general no quadric); nearest exact "
+                       "alternative: spheres centered on the cylinders' common axis, or hull the spheres and the "
+                       "cylinders separately")
 
 
+def _coaxial(its):
+    """(balls, disks, axis, origin, box) if every sphere center, cap center and point lies on
+    the cylinders' common axis line (a solid of revolution), else None."""
+    cyl = [it for it in its if it.kind == "cylinder"]
+    w, o = cyl[0].axis, cyl[0].p0
+    balls = [(it.center, it.radius) for it in its if it.kind == "sphere"]
+    disks = [(p, q) for it in cyl for p, q in ((it.p0, it.r0), (it.p1, it.r1))]
+    disks += [(p, 0.0) for it in its if it.kind == "points" for p in it.points]
+    size = max(float(np.abs([c for c, _ in balls + disks]).max()), max(r for _, r in balls + disks), 1e-300)
+    off = [np.linalg.norm((c - o) - ((c - o) @ w) * w) for c, _ in balls + disks]
+    if max(off) > 1e-9 * size or any(abs(abs(it.axis @ w) - 1) > 1e-12 for it in cyl):
+        return None
+    lo = np.min([c - r for c, r in balls] + [disk_box([c], [r], w)[0] for c, r in disks], axis=0)
+    hi = np.max([c + r for c, r in balls] + [disk_box([c], [r], w)[1] for c, r in disks], axis=0)
+    return balls, disks, w, o, (lo, hi)
 def _hull_spheres(its, what, color):
     """Balls of one radius: conv(centers) + B(r); any radii, with points: :mod:`round_hull`."""
     pts = [it for it in its if it.kind == "points"]

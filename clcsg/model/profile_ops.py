@@ -103,7 +103,7 @@ def offset_delta(p: Profile, delta: float, chamfer: bool = False) -> Profile:
     return polygon(pts, idx)
 
 
-def _tangent(ci, ri, cj, rj):
+def common_tangent(ci, ri, cj, rj):
     """The outer common tangent with the disks on its left, going from disk i to disk j:
     (unit outward normal, tangent point on i, tangent point on j) or None."""
     d = cj - ci
@@ -129,7 +129,7 @@ def hull_disks(centers, radii) -> Profile:
         for j in range(len(c)):
             if i == j:
                 continue
-            t = _tangent(c[i], r[i], c[j], r[j])
+            t = common_tangent(c[i], r[i], c[j], r[j])
             if t is None:
                 continue
             n, ti, tj = t

@@ -42,6 +42,7 @@ import numpy as np
 from .construction import ball, plane, raw, tube
 from .csg import Intersection, Primitive, Shape, Transformed, Union
 from .profile import ProfileError
+from .profile_ops import common_tangent
 from .quadric import frame_z_to
 
 _TOL = 1e-10  # in the normalized coordinates (centers around 0, size 1)
@@ -284,3 +285,44 @@ def disk_box(centers, radii, axis):
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
     ext = np.asarray(radii, dtype=np.float64).reshape(-1, 1) * np.sqrt(np.maximum(0.0, 1 - w * w))
     return (c - ext).min(axis=0), (c + ext).max(axis=0)
+
+
+def hull_coaxial(balls, disks, axis, origin, color=None) -> Shape:
+    """The hull of balls centered on the line ``origin + t axis`` and of disks perpendicular
+    to it and centered on it: a solid of revolution.  Its meridian in the half-plane
+    (rho >= 0, z) is the right half of the 2-D hull of the balls' circles (centers (0, z)) and
+    the disks' rim points (r, z); a boundary segment of it (a common tangent with outer normal
+    rho > 0) turns into a cone frustum or a cylinder from the axis out, and its region between
+    the axis and an arc lies in that arc's ball.  So the hull is the union of those frustums and
+    the balls.  ``balls`` and ``disks``: lists of (center, radius)."""
+    w = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    o = np.asarray(origin, dtype=np.float64)
+    circ = [(np.array([0.0, (np.asarray(c) - o) @ w]), float(r)) for c, r in balls]
+    circ += [(np.array([float(r), (np.asarray(c) - o) @ w]), 0.0) for c, r in disks]
+    cen = np.array([c for c, _ in circ])
+    rad = np.array([r for _, r in circ])
+    scale = max(np.abs(cen).max() + rad.max(), 1e-300)
+    pieces, used = [], set()
+    for i in range(len(circ)):
+        for j in range(len(circ)):
+            t = common_tangent(cen[i], rad[i], cen[j], rad[j]) if i != j else None
+            if t is None or t[0][0] <= 1e-12:
+                continue
+            n, ti, tj = t
+            if np.any(cen @ n + rad > n @ ti + 1e-12 * scale):
+                continue
+            used |= {i, j}
+            (ra, za), (rb, zb) = sorted((ti, tj), key=lambda p: p[1])
+            if zb - za > 1e-12 * scale and max(ra, rb) > 0:
+                mid = o + w * (za + zb) / 2
+                pieces.append(Primitive("cylinder", {"height": zb - za, "radius": ra, "center": mid.tolist(), "axis": w.tolist()}, color)
+                              if abs(ra - rb) <= 1e-15 * scale else
+                              Primitive("cone", {"height": zb - za, "r1": max(ra, 0.0), "r2": max(rb, 0.0),
+                                                 "center": mid.tolist(), "axis": w.tolist()}, color))
+    k = len(balls)
+    if not used and k:  # one ball holds everything
+        used = {int(np.argmax(rad[:k]))}
+    pieces += [ball(balls[i][0], balls[i][1], color) for i in sorted(used) if i < k]
+    if not pieces:
+        raise ProfileError("the hull is flat: it has no volume")
+    return Union(pieces)
