@@ -101,7 +101,7 @@ def agree(solid, dense, support, rng, n=6000):
     inside, outside = oracle(dense, support, pts, size)
     assert not np.any(inside & outside)
     assert (~inside & ~outside).mean() < 0.03, "the oracle's band is too wide"
-    assert inside.sum() > 300 and outside.sum() > 300
+    assert inside.sum() > 100 and outside.sum() > 300
     got = T.contains(solid, pts)
     bad_in, bad_out = inside & ~got, outside & got
     assert not bad_in.any(), f"{bad_in.sum()} points inside the hull are outside the construction, e.g. {pts[bad_in][:3].tolist()}"
@@ -280,3 +280,27 @@ def test_bullet_is_a_cylinder_and_a_sphere():
     ref = clcsg.cylinder(3, 1, center=(0, 0, 1.5)) | clcsg.sphere(1, (0, 0, 3))
     pts = np.random.default_rng(16).uniform(-2, 5, (20000, 3))
     np.testing.assert_array_equal(T.contains(solid, pts), T.contains(ref, pts))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_hulls_on_a_grid(seed):
+    """Integer centers and radii 0.5 or 1: four or more items on one face, equal and unequal
+    radii mixed, cubes among balls or among parallel cylinders and cones."""
+    rng = np.random.default_rng(100 + seed)
+    w = np.array([0, 0, 1.0]) if seed % 4 < 2 else np.array([1.0, 1, 0]) / 2 ** 0.5
+    ops, cubes = [], []
+    for _ in range(int(rng.integers(2, 6))):
+        c = rng.integers(-2, 3, 3).astype(float)
+        r = float(rng.choice([0.5, 1.0]))
+        if rng.random() < 0.25:
+            cubes.append(box_points(c - 0.5, c + 0.5))
+        elif seed % 2 == 0:
+            ops.append(Ball(c, r))
+        else:
+            ops.append(Frustum(c, r, c + float(rng.choice([1, 2])) * w, float(rng.choice([0, 0.5, r]))))
+    if not ops:
+        ops.append(Ball((0, 0, 0), 1.0))
+    corners = np.vstack(cubes) if cubes else np.zeros((0, 3))
+    solid = clcsg.hull(*[o.shape() for o in ops], *[clcsg.box(1, center=q.mean(axis=0)) for q in cubes])
+    agree(solid, np.vstack([o.points() for o in ops] + [corners]),
+          lambda n: np.max([o.support(n) for o in ops] + ([(n @ corners.T).max(axis=1)] if cubes else []), axis=0), rng)

@@ -47,8 +47,8 @@ MODELS = {
     "menger3": (220, {"box": 220}, {"gold"}),
 }
 
-#: what the primitive-only examples above use (the construction examples, rounded_box, rounded_plate
-#: and knob, are tested in test_constructions.py)
+#: what the primitive-only examples above use (the construction examples, rounded_box, rounded_plate,
+#: knob and pen_stand, are tested in test_constructions.py)
 ALLOWED_MODULES = {"cube", "sphere", "cylinder", "union", "difference", "intersection", "translate",
                    "rotate", "scale", "mirror", "multmatrix", "color"}
 UNSUPPORTED = {"hull", "minkowski", "linear_extrude", "rotate_extrude", "polyhedron", "polygon", "text",
