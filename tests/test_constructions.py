@@ -94,6 +94,8 @@ CASES = {
                                                         for y in (0, 3) for z in (0, 2)])),
     "hull_bullet": ("hull() { cylinder(h = 3, r = 1); translate([0, 0, 3]) sphere(1); }",
                     lambda: clcsg.cylinder(3, 1, center=(0, 0, 1.5)) | clcsg.sphere(1, (0, 0, 3))),
+    "minkowski_2d_square_circle": ("linear_extrude(2) minkowski() { square([4, 2]); translate([1, 0]) circle(0.5); }",
+                                   lambda: rounded_rect_plate(1, 0, 5, 2, 0.5, 2)),
     "hull_slot": ("hull() { cylinder(h = 2, r = 1); translate([5, 0, 0]) cylinder(h = 2, r = 1); }",
                   lambda: clcsg.box((5, 2, 2), center=(2.5, 0, 1)) | clcsg.cylinder(2, 1, center=(0, 0, 1))
                   | clcsg.cylinder(2, 1, center=(5, 0, 1))),

@@ -49,9 +49,9 @@ def circle_points(center, radius, axis, n=720):
 class Frustum:
     """A cylinder or cone between cap centers p0 (radius r0) and p1 (radius r1)."""
 
-    def __init__(self, p0, r0, p1, r1):
+    def __init__(self, p0, r0, p1, r1, w=None):
         self.p0, self.p1, self.r0, self.r1 = np.asarray(p0, float), np.asarray(p1, float), r0, r1
-        self.w = (self.p1 - self.p0) / np.linalg.norm(self.p1 - self.p0)
+        self.w = (self.p1 - self.p0) / np.linalg.norm(self.p1 - self.p0) if w is None else np.asarray(w, float)
 
     def shape(self):
         h = float(np.linalg.norm(self.p1 - self.p0))
@@ -304,3 +304,18 @@ def test_hulls_on_a_grid(seed):
     solid = clcsg.hull(*[o.shape() for o in ops], *[clcsg.box(1, center=q.mean(axis=0)) for q in cubes])
     agree(solid, np.vstack([o.points() for o in ops] + [corners]),
           lambda n: np.max([o.support(n) for o in ops] + ([(n @ corners.T).max(axis=1)] if cubes else []), axis=0), rng)
+
+
+def test_hull_of_an_extruded_circle_and_a_cylinder():
+    """linear_extrude(2, scale = 0.5) of a circle off the origin is an oblique cone (caps
+    perpendicular to z, the top center scaled too): one item of hull()."""
+    rng = np.random.default_rng(17)
+    cone = Frustum((1, 0, 0), 1.0, (0.5, 0, 2), 0.5, w=(0, 0, 1))
+    cyl = Frustum((5, 0, 0), 0.5, (5, 0, 2), 0.5)
+    solid = clcsg.hull(clcsg.extrude(clcsg.circle(1).translate((1, 0)), 2, scale=0.5), cyl.shape())
+    agree(solid, np.vstack([cone.points(), cyl.points()]), lambda n: np.maximum(cone.support(n), cyl.support(n)), rng)
+
+
+def test_constructions_that_are_no_item_are_named():
+    with pytest.raises(SceneError, match=r"a minkowski of 1 cube and 1 sphere inside is not covered"):
+        clcsg.hull(clcsg.minkowski(clcsg.box(1), clcsg.sphere(0.1)), clcsg.sphere(1, (3, 0, 0)))

@@ -74,6 +74,11 @@ def _apply(m, p):
 def _item(node, m) -> Item:
     if isinstance(node, Construction) and node.vertices is not None:
         return Item("points", node.kind, points=_apply(m, node.vertices))
+    if isinstance(node, Construction) and node.disks is not None:
+        return _disk_item(node, m)
+    if isinstance(node, Construction):
+        raise ProfileError(f"a {node.label} inside is not covered (only cubes, spheres, cylinders, cones, points, hulls "
+                           "and convex extrusions)")
     if not isinstance(node, Primitive):
         raise ProfileError(f"a {type(node).__name__.lower()} inside is not covered (only cubes, spheres, "
                            "cylinders, points and convex extrusions or hulls)")
@@ -104,15 +109,29 @@ def _item(node, m) -> Item:
     raise ProfileError(f"a {node.kind} is not covered (only cubes, spheres, cylinders, points and convex constructions)")
 
 
+def _disk_item(node, m) -> Item:
+    """An extruded circle: the cylinder or cone (oblique when scaled off the origin) between its
+    two cap disks, which are perpendicular to the extrusion's z."""
+    k = _similarity(m[:3, :3])
+    if k is None:
+        raise ProfileError("a non-uniformly scaled extruded circle is elliptic, which is not covered")
+    (c0, r0), (c1, r1) = node.disks
+    a, b = _apply(m, c0), _apply(m, c1)
+    w = _apply(m, (0, 0, 1)) - _apply(m, (0, 0, 0))
+    return Item("cylinder", "linear_extrude", radius=k * r0, axis=w / np.linalg.norm(w), p0=a, p1=b, r0=k * r0, r1=k * r1)
+
+
 def items(shape: Shape, m=None) -> list[Item]:
     """The items of ``shape``: unions opened, transforms composed (explicit stack)."""
     out, stack = [], [(shape, np.eye(4) if m is None else m)]
     while stack:
         node, mat = stack.pop()
-        if isinstance(node, Construction) and node.vertices is not None:
+        if isinstance(node, Construction) and (node.vertices is not None or node.disks is not None):
             out.append(_item(node, mat))
         elif isinstance(node, Construction) and node.kind == "hull" and isinstance(node.spec, tuple):
             out.append(Item("group", "hull", parts=[it for k in node.spec[1] for it in items(k, mat)]))
+        elif isinstance(node, Construction) and node.kind != "hull":
+            out.append(_item(node, mat))
         elif isinstance(node, Union):
             stack.extend((k, mat) for k in reversed(node.operands))
         elif isinstance(node, Transformed):

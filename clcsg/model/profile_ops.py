@@ -173,3 +173,37 @@ def offset(profile: Profile, r: float | None = None, delta: float | None = None,
         return out
     args = {"r": float(r)} if r is not None else {"delta": float(delta), "chamfer": bool(chamfer)}
     return out.with_spec({"offset": {"profile": profile.spec, **args}})
+
+
+def minkowski2d(*profiles: Profile) -> Profile:
+    """2-D Minkowski sums: a region plus a disk is its rounded offset by the radius, moved by
+    the disk's center (P + D(c, r) = offset_r(P, r) + c, exact for any polygon with holes);
+    disks add centers and radii; convex polygons give the hull of their pairwise vertex sums."""
+    if not profiles:
+        raise ProfileError("2-D minkowski() of nothing")
+    disks = [p for p in profiles if p.circle is not None]
+    rest = [p for p in profiles if p.circle is None]
+    center = np.sum([np.asarray(d.circle[0], float) for d in disks], axis=0) if disks else np.zeros(2)
+    radius = sum(float(d.circle[1]) for d in disks)
+    if len(rest) > 1:
+        if not all(p.loops is not None and len(p.loops) == 1 and _convex_loop(p.loops[0]) for p in rest):
+            raise ProfileError("2-D minkowski() of two polygons is covered for convex ones only; nearest exact "
+                               "alternative: a polygon plus a circle (offset)")
+        pts = np.zeros((1, 2))
+        for p in rest:
+            pts = (pts[:, None, :] + p.loops[0][None]).reshape(-1, 2)
+        rest = [hull_points(pts)]
+    if not rest:
+        return circle(radius, center)
+    if radius == 0:
+        return rest[0].translate(center)
+    if rest[0].loops is None:
+        raise ProfileError("2-D minkowski() of a 2-D Boolean result and a circle has no exact form here; nearest exact "
+                           "alternative: the sum of each square, circle or polygon before combining")
+    return offset_r(rest[0], radius).translate(center)
+
+
+def _convex_loop(lp):
+    d = np.roll(lp, -1, axis=0) - lp
+    c = d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1)
+    return bool(np.all(c >= 0) or np.all(c <= 0))
