@@ -96,6 +96,9 @@ CASES = {
                     lambda: clcsg.cylinder(3, 1, center=(0, 0, 1.5)) | clcsg.sphere(1, (0, 0, 3))),
     "minkowski_2d_square_circle": ("linear_extrude(2) minkowski() { square([4, 2]); translate([1, 0]) circle(0.5); }",
                                    lambda: rounded_rect_plate(1, 0, 5, 2, 0.5, 2)),
+    # the reference is the 3-D hull (tested against the dense-point oracle in test_round_hull.py)
+    "hull_2d_square_circle": ("linear_extrude(1) hull() { square([2, 2]); translate([5, 1]) circle(1); }",
+                              lambda: clcsg.hull(clcsg.box((2, 2, 1), center=(1, 1, 0.5)), clcsg.cylinder(1, 1, center=(5, 1, 0.5)))),
     "hull_slot": ("hull() { cylinder(h = 2, r = 1); translate([5, 0, 0]) cylinder(h = 2, r = 1); }",
                   lambda: clcsg.box((5, 2, 2), center=(2.5, 0, 1)) | clcsg.cylinder(2, 1, center=(0, 0, 1))
                   | clcsg.cylinder(2, 1, center=(5, 0, 1))),

@@ -23,6 +23,7 @@ import clcsg
 from clcsg.errors import SceneError
 from clcsg.model.construction import Construction
 from clcsg.model.csg import Primitive, rotation_matrix, walk
+from clcsg.model.profile_ops import hull2d_of
 
 import tree_oracle as T
 
@@ -319,3 +320,15 @@ def test_hull_of_an_extruded_circle_and_a_cylinder():
 def test_constructions_that_are_no_item_are_named():
     with pytest.raises(SceneError, match=r"a minkowski of 1 cube and 1 sphere inside is not covered"):
         clcsg.hull(clcsg.minkowski(clcsg.box(1), clcsg.sphere(0.1)), clcsg.sphere(1, (3, 0, 0)))
+
+
+def test_extruded_2d_hull_of_a_square_and_circles_is_the_3d_hull():
+    """2-D hull() of polygons and circles (vertices as disks of radius 0: tangent lines and
+    arcs) extruded, against the oracle of the 3-D hull of the cube and the cylinders."""
+    rng = np.random.default_rng(18)
+    prof = hull2d_of(clcsg.square((2, 2)), clcsg.circle(1).translate((5, 1)), clcsg.circle(0.5).translate((1, 4)))
+    solid = clcsg.extrude(prof, 1)
+    ops = [Frustum((5, 1, 0), 1.0, (5, 1, 1), 1.0), Frustum((1, 4, 0), 0.5, (1, 4, 1), 0.5)]
+    cube = box_points((0, 0, 0), (2, 2, 1))
+    agree(solid, np.vstack([cube] + [o.points() for o in ops]),
+          lambda n: np.max([(n @ cube.T).max(axis=1)] + [o.support(n) for o in ops], axis=0), rng)

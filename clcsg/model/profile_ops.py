@@ -8,8 +8,9 @@
   corners (mitered); ``chamfer`` cuts convex corners by the line perpendicular to the corner's
   bisector at distance |delta| (OpenSCAD's square joins).  Refused when an edge would turn
   around (a collapsed edge changes the polygon's topology).
-* The hull of disks c_i, r_i (any radii) is conv(T) | disks, T the tangent points of the hull's
-  common tangent lines: each arc of the boundary bounds a circular segment inside its disk.
+* The hull of disks c_i, r_i (any radii; polygon vertices are disks of radius 0) is
+  conv(T) | disks, T the tangent points of the hull's common tangent lines: each arc of the
+  boundary bounds a circular segment inside its disk.
 """
 
 from __future__ import annotations
@@ -138,7 +139,7 @@ def hull_disks(centers, radii) -> Profile:
                 tangents += [ti, tj]
                 used |= {i, j}
     poly = hull2d(np.array(tangents))
-    disks = [circle(r[i], c[i]) for i in sorted(used)]
+    disks = [circle(r[i], c[i]) for i in sorted(used) if r[i] > 0]
     out = union2d(polygon(poly), *disks)
     lo, hi = (c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0)
     return Profile(out.op, out.data, out.kids, bbox=(*lo, *hi))
@@ -150,9 +151,14 @@ def hull2d_of(*profiles: Profile) -> Profile:
         out = hull_disks([k.circle[0] for k in profiles], [k.circle[1] for k in profiles])
     elif all(k.loops is not None for k in profiles):
         out = hull_points(np.vstack([np.vstack(k.loops) for k in profiles]))
+    elif all(k.loops is not None or k.circle is not None for k in profiles):
+        # polygon vertices are disks of radius 0: conv(tangent points) | the circles
+        pts = hull2d(np.vstack([np.vstack(k.loops) for k in profiles if k.loops is not None]))
+        circ = [k.circle for k in profiles if k.circle is not None]
+        out = hull_disks([c for c, _ in circ] + list(pts), [r for _, r in circ] + [0.0] * len(pts))
     else:
-        raise ProfileError("2-D hull() is covered for all polygons (and squares) or all circles; "
-                           "nearest exact alternative: hull the circles or the polygons separately")
+        raise ProfileError("2-D hull() is covered for squares, circles and polygons, not for 2-D Boolean results; "
+                           "nearest exact alternative: hull the shapes before combining them")
     specs = [k.spec for k in profiles]
     return out if any(s is None for s in specs) else out.with_spec({"hull": specs})
 
