@@ -52,7 +52,9 @@ def surface_type(m: np.ndarray) -> str:
     """A quadric matrix's surface type, from the eigenvalues of its quadratic part."""
     a = m[:3, :3]
     w = np.linalg.eigvalsh(a)
-    tol = 1e-9 * max(np.abs(m).max(), 1e-300)
+    # relative to the quadratic part itself (a cone far from the origin has a huge constant
+    # term), but above rounding of the whole matrix (a moved plane's A is noise)
+    tol = max(1e-9 * np.abs(a).max(), 1e-13 * np.abs(m).max(), 1e-300)
     nz = w[np.abs(w) > tol]
     if len(nz) == 0:
         return "plane"
