@@ -332,3 +332,32 @@ def test_extruded_2d_hull_of_a_square_and_circles_is_the_3d_hull():
     cube = box_points((0, 0, 0), (2, 2, 1))
     agree(solid, np.vstack([cube] + [o.points() for o in ops]),
           lambda n: np.max([(n @ cube.T).max(axis=1)] + [o.support(n) for o in ops], axis=0), rng)
+
+
+def _dist_to_polygon(pts, poly):
+    """Distance from each point to the filled simple polygon (0 inside): even-odd crossing
+    test and the nearest edge, in float64."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    x, y = pts[:, :1], pts[:, 1:2]
+    cross = ((a[:, 1] > y) != (b[:, 1] > y)) & (x < (b[:, 0] - a[:, 0]) * (y - a[:, 1]) / (b[:, 1] - a[:, 1] + 1e-300) + a[:, 0])
+    inside = cross.sum(axis=1) % 2 == 1
+    e = b - a
+    t = np.clip(((pts[:, None, :] - a) * e).sum(-1) / (e * e).sum(-1), 0, 1)
+    d = np.linalg.norm(pts[:, None, :] - (a + t[..., None] * e), axis=-1).min(axis=1)
+    return np.where(inside, 0.0, d)
+
+
+def test_2d_minkowski_of_a_polygon_and_a_circle():
+    """P + D(c, r) = {x : dist(x - c, P) <= r}, for a non-convex polygon (an L)."""
+    from clcsg.model.profile_ops import minkowski2d
+
+    ell = np.array([[0, 0], [4, 0], [4, 1], [1, 1], [1, 3], [0, 3]], float)
+    c, r = np.array([0.5, -0.25]), 0.6
+    solid = clcsg.extrude(minkowski2d(clcsg.polygon(ell), clcsg.circle(r).translate(c)), 1.0)
+    rng = np.random.default_rng(19)
+    pts = np.c_[rng.uniform(-1.5, 6, (20000, 2)), np.full(20000, 0.5)]
+    d = _dist_to_polygon(pts[:, :2] - c, ell)
+    sure = np.abs(d - r) > 1e-9
+    np.testing.assert_array_equal(T.contains(solid, pts)[sure], (d <= r)[sure])
+    with pytest.raises(SceneError, match="2-D minkowski.. of two polygons is covered for convex ones only"):
+        minkowski2d(clcsg.polygon(ell), clcsg.square(1))
