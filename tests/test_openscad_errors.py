@@ -43,9 +43,10 @@ UNSUPPORTED = {
         "text() is not supported: text() outlines glyphs with Bezier curves, not lines and arcs; nearest exact alternative: none (model lettering with polygons)",
     'import(file = "foo.stl", layer = "", origin = [0, 0], scale = 1, convexity = 1, $fn = 0, $fa = 12, $fs = 2, timestamp = 0);':
         "import(): foo.stl: no such file",
-    "hull() { sphere(r = 1); cube(1); }":
-        "hull(): hull() of 1 sphere and 1 cube is not covered exactly (hulls of cubes and points, of spheres, or of parallel "
-        "cylinders with the same caps are); nearest exact alternative: hull the spheres, the cubes or the cylinders separately",
+    "hull() { sphere(r = 1); multmatrix([[1, 0, 0, 3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) cylinder(h = 1, r = 1); }":
+        "hull(): hull() of 1 sphere and 1 cylinder is not covered exactly (spheres with cylinders or cones off their axis: "
+        "the surface between a sphere and a circle is in general no quadric); nearest exact alternative: spheres centered "
+        "on the cylinders' common axis, or hull the spheres and the cylinders separately",
     "minkowski(convexity = 0) { sphere(r = 1); cylinder(h = 1, r = 1); }":
         "minkowski(): minkowski() of spheres and cylinders is not covered exactly (it is a rounded cylinder, a torus edge); "
         "nearest exact alternative: a cube or polytope plus a sphere",

@@ -47,8 +47,8 @@ MODELS = {
     "menger3": (220, {"box": 220}, {"gold"}),
 }
 
-#: what the primitive-only examples above use (the construction examples, rounded_box, rounded_plate
-#: and knob, are tested in test_constructions.py)
+#: what the primitive-only examples above use (the construction examples, rounded_box, rounded_plate,
+#: knob and pen_stand, are tested in test_constructions.py)
 ALLOWED_MODULES = {"cube", "sphere", "cylinder", "union", "difference", "intersection", "translate",
                    "rotate", "scale", "mirror", "multmatrix", "color"}
 UNSUPPORTED = {"hull", "minkowski", "linear_extrude", "rotate_extrude", "polyhedron", "polygon", "text",
@@ -205,10 +205,10 @@ def test_openscad_warnings_become_openscad_warnings(openscad, tmp_path):
 
 def test_unsupported_node_in_the_export_names_the_scad_file(openscad, tmp_path):
     src = tmp_path / "hull.scad"
-    src.write_text("cube(1);\nhull() { cube(1); translate([3, 0, 0]) sphere(1); }\n")
+    src.write_text("cube(1);\nhull() { cylinder(1); translate([3, 0, 0]) sphere(1); }\n")
     with pytest.raises(SceneError) as ei:
         clcsg.load(src)
-    assert str(ei.value).startswith(f"{src} (CSG export):2:1: hull(): hull() of 1 cube and 1 sphere is not covered exactly")
+    assert str(ei.value).startswith(f"{src} (CSG export):2:1: hull(): hull() of 1 cylinder and 1 sphere is not covered exactly")
 
 
 def test_empty_model_loads_empty_with_a_warning(openscad, tmp_path):
@@ -306,8 +306,8 @@ def test_10000_levels_without_recursion_error():
     scene = parse_csg("group() " * n + "difference() { cube(2); sphere(1); }", "deep.csg")
     assert isinstance(scene.shape, Difference)
     # errors deep down still name line and column
-    with pytest.raises(SceneError, match=r"^deep\.csg:10001:1: hull\(\): hull\(\) of 1 cube and 1 sphere is not covered"):
-        parse_csg("group() {\n" * n + "hull() { cube(1); sphere(1); }" + "}" * n, "deep.csg")
+    with pytest.raises(SceneError, match=r"^deep\.csg:10001:1: hull\(\): hull\(\) of 1 cylinder and 1 sphere is not covered"):
+        parse_csg("group() {\n" * n + "hull() { cylinder(h = 1, r = 1); multmatrix([[1, 0, 0, 3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) sphere(1); }" + "}" * n, "deep.csg")
     with pytest.raises(SceneError, match=r"^deep\.csg:1:\d+: syntax error: expected '\}', got end of file"):
         parse_csg("group() {" * n, "deep.csg")
 

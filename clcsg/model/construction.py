@@ -4,7 +4,8 @@
 CSG the construction expands to, so every stage that understands unions (compile, bounds,
 ``contains``, the oracle) needs nothing new.  It adds ``label`` ("hull of 8 spheres"),
 ``surfaces`` (the unique quadric surfaces by type: "6 planes, 12 cylinders, 8 spheres") and,
-for convex polytopes, ``vertices`` (what ``minkowski`` needs from its first operand).
+for convex polytopes, ``vertices``, and for extruded circles ``disks`` (what ``hull`` and
+``minkowski`` read their operands as).
 
 Leaf helpers build the Primitive literals the constructions use, all with one color.
 """
@@ -21,9 +22,12 @@ _ORDER = ("plane", "cylinder", "elliptic cylinder", "cone", "sphere", "ellipsoid
 
 
 class Construction(Union):
-    __slots__ = ("label", "surfaces", "vertices", "kind", "spec")
+    __slots__ = ("label", "surfaces", "vertices", "kind", "spec", "disks")
 
-    def __init__(self, kind: str, label: str, body: Shape, vertices=None, box=None, spec=None):
+    def __init__(self, kind: str, label: str, body: Shape, vertices=None, box=None, spec=None, disks=None):
+        #: for a cylinder or cone built otherwise (an extruded circle): its two cap disks
+        #: ((center, radius), (center, radius)), perpendicular to z; what hull() needs
+        self.disks = disks
         #: how to build it again (scene files): {"extrude": {...}} with a JSON profile, or
         #: ("hull" | "minkowski", operand shapes); None: saved as its expansion
         self.spec = spec
@@ -48,7 +52,9 @@ def surface_type(m: np.ndarray) -> str:
     """A quadric matrix's surface type, from the eigenvalues of its quadratic part."""
     a = m[:3, :3]
     w = np.linalg.eigvalsh(a)
-    tol = 1e-9 * max(np.abs(m).max(), 1e-300)
+    # relative to the quadratic part itself (a cone far from the origin has a huge constant
+    # term), but above rounding of the whole matrix (a moved plane's A is noise)
+    tol = max(1e-9 * np.abs(a).max(), 1e-13 * np.abs(m).max(), 1e-300)
     nz = w[np.abs(w) > tol]
     if len(nz) == 0:
         return "plane"

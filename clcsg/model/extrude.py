@@ -79,7 +79,12 @@ def extrude(profile: Profile, height=1.0, center=False, scale=1.0, twist=0.0, co
     box = ((min(xs), min(ys), z0), (max(xs), max(ys), z0 + h))
     spec = None if profile.spec is None else {"extrude": {"profile": profile.spec, "height": h, "center": bool(center),
                                                           "scale": float(s[0]) if uniform else s.tolist()}}
-    return Construction("extrude", f"linear_extrude of {profile.describe()} (height {h:g}{sc})", solid, verts, box, spec)
+    disks = None
+    if profile.circle is not None and uniform:
+        (cx, cy), rc = profile.circle
+        disks = (((cx, cy, z0), rc), ((cx * s[0], cy * s[0], z0 + h), rc * s[0]))
+    return Construction("extrude", f"linear_extrude of {profile.describe()} (height {h:g}{sc})", solid, verts, box, spec,
+                        disks)
 
 
 def _convex(lp):

@@ -2,27 +2,30 @@
 
 The operands are read as *items* (unions are opened and transforms composed into them):
 points (a box's 8 corners, a convex construction's vertices), spheres (under a similarity),
-and cylinders (under a similarity: a circle stays a circle).
+and cylinders and cones (under a similarity: a circle stays a circle), each the hull of its
+two cap disks.
 
 hull:
 * points only: the convex polytope of all points (face planes);
 * spheres of equal radius r: conv(centers) + B(r) (:mod:`clcsg.model.minkowski`): planes,
   cylinders along the edges, spheres at the corners: the rounded-box idiom;
-* two spheres of different radii: both balls and the frustum of their common tangent cone
-  between the two tangent circles (at distance r_i sin(alpha) from each center towards the
-  smaller one, sin(alpha) = (r1 - r2) / |c2 - c1|);
-* three or more spheres of any radii: a star decomposition from the centroid of the centers
-  (:func:`_many_spheres`);
+* spheres of any radii, with points (cubes, polytopes) or without:
+  :func:`clcsg.model.round_hull.hull_of_balls`: the face planes, one tangent cone per edge and
+  the balls, with one polytope and the frustum caps closing them inside;
 * cylinders with parallel axes and the same two cap planes: the extrusion of the 2-D hull of
-  their circles (:func:`clcsg.model.profile_ops.hull_disks`: tangent lines and arcs).
+  their circles (:func:`clcsg.model.profile_ops.hull_disks`: tangent lines and arcs);
+* cylinders and cones with parallel axes and any caps, with points or without:
+  :func:`clcsg.model.round_hull.hull_of_disks` (oblique cones between the cap circles).
 
 minkowski (associative, and distributive over the union of the first operand):
-points + points is the hull of the pairwise sums, spheres add centers and radii, a polytope
-plus a ball is :func:`~clcsg.model.minkowski.polytope_plus_ball`, a z-prism plus a z-cylinder
-is the extrusion of the cross-section offset by the radius.
+points + points is the hull of the pairwise sums, spheres add centers and radii, parallel
+cylinders and cones add their cap disks pairwise; a polytope plus a ball is
+:func:`~clcsg.model.minkowski.polytope_plus_ball`, a polytope plus cylinders or cones is the
+hull of the disks placed at its vertices (conv(V) + conv(D) = conv(V + D)), for a prism along
+a cylinder's axis the extrusion of the cross-section offset by the radius.
 
-Everything else (mixed operands, skew cylinders,
-differences and intersections inside) is refused with a :class:`ProfileError` that names it.
+Everything else (spheres with cylinders, cylinders that are not parallel, differences and
+intersections inside) is refused with a :class:`ProfileError` that names it.
 """
 
 from __future__ import annotations
@@ -32,26 +35,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .construction import Construction, ball, bounded, first_color, plane, tube
-from .csg import Intersection, Primitive, Shape, Transformed, Union
+from .construction import Construction, ball, bounded, first_color
+from .csg import Primitive, Shape, Transformed, Union
 from .extrude import extrude
 from .minkowski import minkowski_ball, z_prism
 from .polytope import convex_polytope, polytope_solid
 from .profile import ProfileError, polygon
 from .profile_ops import hull_disks, offset_r
 from .quadric import frame_z_to
+from .round_hull import disk_box, hull_coaxial, hull_of_balls, hull_of_disks
 
 
 @dataclass
 class Item:
-    kind: str               # "points", "sphere", "cylinder"
+    kind: str               # "points", "sphere", "cylinder" (cylinders and cones)
     name: str               # for messages: "cube", "sphere", ...
     points: np.ndarray = None
     center: np.ndarray = None
-    radius: float = 0.0
+    radius: float = 0.0      # spheres; cylinders: r0 if r0 == r1
     axis: np.ndarray = None  # unit, cylinders
     p0: np.ndarray = None    # cap centers, cylinders
     p1: np.ndarray = None
+    r0: float = 0.0          # cap radii at p0, p1 (cones: one may be 0)
+    r1: float = 0.0
+    parts: list = None       # "group": the items of a hull() operand (one convex item)
 
 
 def _similarity(lin):
@@ -67,6 +74,11 @@ def _apply(m, p):
 def _item(node, m) -> Item:
     if isinstance(node, Construction) and node.vertices is not None:
         return Item("points", node.kind, points=_apply(m, node.vertices))
+    if isinstance(node, Construction) and node.disks is not None:
+        return _disk_item(node, m)
+    if isinstance(node, Construction):
+        raise ProfileError(f"a {node.label} inside is not covered (only cubes, spheres, cylinders, cones, points, hulls "
+                           "and convex extrusions)")
     if not isinstance(node, Primitive):
         raise ProfileError(f"a {type(node).__name__.lower()} inside is not covered (only cubes, spheres, "
                            "cylinders, points and convex extrusions or hulls)")
@@ -80,17 +92,33 @@ def _item(node, m) -> Item:
         if k is None:
             raise ProfileError("a scaled sphere is an ellipsoid, which is not covered")
         return Item("sphere", "sphere", center=_apply(m, p.get("center", (0, 0, 0))), radius=k * float(p.get("radius", 1.0)))
-    if node.kind == "cylinder":
+    if node.kind in ("cylinder", "cone"):
         k = _similarity(m[:3, :3])
         if k is None:
-            raise ProfileError("a non-uniformly scaled cylinder is elliptic, which is not covered")
+            raise ProfileError(f"a non-uniformly scaled {node.kind} is elliptic, which is not covered")
         w = np.asarray(p.get("axis", (0, 0, 1)), float)
         w = w / np.linalg.norm(w)
         c = np.asarray(p.get("center", (0, 0, 0)), float)
         h = float(p.get("height", 1.0))
         a, b = _apply(m, c - w * h / 2), _apply(m, c + w * h / 2)
-        return Item("cylinder", "cylinder", radius=k * float(p.get("radius", 1.0)), axis=(b - a) / np.linalg.norm(b - a), p0=a, p1=b)
+        if node.kind == "cone":
+            r0, r1 = k * float(p.get("r1", 1.0)), k * float(p.get("r2", 0.0))
+        else:
+            r0 = r1 = k * float(p.get("radius", 1.0))
+        return Item("cylinder", node.kind, radius=r0, axis=(b - a) / np.linalg.norm(b - a), p0=a, p1=b, r0=r0, r1=r1)
     raise ProfileError(f"a {node.kind} is not covered (only cubes, spheres, cylinders, points and convex constructions)")
+
+
+def _disk_item(node, m) -> Item:
+    """An extruded circle: the cylinder or cone (oblique when scaled off the origin) between its
+    two cap disks, which are perpendicular to the extrusion's z."""
+    k = _similarity(m[:3, :3])
+    if k is None:
+        raise ProfileError("a non-uniformly scaled extruded circle is elliptic, which is not covered")
+    (c0, r0), (c1, r1) = node.disks
+    a, b = _apply(m, c0), _apply(m, c1)
+    w = _apply(m, (0, 0, 1)) - _apply(m, (0, 0, 0))
+    return Item("cylinder", "linear_extrude", radius=k * r0, axis=w / np.linalg.norm(w), p0=a, p1=b, r0=k * r0, r1=k * r1)
 
 
 def items(shape: Shape, m=None) -> list[Item]:
@@ -98,7 +126,11 @@ def items(shape: Shape, m=None) -> list[Item]:
     out, stack = [], [(shape, np.eye(4) if m is None else m)]
     while stack:
         node, mat = stack.pop()
-        if isinstance(node, Construction) and node.vertices is not None:
+        if isinstance(node, Construction) and (node.vertices is not None or node.disks is not None):
+            out.append(_item(node, mat))
+        elif isinstance(node, Construction) and node.kind == "hull" and isinstance(node.spec, tuple):
+            out.append(Item("group", "hull", parts=[it for k in node.spec[1] for it in items(k, mat)]))
+        elif isinstance(node, Construction) and node.kind != "hull":
             out.append(_item(node, mat))
         elif isinstance(node, Union):
             stack.extend((k, mat) for k in reversed(node.operands))
@@ -123,8 +155,16 @@ def hull(*solids: Shape, color=None) -> Construction:
     return out
 
 
+def _flat(its):
+    """A hull of hulls is the hull of all their parts."""
+    out = []
+    for it in its:
+        out += _flat(it.parts) if it.kind == "group" else [it]
+    return out
+
+
 def _hull(solids, color):
-    its = [it for s in solids for it in items(s)]
+    its = _flat([it for s in solids for it in items(s)])
     if not its:
         raise ProfileError("hull() of nothing")
     kinds = {it.kind for it in its}
@@ -135,150 +175,97 @@ def _hull(solids, color):
             raise ProfileError("hull() of flat points (coplanar) has no volume")
         box = (poly.vertices.min(axis=0), poly.vertices.max(axis=0))
         return Construction("hull", what, polytope_solid(poly, color), poly.vertices, box)
-    if kinds == {"sphere"}:
+    if "sphere" in kinds and "cylinder" not in kinds:
         return _hull_spheres(its, what, color)
-    if kinds == {"cylinder"}:
-        return _hull_cylinders(its, what, color)
-    raise ProfileError(f"hull() of {_count(its)} is not covered exactly (hulls of cubes and points, of spheres, "
-                       "or of parallel cylinders with the same caps are); nearest exact alternative: "
-                       "hull the spheres, the cubes or the cylinders separately")
+    if "cylinder" in kinds and "sphere" not in kinds:
+        if kinds == {"cylinder"} and _same_caps(its):
+            return _hull_cylinders(its, what, color)
+        return _hull_disks(its, what, color)
+    coax = _coaxial(its)
+    if coax is not None:
+        return Construction("hull", what, hull_coaxial(*coax[:4], color=color), box=coax[4])
+    raise ProfileError(f"hull() of {_count(its)} is not covered exactly (spheres with cylinders or cones off their "
+                       "axis: the surface between a sphere and a circle is in general no quadric); nearest exact "
+                       "alternative: spheres centered on the cylinders' common axis, or hull the spheres and the "
+                       "cylinders separately")
 
 
+def _coaxial(its):
+    """(balls, disks, axis, origin, box) if every sphere center, cap center and point lies on
+    the cylinders' common axis line (a solid of revolution), else None."""
+    cyl = [it for it in its if it.kind == "cylinder"]
+    w, o = cyl[0].axis, cyl[0].p0
+    balls = [(it.center, it.radius) for it in its if it.kind == "sphere"]
+    disks = [(p, q) for it in cyl for p, q in ((it.p0, it.r0), (it.p1, it.r1))]
+    disks += [(p, 0.0) for it in its if it.kind == "points" for p in it.points]
+    size = max(float(np.abs([c for c, _ in balls + disks]).max()), max(r for _, r in balls + disks), 1e-300)
+    off = [np.linalg.norm((c - o) - ((c - o) @ w) * w) for c, _ in balls + disks]
+    if max(off) > 1e-9 * size or any(abs(abs(it.axis @ w) - 1) > 1e-12 for it in cyl):
+        return None
+    lo = np.min([c - r for c, r in balls] + [disk_box([c], [r], w)[0] for c, r in disks], axis=0)
+    hi = np.max([c + r for c, r in balls] + [disk_box([c], [r], w)[1] for c, r in disks], axis=0)
+    return balls, disks, w, o, (lo, hi)
 def _hull_spheres(its, what, color):
-    r = np.array([it.radius for it in its])
-    c = np.array([it.center for it in its])
-    if np.allclose(r, r[0], rtol=1e-12, atol=0):
+    """Balls of one radius: conv(centers) + B(r); any radii, with points: :mod:`round_hull`."""
+    pts = [it for it in its if it.kind == "points"]
+    sph = [it for it in its if it.kind == "sphere"]
+    r = np.array([it.radius for it in sph])
+    c = np.array([it.center for it in sph])
+    if not pts and np.allclose(r, r[0], rtol=1e-12, atol=0) and len(sph) > 1:
         poly = convex_polytope(c)
         return Construction("hull", what, minkowski_ball(poly, r[0], color=color).operands[0])
+    if pts:
+        p = _extreme(np.vstack([it.points for it in pts]))
+        c, r = np.vstack([c, p]), np.r_[r, np.zeros(len(p))]
+    body, _ = hull_of_balls(c, r, color)
     box = ((c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0))
-    if len(its) == 2:
-        return Construction("hull", what, _two_spheres(c[0], r[0], c[1], r[1], color), box=box)
-    return Construction("hull", what, _many_spheres(c, r, color), box=box)
+    return Construction("hull", what, body, box=box)
 
 
-def _two_spheres(c1, r1, c2, r2, color):
-    if r1 < r2:
-        c1, r1, c2, r2 = c2, r2, c1, r1
-    d = c2 - c1
-    length = np.linalg.norm(d)
-    if length + r2 <= r1:
-        return ball(c1, r1, color)
-    u = d / length
-    balls = [ball(p, q, color) for p, q in ((c1, r1), (c2, r2)) if q > 0]
-    if r1 == r2:
-        return Union(balls + [Intersection([tube(c1, u, r1, color), plane(u, u @ c2, color), plane(-u, -(u @ c1), color)])])
-    sin = (r1 - r2) / length
-    apex = c1 + u * r1 / sin
-    slope = sin / math.sqrt(1 - sin * sin)
-    cone = Primitive("double_cone", {"apex": apex.tolist(), "axis": u.tolist(), "slope": slope}, color)
-    lo, hi = u @ c1 + r1 * sin, u @ c2 + r2 * sin
-    frustum = Intersection([cone, plane(u, hi, color), plane(-u, -lo, color)])
-    return Union(balls + [frustum])
+def _extreme(points):
+    """The vertices of conv(points) (all of them if they are flat)."""
+    poly = convex_polytope(points)
+    return poly.vertices
 
 
-def _tangent_planes(c, r, i, j, k):
-    """Unit normals n with n . c_m + r_m equal for m = i, j, k (0, 1 or 2 of them)."""
-    a = np.array([c[j] - c[i], c[k] - c[i]])
-    b = np.array([r[i] - r[j], r[i] - r[k]])
-    w = np.cross(a[0], a[1])
-    if np.linalg.norm(w) <= 1e-12 * np.linalg.norm(a[0]) * np.linalg.norm(a[1]):
-        return []
-    p0 = np.linalg.lstsq(a, b, rcond=None)[0]  # the point of the solution line nearest 0
-    w = w / np.linalg.norm(w)
-    q = 1 - p0 @ p0
-    if q < 0:
-        return []
-    return [p0 + s * math.sqrt(q) * w for s in (1, -1)]
+def _disks(its):
+    """(centers, radii, axis) of the disks of cylinder and cone items (points: radius 0)."""
+    cyl = [it for it in its if it.kind == "cylinder"]
+    w = cyl[0].axis
+    if not all(abs(abs(it.axis @ w) - 1) <= 1e-12 for it in cyl):
+        raise ProfileError("cylinders and cones whose axes are not parallel are not covered exactly (their hull or "
+                           "sum has non-quadric patches); nearest exact alternative: parallel axes")
+    c = [p for it in cyl for p in (it.p0, it.p1)]
+    r = [q for it in cyl for q in (it.r0, it.r1)]
+    pts = [it.points for it in its if it.kind == "points"]
+    if pts:
+        p = _extreme(np.vstack(pts))
+        c, r = c + list(p), r + [0.0] * len(p)
+    return np.array(c), np.array(r), w
 
 
-def _pair(c, r, a, b, color):
-    """hull(B_a, B_b) without the balls: a cone frustum, or a finite cylinder (r = 0: a point,
-    the cone from it tangent to the other ball)."""
-    if np.linalg.norm(c[a] - c[b]) <= abs(r[a] - r[b]):
-        return Union([])  # one contains the other
-    return _two_spheres(c[a], r[a], c[b], r[b], color).operands[-1]
+def _hull_disks(its, what, color):
+    c, r, w = _disks(its)
+    body, _ = hull_of_disks(c, r, w, color)
+    return Construction("hull", what, body, box=disk_box(c, r, w))
 
 
-def _faces(c, r):
-    """The hull's face planes: (normal, indices of the balls touching it), each plane tangent to
-    three balls with every ball on its inner side."""
-    n, scale = len(c), float(np.abs(c).max() + r.max())
-    out, seen = [], set()
-    for i in range(n):
-        for j in range(i + 1, n):
-            for k in range(j + 1, n):
-                for nrm in _tangent_planes(c, r, i, j, k):
-                    h = nrm @ c[i] + r[i]
-                    if np.all(c @ nrm + r <= h + 1e-12 * scale):
-                        touch = tuple(m for m in range(n) if c[m] @ nrm + r[m] >= h - 1e-12 * scale)
-                        key = (touch, tuple(np.round(nrm, 9)))
-                        if key not in seen:
-                            seen.add(key)
-                            out.append((nrm, touch))
-    return out
-
-
-def _three(c, r, color):
-    """hull of three balls (radii may be 0): conv(tangent points of its two tangent planes),
-    the balls and the three pair hulls."""
-    pieces = [ball(c[m], r[m], color) for m in range(3) if r[m] > 0]
-    pieces += [_pair(c, r, a, b, color) for a, b in ((0, 1), (0, 2), (1, 2))]
-    pts = [c[m] + r[m] * nrm for nrm, touch in _faces(c, r) for m in touch]
-    if len(pts) >= 4:
-        poly = convex_polytope(np.array(pts))
-        if poly.dim == 3:
-            pieces.append(polytope_solid(poly, color))
-    return Union(pieces)
-
-
-def _many_spheres(c, r, color):
-    """Hull of three or more balls of different radii, star-shaped from O (the centroid of the
-    centers, inside the hull): every hull point is on a segment from O to a boundary point, on
-    a face triangle, on the cone patch of an edge (i, j) or on the sphere patch of a ball i, so
-
-        hull = U conv(O, face) | U hull(O, B_i, B_j) | U hull(O, B_i)
-
-    over the faces, edges and balls of the boundary; each piece lies in the hull.  hull(O, B_i)
-    is B_i and the cone from O tangent to it; hull(O, B_i, B_j) is the three-ball case."""
-    keep = [i for i in range(len(c)) if not any(j != i and np.linalg.norm(c[i] - c[j]) + r[i] <= r[j] for j in range(len(c)))]
-    c, r = c[keep], r[keep]
-    if len(c) == 1:
-        return ball(c[0], r[0], color)
-    if len(c) == 2:
-        return _two_spheres(c[0], r[0], c[1], r[1], color)
-    faces = _faces(c, r)
-    if not faces:  # collinear centers: the balls and all pair hulls
-        n = len(c)
-        return Union([ball(c[m], r[m], color) for m in range(n)]
-                     + [_pair(c, r, a, b, color) for a in range(n) for b in range(a + 1, n)])
-    o = c.mean(axis=0)
-    pieces, edges, used = [], set(), set()
-    for nrm, touch in faces:
-        pts = np.array([o] + [c[m] + r[m] * nrm for m in touch])
-        poly = convex_polytope(pts)
-        if poly.dim == 3:
-            pieces.append(polytope_solid(poly, color))
-        edges |= {(a, b) for a in touch for b in touch if a < b}
-        used |= set(touch)
-    for a, b in sorted(edges):
-        pieces.append(_three(np.array([o, c[a], c[b]]), np.array([0.0, r[a], r[b]]), color))
-    for m in sorted(used):
-        pieces += [ball(c[m], r[m], color), _pair(np.array([o, c[m]]), np.array([0.0, r[m]]), 0, 1, color)]
-    return Union(pieces)
-
-
-def _frame(w):
-    return frame_z_to(w)
+def _same_caps(its):
+    """Parallel cylinders (equal cap radii) whose caps lie in the same two planes."""
+    w = its[0].axis
+    if not all(abs(abs(it.axis @ w) - 1) <= 1e-12 and it.r0 == it.r1 for it in its):
+        return False
+    rot = frame_z_to(w)
+    z = np.array([sorted(((rot.T @ it.p0)[2], (rot.T @ it.p1)[2])) for it in its])
+    return bool(np.ptp(z[:, 0]) <= 1e-9 * max(1, abs(z[0, 0])) and np.ptp(z[:, 1]) <= 1e-9 * max(1, abs(z[0, 1])))
 
 
 def _hull_cylinders(its, what, color):
     w = its[0].axis
-    rot = _frame(w)
+    rot = frame_z_to(w)
     loc = [(rot.T @ it.p0, rot.T @ it.p1) for it in its]
     z0 = [min(a[2], b[2]) for a, b in loc]
     z1 = [max(a[2], b[2]) for a, b in loc]
-    if not all(abs(abs(it.axis @ w) - 1) <= 1e-12 for it in its) or np.ptp(z0) > 1e-9 * max(1, abs(z0[0])) or np.ptp(z1) > 1e-9 * max(1, abs(z1[0])):
-        raise ProfileError("hull() of cylinders is covered for parallel axes and the same two cap planes only")
     prof = hull_disks([a[:2] for a, _ in loc], [it.radius for it in its])
     ext = extrude(prof, z1[0] - z0[0], color=color)
     m = np.eye(4)
@@ -309,43 +296,91 @@ def _minkowski(solids, color):
     return Construction("minkowski", what, pieces[0] if len(pieces) == 1 else Union(pieces))
 
 
+_MIXED = ("minkowski() of spheres and cylinders is not covered exactly (it is a rounded cylinder, "
+          "a torus edge); nearest exact alternative: a cube or polytope plus a sphere")
+
+
+def _round_set(it):
+    """An item as (kind, centers, radii, axis): "points", "balls" or "disks" (the hull of
+    them; a hull() operand is the hull of its parts' sets)."""
+    if it.kind == "points":
+        return "points", it.points, np.zeros(len(it.points)), None
+    if it.kind == "sphere":
+        return "balls", it.center[None], np.array([it.radius]), None
+    if it.kind == "cylinder":
+        return "disks", np.array([it.p0, it.p1]), np.array([it.r0, it.r1]), it.axis
+    sets = [_round_set(p) for p in it.parts]
+    kinds = {k for k, *_ in sets} - {"points"}
+    if len(kinds) > 1:
+        raise ProfileError(_MIXED)
+    axis = next((a for _, _, _, a in sets if a is not None), None)
+    _parallel(axis, [a for _, _, _, a in sets])
+    return (kinds.pop() if kinds else "points"), np.vstack([c for _, c, _, _ in sets]), np.concatenate([r for _, _, r, _ in sets]), axis
+
+
+def _parallel(w, axes):
+    if any(a is not None and abs(abs(a @ w) - 1) > 1e-12 for a in axes):
+        raise ProfileError("cylinders and cones whose axes are not parallel are not covered exactly (their hull or "
+                           "sum has non-quadric patches); nearest exact alternative: parallel axes")
+
+
 def _sum(its, color):
-    pts = [it.points for it in its if it.kind == "points"]
-    sph = [it for it in its if it.kind == "sphere"]
-    cyl = [it for it in its if it.kind == "cylinder"]
-    center = sum((s.center for s in sph), np.zeros(3))
-    radius = sum(s.radius for s in sph)
-    if not pts:
-        if cyl:
-            raise ProfileError("minkowski() of spheres and cylinders is not covered exactly (it is a rounded cylinder, "
-                               "a torus edge); nearest exact alternative: a cube or polytope plus a sphere")
-        return ball(center, radius, color)
-    sums = pts[0]
-    for p in pts[1:]:
-        sums = (sums[:, None, :] + p[None, :, :]).reshape(-1, 3)
-    poly = convex_polytope(sums)
-    if cyl and sph:
-        raise ProfileError("minkowski() of a polytope, a sphere and a cylinder is not covered exactly")
-    if sph:
-        return minkowski_ball(poly, radius, center, color=color).operands[0]
-    if cyl:
-        return _prism_cylinder(poly, cyl, color)
-    if poly.dim < 3:
-        raise ProfileError("minkowski() of flat polytopes has no volume")
-    return bounded(polytope_solid(poly, color), poly.vertices.min(axis=0), poly.vertices.max(axis=0))
+    """The sum of convex items as the hull of one set of balls or of parallel disks: the hull
+    of sets adds pairwise (B(c, r) + B(c', r') = B(c + c', r + r'), the same for parallel disks,
+    conv(A) + conv(B) = conv(A + B)); points are radius 0."""
+    kind, c, r, axis = "points", np.zeros((1, 3)), np.zeros(1), None
+    for it in its:
+        k, dc, dr, a = _round_set(it)
+        if {kind, k} == {"balls", "disks"}:
+            raise ProfileError(_MIXED)
+        if a is not None:
+            _parallel(a, [axis])
+            axis = a
+        kind = k if kind == "points" else kind
+        c, r = _prune((c[:, None, :] + dc[None]).reshape(-1, 3), (r[:, None] + dr[None]).reshape(-1))
+    if kind == "points":
+        poly = convex_polytope(c)
+        if poly.dim < 3:
+            raise ProfileError("minkowski() of flat polytopes has no volume")
+        return bounded(polytope_solid(poly, color), poly.vertices.min(axis=0), poly.vertices.max(axis=0))
+    if kind == "balls":
+        if len(c) == 1:
+            return ball(c[0], r[0], color)
+        if np.ptp(r) <= 1e-12 * r.max():
+            return minkowski_ball(convex_polytope(c), r[0], color=color).operands[0]
+        body, _ = hull_of_balls(c, r, color)
+        return bounded(body, (c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0))
+    if np.ptp(r) <= 1e-12 * r.max():
+        prism = _prism_disks(c, r[0], axis, color)
+        if prism is not None:
+            return prism
+    body, _ = hull_of_disks(c, r, axis, color)
+    return bounded(body, *disk_box(c, r, axis))
 
 
-def _prism_cylinder(poly, cyl, color):
-    if len(cyl) != 1 or abs(abs(cyl[0].axis[2]) - 1) > 1e-12:
-        raise ProfileError("minkowski() with a cylinder is covered for one cylinder along z and a prism along z "
-                           "(a cube or a straight extrusion); nearest exact alternative: a sphere")
+def _prune(c, r):
+    """Items of one radius whose center is not a vertex of the hull of that radius' centers
+    lie in the hull of the others (conv(C) + B(r) = conv(C + B(r))): only vertices stay."""
+    keep_c, keep_r = [], []
+    for q in np.unique(r):
+        pts = c[r == q]
+        v = convex_polytope(pts).vertices if len(pts) > 2 else np.unique(pts, axis=0)
+        keep_c.append(v)
+        keep_r.append(np.full(len(v), q))
+    return np.vstack(keep_c), np.concatenate(keep_r)
+
+
+def _prism_disks(c, radius, axis, color):
+    """conv(C) + D(radius) for a prism conv(C) along the disks' axis: the extrusion of the
+    cross-section offset by the radius, in the axis' frame (None if conv(C) is no such prism)."""
+    rot = frame_z_to(axis)
+    poly = convex_polytope(c @ rot)
     prism = z_prism(poly)
     if prism is None:
-        raise ProfileError("minkowski() with a cylinder is covered for prisms along z only (a cube or a straight "
-                           "extrusion of a convex polygon)")
+        return None
     xy, z0, z1 = prism
-    c = cyl[0]
-    lo, hi = sorted((c.p0[2], c.p1[2]))
-    prof = offset_r(polygon(xy), c.radius).translate(c.p0[:2])
-    ext = extrude(prof, (z1 - z0) + (hi - lo), color=color)
-    return Transformed(ext, np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, z0 + lo], [0, 0, 0, 1.0]]))
+    ext = extrude(offset_r(polygon(xy), radius), z1 - z0, color=color)
+    m = np.eye(4)
+    m[:3, :3] = rot
+    m[:3, 3] = rot @ np.array([0, 0, z0])
+    return Transformed(ext, m)

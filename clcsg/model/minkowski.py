@@ -12,8 +12,9 @@ in the sum, so the union is exact; only the offset planes, the cylinders and the
 the surface.  Flat polytopes (a polygon, a segment, a point) use the same pieces with both
 sides of the polygon as faces.
 
-A convex prism along z (faces with normals +z, -z or horizontal) plus a cylinder along z is
-the extrusion of the cross-section offset by the radius: :func:`prism_plus_cylinder`.
+A convex prism along z (faces with normals +z, -z or horizontal, :func:`z_prism`) plus a
+cylinder along z is the extrusion of the cross-section offset by the radius (built in
+:mod:`clcsg.model.hull`, in the frame of any cylinder axis).
 """
 
 from __future__ import annotations

@@ -8,8 +8,9 @@
   corners (mitered); ``chamfer`` cuts convex corners by the line perpendicular to the corner's
   bisector at distance |delta| (OpenSCAD's square joins).  Refused when an edge would turn
   around (a collapsed edge changes the polygon's topology).
-* The hull of disks c_i, r_i (any radii) is conv(T) | disks, T the tangent points of the hull's
-  common tangent lines: each arc of the boundary bounds a circular segment inside its disk.
+* The hull of disks c_i, r_i (any radii; polygon vertices are disks of radius 0) is
+  conv(T) | disks, T the tangent points of the hull's common tangent lines: each arc of the
+  boundary bounds a circular segment inside its disk.
 """
 
 from __future__ import annotations
@@ -103,7 +104,7 @@ def offset_delta(p: Profile, delta: float, chamfer: bool = False) -> Profile:
     return polygon(pts, idx)
 
 
-def _tangent(ci, ri, cj, rj):
+def common_tangent(ci, ri, cj, rj):
     """The outer common tangent with the disks on its left, going from disk i to disk j:
     (unit outward normal, tangent point on i, tangent point on j) or None."""
     d = cj - ci
@@ -129,7 +130,7 @@ def hull_disks(centers, radii) -> Profile:
         for j in range(len(c)):
             if i == j:
                 continue
-            t = _tangent(c[i], r[i], c[j], r[j])
+            t = common_tangent(c[i], r[i], c[j], r[j])
             if t is None:
                 continue
             n, ti, tj = t
@@ -138,7 +139,7 @@ def hull_disks(centers, radii) -> Profile:
                 tangents += [ti, tj]
                 used |= {i, j}
     poly = hull2d(np.array(tangents))
-    disks = [circle(r[i], c[i]) for i in sorted(used)]
+    disks = [circle(r[i], c[i]) for i in sorted(used) if r[i] > 0]
     out = union2d(polygon(poly), *disks)
     lo, hi = (c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0)
     return Profile(out.op, out.data, out.kids, bbox=(*lo, *hi))
@@ -150,9 +151,14 @@ def hull2d_of(*profiles: Profile) -> Profile:
         out = hull_disks([k.circle[0] for k in profiles], [k.circle[1] for k in profiles])
     elif all(k.loops is not None for k in profiles):
         out = hull_points(np.vstack([np.vstack(k.loops) for k in profiles]))
+    elif all(k.loops is not None or k.circle is not None for k in profiles):
+        # polygon vertices are disks of radius 0: conv(tangent points) | the circles
+        pts = hull2d(np.vstack([np.vstack(k.loops) for k in profiles if k.loops is not None]))
+        circ = [k.circle for k in profiles if k.circle is not None]
+        out = hull_disks([c for c, _ in circ] + list(pts), [r for _, r in circ] + [0.0] * len(pts))
     else:
-        raise ProfileError("2-D hull() is covered for all polygons (and squares) or all circles; "
-                           "nearest exact alternative: hull the circles or the polygons separately")
+        raise ProfileError("2-D hull() is covered for squares, circles and polygons, not for 2-D Boolean results; "
+                           "nearest exact alternative: hull the shapes before combining them")
     specs = [k.spec for k in profiles]
     return out if any(s is None for s in specs) else out.with_spec({"hull": specs})
 
@@ -173,3 +179,37 @@ def offset(profile: Profile, r: float | None = None, delta: float | None = None,
         return out
     args = {"r": float(r)} if r is not None else {"delta": float(delta), "chamfer": bool(chamfer)}
     return out.with_spec({"offset": {"profile": profile.spec, **args}})
+
+
+def minkowski2d(*profiles: Profile) -> Profile:
+    """2-D Minkowski sums: a region plus a disk is its rounded offset by the radius, moved by
+    the disk's center (P + D(c, r) = offset_r(P, r) + c, exact for any polygon with holes);
+    disks add centers and radii; convex polygons give the hull of their pairwise vertex sums."""
+    if not profiles:
+        raise ProfileError("2-D minkowski() of nothing")
+    disks = [p for p in profiles if p.circle is not None]
+    rest = [p for p in profiles if p.circle is None]
+    center = np.sum([np.asarray(d.circle[0], float) for d in disks], axis=0) if disks else np.zeros(2)
+    radius = sum(float(d.circle[1]) for d in disks)
+    if len(rest) > 1:
+        if not all(p.loops is not None and len(p.loops) == 1 and _convex_loop(p.loops[0]) for p in rest):
+            raise ProfileError("2-D minkowski() of two polygons is covered for convex ones only; nearest exact "
+                               "alternative: a polygon plus a circle (offset)")
+        pts = np.zeros((1, 2))
+        for p in rest:
+            pts = (pts[:, None, :] + p.loops[0][None]).reshape(-1, 2)
+        rest = [hull_points(pts)]
+    if not rest:
+        return circle(radius, center)
+    if radius == 0:
+        return rest[0].translate(center)
+    if rest[0].loops is None:
+        raise ProfileError("2-D minkowski() of a 2-D Boolean result and a circle has no exact form here; nearest exact "
+                           "alternative: the sum of each square, circle or polygon before combining")
+    return offset_r(rest[0], radius).translate(center)
+
+
+def _convex_loop(lp):
+    d = np.roll(lp, -1, axis=0) - lp
+    c = d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1)
+    return bool(np.all(c >= 0) or np.all(c <= 0))

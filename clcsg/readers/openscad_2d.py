@@ -21,7 +21,7 @@ from ..errors import SceneError
 from ..model.extrude import extrude
 from ..model.hull import hull, minkowski
 from ..model.profile import Profile, circle, difference2d, intersection2d, polygon, square, union2d
-from ..model.profile_ops import hull2d_of, offset
+from ..model.profile_ops import hull2d_of, minkowski2d, offset
 from ..model.polyhedron import polyhedron
 from ..model.revolve import revolve
 from .openscad_tokens import fmt, is_num
@@ -271,4 +271,6 @@ class Constructions:
         return hull2d_of(*kids)
 
     def p_minkowski(self, node):
-        raise SceneError("2-D minkowski() is not covered; nearest exact alternative: offset(r = ...)")
+        self.bind(node)
+        kids = [k for k in (self.profile(c) for c in node.children if not (c.disabled or c.background)) if k is not None]
+        return minkowski2d(*kids) if kids else None
