@@ -293,6 +293,10 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     __global const tape_op *tape = arena_in + c.tape_first;
     int n = c.tape_count;
     sample_src src = {c.task, c.tape_first, c.tape_count};
+    /* the discs of the corners the cell has from its parent first (a split gives both
+     * children all four corners; NaN, unknown, gives no disc): where they prove the patch off
+     * the surface, pruning it would only say the same */
+    if (corner_cover(&g, c.d) > 0) return OUT_DISCARDED;
 
     /* the tape over the patch: both sides constant decides the whole patch; a value that no
      * longer depends on the task's quadric is the same on both sides: no surface */

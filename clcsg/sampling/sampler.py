@@ -745,12 +745,18 @@ class _Finisher:
                 cl.enqueue_copy(self.ctx.queue, new[name], self.out[name], byte_count=self.done * item)
         self.out, self.cap_out = new, cap_samples
 
-    def _read_used(self):
+    def _read_used(self, checked_pass=False):
+        """The counters [clip rows used, prune evaluations]; past the capacity only after a
+        checked pass (which then runs again), never after unchecked ones."""
         import pyopencl as cl
 
         c = np.zeros(2, dtype=np.uint32)
         cl.enqueue_copy(self.ctx.queue, c, self.counters)
         self.used = self.reserved = int(c[0])
+        if not checked_pass and self.used > self.cap_clip:
+            # an unchecked pass wrote past its bound: some clip programs were not stored
+            raise RuntimeError(f"finish pass: {self.used} clip rows past the capacity of {self.cap_clip} "
+                               "in a pass enqueued without a check (its bound was wrong)")
         return c
 
     def _grow_clip(self, rows):
@@ -788,7 +794,7 @@ class _Finisher:
         before = self._read_used()
         while True:
             self._launch(samples, first, n, arena)
-            c = self._read_used()
+            c = self._read_used(checked_pass=True)
             if int(c[0]) <= self.cap_clip:
                 break
             # run again from the counts before: a fresh counter buffer from host memory
