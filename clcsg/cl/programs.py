@@ -14,6 +14,7 @@ cache answers, takes several), so a second ``clcsg sample`` builds nothing.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import importlib.resources
 import os
@@ -29,6 +30,7 @@ _lock = threading.Lock()
 _exit = contextlib.ExitStack()
 
 
+@functools.lru_cache(maxsize=None)
 def package_dir(sub: str) -> str:
     """A real directory for package folder ``sub`` (extracted if the package is zipped)."""
     res = importlib.resources.files("clcsg").joinpath(*sub.split("/"))
@@ -47,6 +49,37 @@ def _headers_hash(folders) -> str:
             if f.name.endswith(".h"):
                 h.update(f.read_bytes())
     return h.hexdigest()
+
+
+def _stamp(folders) -> tuple:
+    """(name, mtime, size) of the headers in ``folders``: a cheap check that they are unchanged."""
+    out = []
+    for folder in folders:
+        d = package_dir(folder)
+        for name in sorted(os.listdir(d)):
+            if name.endswith(".h"):
+                st = os.stat(os.path.join(d, name))
+                out.append((folder, name, st.st_mtime_ns, st.st_size))
+    return tuple(out)
+
+
+_hashed: dict = {}
+
+
+def _source_and_hashes(path: str, folder: str) -> tuple[str, str, str]:
+    """(source, its hash, the hash of the headers it may include), re-read only when a file's
+    modification time or size changed (a sampling call builds two programs; hashing every
+    header each time cost about a millisecond)."""
+    src_file = os.path.join(package_dir(folder), path.rpartition("/")[2])
+    st = os.stat(src_file)
+    stamp = (st.st_mtime_ns, st.st_size, _stamp(("cl/include", folder)))
+    hit = _hashed.get(path)
+    if hit is not None and hit[0] == stamp:
+        return hit[1]
+    src = source(path)
+    out = (src, hashlib.sha256(src.encode()).hexdigest(), _headers_hash(["cl/include", folder]))
+    _hashed[path] = (stamp, out)
+    return out
 
 
 def real_options(real) -> list[str]:
@@ -115,10 +148,9 @@ def build(context, path: str, defines: dict | None = None, real=np.float64):
     import pyopencl as cl
 
     opts = build_options(defines, real)
-    src = source(path)
     folder = path.rpartition("/")[0]
-    key = (id(context.ctx), path, tuple(opts), hashlib.sha256(src.encode()).hexdigest(),
-           _headers_hash(["cl/include", folder]))
+    src, src_hash, headers = _source_and_hashes(path, folder)
+    key = (id(context.ctx), path, tuple(opts), src_hash, headers)
     with _lock:
         prg = _cache.get(key)
         if prg is None:
