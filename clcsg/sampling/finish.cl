@@ -33,14 +33,17 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
     uint evals = 0;
     uchar state;
     int first = 0, count = 0;
-    int rows = tape_prune_rows(tape, nt, qs, &ball, t.quadric, &state, &evals);
+    prune_memo memo; /* the count's leaf states, replayed by the write */
+    memo.mode = 1;
+    int rows = tape_prune_rows_memo(tape, nt, qs, &ball, t.quadric, &state, &evals, &memo);
     /* membership at s: from the decided root state, else from the (short) clip program, which
      * equals the tape over the ball; the full tape only if the clip buffer is full this run */
     uint bits = prune_member_bits(state);
     if (prune_decision(state) >= 0) {
         uint base = atomic_add(&counters[0], (uint)rows);
         if (base + (uint)rows <= cap_clip) {
-            tape_prune_write(tape, nt, qs, &ball, t.quadric, state, clip + base, &first, &count, &evals);
+            memo.mode = 2;
+            tape_prune_write_memo(tape, nt, qs, &ball, t.quadric, state, clip + base, &first, &count, &evals, &memo);
             first += (int)base;
             bits = tape_member(clip + first, count, qs, p, t.quadric);
         } else {
