@@ -309,6 +309,9 @@ class _Progress:
         return sum(a + b * n for n in cells)
 
     def level(self, level, cells, samples, children=0):
+        if self.reporter.mode == "none":  # nothing is shown: no forecast to make
+            self.cells += cells
+            return
         now = time.perf_counter()
         self.times.append(now - self.t_last)
         self.t_last = now
