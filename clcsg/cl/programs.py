@@ -145,7 +145,7 @@ def _store_binary(cl, prg, binary_path) -> None:
 #: target features include ``clwb``; on a host whose detected CPU lacks that flag in LLVM's
 #: table (a Rocket Lake, for one) LLVM refuses to inline any builtin into the kernel (a callee
 #: may not use features its caller lacks), so every fmin became a call.  Giving our functions
-#: the feature makes the builtins inlinable again (``classify`` ~1.5x faster on the zoo); it
+#: the feature makes the builtins inlinable again (sampling the zoo: 1.24-1.3x less CPU); it
 #: only enables an instruction set flag, it does not emit any instruction.  ``#line 1`` keeps
 #: the compiler's line numbers those of the file.
 POCL_CPU_PRELUDE = ('#pragma clang attribute push (__attribute__((target("clwb"))), apply_to = function)\n'
