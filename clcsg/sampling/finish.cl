@@ -1,6 +1,7 @@
 /* Per sample, after the level that emitted it (while its cell's tape is still in the level's
- * arena; samples [first, first + n) of the raw buffer, outputs from index 0): its clip program, the side the solid is on, its outward
- * normal and its primitive (driven by clcsg/sampling/sampler.py).
+ * arena; samples [first, first + n) of the raw buffer, outputs at the same indices): its clip
+ * program, the side the solid is on, its outward normal and its primitive (driven by
+ * clcsg/sampling/sampler.py).
  *
  * The clip program is the sample's cell tape pruned over the splat ball (s, r) with the
  * sample's quadric substituted.  If both sides come out constant (and, s being on the surface,
@@ -22,7 +23,8 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
 {
     int gid = get_global_id(0);
     if (gid >= n) return;
-    raw_sample_rec s = raw[first_sample + gid];
+    int o = first_sample + gid;
+    raw_sample_rec s = raw[o];
     task_rec t = tasks[s.task];
     real3 p = (real3)(s.pos[0], s.pos[1], s.pos[2]);
     __global const tape_op *tape = arena + s.tape_first;
@@ -31,22 +33,25 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
     uint evals = 0;
     uchar state;
     int first = 0, count = 0;
-    int rows = tape_prune_rows(tape, nt, qs, &ball, t.quadric, &state, &evals);
+    prune_memo memo; /* the count's leaf states, replayed by the write */
+    memo.mode = 1;
+    int rows = tape_prune_rows_memo(tape, nt, qs, &ball, t.quadric, &state, &evals, &memo);
     /* membership at s: from the decided root state, else from the (short) clip program, which
      * equals the tape over the ball; the full tape only if the clip buffer is full this run */
     uint bits = prune_member_bits(state);
     if (prune_decision(state) >= 0) {
         uint base = atomic_add(&counters[0], (uint)rows);
         if (base + (uint)rows <= cap_clip) {
-            tape_prune_write(tape, nt, qs, &ball, t.quadric, state, clip + base, &first, &count, &evals);
+            memo.mode = 2;
+            tape_prune_write_memo(tape, nt, qs, &ball, t.quadric, state, clip + base, &first, &count, &evals, &memo);
             first += (int)base;
             bits = tape_member(clip + first, count, qs, p, t.quadric);
         } else {
             bits = tape_member(tape, nt, qs, p, t.quadric);
         }
     }
-    clip_first[gid] = first;
-    clip_count[gid] = count;
+    clip_first[o] = first;
+    clip_count[o] = count;
     atomic_add(&counters[1], evals);
     int sign = (bits & 1) ? 1 : -1;
     real3 g = sign * quadric_gradient(quadric_load(qs, t.quadric), p);
@@ -58,9 +63,9 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
         real sh = t.sheet != 0 ? (real)t.sheet : (real)1;
         g = sh * (real3)(f->U[t.plane], f->U[3 + t.plane], f->U[6 + t.plane]);
     }
-    normals[3 * gid] = g.x;
-    normals[3 * gid + 1] = g.y;
-    normals[3 * gid + 2] = g.z;
-    signs[gid] = sign;
-    primitives[gid] = primitive_at(PRIMITIVE_TABLE_ARGS, qs, t.quadric, p);
+    normals[3 * o] = g.x;
+    normals[3 * o + 1] = g.y;
+    normals[3 * o + 2] = g.z;
+    signs[o] = sign;
+    primitives[o] = primitive_at(PRIMITIVE_TABLE_ARGS, qs, t.quadric, p);
 }

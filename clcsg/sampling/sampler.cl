@@ -235,7 +235,8 @@ inline real query_at(const cell_geom *g, real x, real y, __global const tape_op 
 
 /* Split along the longest edge.  The children's tape is this tape pruned over the patch grown
  * by the radius (so it stays valid over every splat ball their samples get), counted first and
- * written with exactly that many rows into arena_out.  The two new corners, shared by both
+ * written with exactly that many rows into arena_out (the write replays the count's leaf
+ * states).  The two new corners, shared by both
  * children, are evaluated here once with the parent's tape (valid over the whole patch). */
 inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
                        __global const quadric_rec *qs, int q, real radius, __global cell_rec *cells_out,
@@ -246,10 +247,13 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
     uchar state;
     int first, count;
-    int rows = tape_prune_rows(tape, n, qs, &grown, q, &state, &w->evals);
+    prune_memo memo; /* the count's leaf states, replayed by the write */
+    memo.mode = 1;
+    int rows = tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
     uint base = atomic_add(&counters[SC_ARENA], (uint)rows);
     if (slot + 1 >= cap_cells || base + (uint)rows > cap_arena) return; /* overflow: the level re-runs */
-    tape_prune_write(tape, n, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals);
+    memo.mode = 2;
+    tape_prune_write_memo(tape, n, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
     w->tapes_written = 1;
     cell_rec a = c, b = c;
     a.level = b.level = c.level + 1;
@@ -293,6 +297,10 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     __global const tape_op *tape = arena_in + c.tape_first;
     int n = c.tape_count;
     sample_src src = {c.task, c.tape_first, c.tape_count};
+    /* the discs of the corners the cell has from its parent first (a split gives both
+     * children all four corners; NaN, unknown, gives no disc): where they prove the patch off
+     * the surface, pruning it would only say the same */
+    if (corner_cover(&g, c.d) > 0) return OUT_DISCARDED;
 
     /* the tape over the patch: both sides constant decides the whole patch; a value that no
      * longer depends on the task's quadric is the same on both sides: no surface */

@@ -80,7 +80,7 @@ import numpy as np
 
 from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
-from ..cl.programs import build
+from ..cl.programs import build, kernel as program_kernel
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
@@ -309,6 +309,9 @@ class _Progress:
         return sum(a + b * n for n in cells)
 
     def level(self, level, cells, samples, children=0):
+        if self.reporter.mode == "none":  # nothing is shown: no forecast to make
+            self.cells += cells
+            return
         now = time.perf_counter()
         self.times.append(now - self.t_last)
         self.t_last = now
@@ -377,9 +380,7 @@ def sample(
     real = np.dtype(_device.real_dtype(ctx))
     est = _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, max_samples, max_memory)
     t1 = time.perf_counter()
-    packed = pack(tape, real)
-    frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
-    frames_rec = frame_records(frames, real)
+    packed, frames, frames_rec = _packed(tape, real)
     tasks, roots, root_rows = root_tasks(tape, packed, frames, radius)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
@@ -407,6 +408,19 @@ def sample(
     stats.update(samples.stats)
     samples.stats = stats
     return samples
+
+
+def _packed(tape, real):
+    """(packed scene, principal frames, frame records) of ``tape`` for precision ``real``: made
+    once per tape and kept on it (as the scene keeps its compiled tape; nothing here depends on
+    the radius)."""
+    cache = tape.__dict__.setdefault("_sampler_packed", {})
+    key = np.dtype(real).str
+    if key not in cache:
+        packed = pack(tape, real)
+        frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
+        cache[key] = (packed, frames, frame_records(frames, real))
+    return cache[key]
 
 
 def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
@@ -501,6 +515,14 @@ class _Subdivision:
     zero, so an arena holds the tapes of one level's live cells and never the tapes of cells
     already done.  A sample's clip program is made from its cell's tape by the finish pass
     right after the level that emitted it (:class:`_Finisher`), while that tape is still there.
+
+    Buffers are sized before a level to what it can write at most, so a level runs once: a
+    cell has at most two children, and a split writes one tape of at most its cell's rows + 1
+    (``tape_prune_rows``), so the children's tapes take at most (the rows of the level's
+    cells' tapes) + (its cells) rows; the rows of a level's cells are at most twice the rows
+    the level before wrote (two cells to a tape).  A bound past :data:`ARENA_BUDGET` of the
+    device, and every buffer whose size the caller forces (``capacity``), is left to the
+    overflow protocol (run, see the counters past the capacity, grow, run the level again).
     """
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
@@ -519,9 +541,12 @@ class _Subdivision:
         self.finisher = finisher
         tape = scene.packed.tape
         cap = tuple(capacity or ())
-        self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(4 * len(roots), 4096)
+        self.sized = {"cells": len(cap) < 1, "arena": len(cap) < 3}
+        self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(2 * len(roots), 4096)
         self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(int(2 * estimate), 4096)
         self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
+        self.arena_budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem)
+        self.zeroed = "oclgrind" in ctx.info.platform.lower()
         self.progress = _Progress(progress, estimate, roots, radius, max_levels)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
@@ -529,9 +554,13 @@ class _Subdivision:
         self.arena_peak = 0
 
     def _buffer(self, nbytes, what):
-        """A zeroed device buffer from host memory: the level's outputs are read by the next
-        level, and Oclgrind's uninitialized-value checker only trusts host-initialized memory
-        or bytes a kernel wrote (a tape row's unused operand fields are never written)."""
+        """A device buffer for a level's outputs (read by the next level).  On Oclgrind it is
+        zeroed from host memory: its uninitialized-value checker only trusts host-initialized
+        memory or bytes a kernel wrote, and a tape row's unused operand fields are never
+        written (nor read for anything but copying the row).  Elsewhere zeroing would only cost
+        time (a large arena is written through once per allocation)."""
+        if not self.zeroed:
+            return device_buffer(self.ctx, nbytes, what)
         check_allocation(self.ctx, nbytes, what)
         return upload(self.ctx, np.zeros(max(int(nbytes), 16), dtype=np.uint8), writable=True, what=what)
 
@@ -546,6 +575,17 @@ class _Subdivision:
         if used_bytes:
             cl.enqueue_copy(self.ctx.queue, data[:used_bytes], old)
         return upload(self.ctx, data, writable=True)
+
+    def _size_for(self, n_in, arena_bound):
+        """Grow the output buffers to what a level of ``n_in`` cells can write at most (see
+        the class docstring), where that is allowed."""
+        if self.sized["cells"] and 2 * n_in > self.cap_cells:
+            self.cap_cells = max(2 * n_in, self.cap_cells + self.cap_cells // 2)
+            self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+        rows = self.scene.packed.tape.itemsize
+        if self.sized["arena"] and self.cap_out < arena_bound <= self.arena_budget / rows:
+            self.cap_out = int(min(max(arena_bound, self.cap_out + self.cap_out // 2), self.arena_budget // rows))
+            self.arena_out = self._buffer(self.cap_out * rows, "tape arena")
 
     def _level(self, kernel, cells_in, n_in, n_samples):
         """Run one level until it fits (the overflow protocol); returns its counters."""
@@ -589,39 +629,49 @@ class _Subdivision:
             if ok:
                 return counters
 
+    def _start(self):
+        """The first level's buffers: the root cells, the arena with the root tapes (exactly
+        them when the arenas are sized per level: this arena takes level 1's output and is
+        grown for it then), the other arena, cells and samples."""
+        tape = self.scene.packed.tape
+        n_first = len(self.root_rows) if self.sized["arena"] else max(self.cap_arena, len(self.root_rows))
+        first = np.zeros(max(n_first, 1), dtype=tape.dtype)
+        first[:len(self.root_rows)] = self.root_rows
+        self.arena_in, self.cap_in = upload(self.ctx, first, writable=True, what="tape arena"), len(first)
+        bound = int(self.roots["tape_count"].sum()) + len(self.roots)
+        self.cap_out = self.cap_arena
+        if self.sized["arena"] and bound <= self.arena_budget / tape.itemsize:
+            self.cap_out = max(bound, 16)
+        self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
+        self.cap_cells = max(self.cap_cells, 2 * len(self.roots)) if self.sized["cells"] else self.cap_cells
+        self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+        self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
+        return upload(self.ctx, self.roots, writable=True), bound
+
     def run(self):
         import pyopencl as cl
 
-        tape = self.scene.packed.tape
-        # level 0 reads the root tapes; its arena then takes the next level's output, so it
-        # gets the same capacity as the other
-        first = np.zeros(max(self.cap_arena, len(self.root_rows)), dtype=tape.dtype)
-        first[:len(self.root_rows)] = self.root_rows
-        self.arena_in, self.cap_in = upload(self.ctx, first, writable=True, what="tape arena"), len(first)
-        self.cap_out = self.cap_arena
-        self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
-        cells_in = upload(self.ctx, self.roots, writable=True)
-        n_in = len(self.roots)
-        self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
-        self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
-        kernel = cl.Kernel(self.prg, "classify")
-        n_samples = 0
-        level = 0
+        cells_in, arena_bound = self._start()
+        kernel = program_kernel(self.prg, "classify")
+        n_in, n_samples, level = len(self.roots), 0, 0
         while n_in > 0:
             if level >= self.max_levels:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
+            self._size_for(n_in, arena_bound)
             counters = self._level(kernel, cells_in, n_in, n_samples)
             n_cells_out = int(counters[_SLOT["cells"]])
             n_samples_out = int(counters[_SLOT["samples"]])
             for name in _SUMMED:
                 self.totals[name] += int(counters[_SLOT[name]])
+            arena_rows = int(counters[_SLOT["arena"]])
             self.levels.append({
                 "cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples,
                 "tape_mean": int(counters[_SLOT["tape_rows"]]) / n_in, "tape_max": int(counters[_SLOT["tape_max"]]),
-                "arena_rows": int(counters[_SLOT["arena"]]),
+                "arena_rows": arena_rows,
             })
-            self.arena_peak = max(self.arena_peak, int(counters[_SLOT["arena"]]))
-            self.finisher.run(self.samples, n_samples, n_samples_out - n_samples, self.arena_in)
+            self.arena_peak = max(self.arena_peak, arena_rows)
+            self.finisher.run(self.samples, n_samples, n_samples_out - n_samples, self.arena_in,
+                              int(counters[_SLOT["tape_max"]]), self.cap_samples)
             n_samples = n_samples_out
             self.progress.level(level, n_in, n_samples, n_cells_out)
             cells_in, self.cells_out = self.cells_out, cells_in
@@ -631,6 +681,7 @@ class _Subdivision:
             self.arena_in, self.arena_out = self.arena_out, self.arena_in
             self.cap_in, self.cap_out = self.cap_out, self.cap_in
             n_in = n_cells_out
+            arena_bound = 2 * arena_rows + n_in
             level += 1
         self.progress.done()
         self.n_samples = n_samples
@@ -641,72 +692,140 @@ class _Subdivision:
         self.totals["arena_rows"] = self.arena_peak
 
 
+#: the share of the device's largest allocation (or global memory, if smaller) that a tape
+#: arena or the clip buffer may take when it is sized to its bound ahead of a pass; a larger
+#: bound falls back to the overflow protocol
+ARENA_BUDGET = 1 / 8
+
+#: the finish pass's outputs per sample: (name, dtype, values per sample)
+_FINISH_OUTPUTS = (("normals", "real", 3), ("signs", np.int32, 1), ("primitives", np.int32, 1),
+                   ("clip_first", np.int32, 1), ("clip_count", np.int32, 1))
+
+
 class _Finisher:
     """The finish pass (``finish.cl``), run after each level on the samples it emitted: clip
-    programs, signs, normals and primitives; the per-level outputs are appended on the host and
-    equal clip programs deduplicated at the end (:func:`dedupe_programs`)."""
+    programs, signs, normals and primitives, written into device buffers indexed by sample and
+    read once at the end, where equal clip programs are deduplicated (:func:`dedupe_programs`).
+
+    A pass is enqueued without waiting for it when the clip buffer has room for its bound (a
+    sample's clip program has at most its cell's rows + 1, so a level's at most (samples) x
+    (its largest tape + 1)); the rows used are read with the next level's counters.  Otherwise
+    (a bound past :data:`ARENA_BUDGET`, or a clip capacity the caller forces) the pass is
+    checked at once: the rows used are read, and on an overflow the buffer grows and the pass
+    runs again (the level's tapes are still in the arena)."""
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, packed, capacity):
-        import pyopencl as cl
-
         self.ctx, self.scene, self.packed = ctx, scene, packed
         self.real = np.dtype(packed.real)
-        self.kernel = cl.Kernel(prg, "finish")
+        self.kernel = program_kernel(prg, "finish")
         self.frames, self.tasks = upload(ctx, frames_rec), upload(ctx, tasks)
         cap = tuple(capacity or ())
+        self.checked = len(cap) > 3
         self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else 1 << 14
-        self.clip_buf = None
-        self.parts = []
-        self.clip_rows = 0
-        self.evals = 0
+        self.row_bytes = packed.tape.itemsize
+        self.budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem) / self.row_bytes
+        self.clip_buf = device_buffer(ctx, self.cap_clip * self.row_bytes, "clip")
+        self.counters = upload(ctx, np.zeros(2, dtype=np.uint32), writable=True)
+        self.used = 0  # clip rows known to be used
+        self.reserved = 0  # upper bound of the clip rows used after the passes enqueued
+        self.cap_out = 0
+        self.out = {}
+        self.done = 0
         self.grown = 0
 
-    def run(self, samples, first, n, arena):
-        """Finish raw samples [first, first + n) whose cells' tapes are in ``arena``."""
+    def _outputs(self, need, cap_samples):
+        """Output buffers for at least ``need`` samples (grown to ``cap_samples``, keeping the
+        ``self.done`` samples finished so far)."""
         import pyopencl as cl
 
+        if need <= self.cap_out:
+            return
+        new = {}
+        for name, dtype, k in _FINISH_OUTPUTS:
+            item = (self.real if dtype == "real" else np.dtype(dtype)).itemsize * k
+            new[name] = device_buffer(self.ctx, cap_samples * item, "sample output")
+            if self.done and name in self.out:
+                cl.enqueue_copy(self.ctx.queue, new[name], self.out[name], byte_count=self.done * item)
+        self.out, self.cap_out = new, cap_samples
+
+    def _read_used(self, checked_pass=False):
+        """The counters [clip rows used, prune evaluations]; past the capacity only after a
+        checked pass (which then runs again), never after unchecked ones."""
+        import pyopencl as cl
+
+        c = np.zeros(2, dtype=np.uint32)
+        cl.enqueue_copy(self.ctx.queue, c, self.counters)
+        self.used = self.reserved = int(c[0])
+        if not checked_pass and self.used > self.cap_clip:
+            # an unchecked pass wrote past its bound: some clip programs were not stored
+            raise RuntimeError(f"finish pass: {self.used} clip rows past the capacity of {self.cap_clip} "
+                               "in a pass enqueued without a check (its bound was wrong)")
+        return c
+
+    def _grow_clip(self, rows):
+        """A clip buffer of ``rows`` rows holding the rows used so far (the kernel reads only
+        rows it wrote in the same pass, so a device copy is enough)."""
+        import pyopencl as cl
+
+        buf = device_buffer(self.ctx, rows * self.row_bytes, "clip")
+        if self.used:
+            cl.enqueue_copy(self.ctx.queue, buf, self.clip_buf, byte_count=self.used * self.row_bytes)
+        self.clip_buf, self.cap_clip = buf, rows
+        self.grown += 1
+
+    def _launch(self, samples, first, n, arena):
+        self.kernel(self.ctx.queue, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames, self.tasks,
+                    samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
+                    self.counters, *self.scene.colour_args(), *(self.out[name] for name, _, _ in _FINISH_OUTPUTS))
+
+    def run(self, samples, first, n, arena, tape_max, cap_samples):
+        """Finish raw samples [first, first + n) whose cells' tapes (at most ``tape_max`` rows)
+        are in ``arena``."""
         if n == 0:
             return
-        q = self.ctx.queue
-        out = {"normals": np.zeros((n, 3), dtype=self.real)}
-        out.update({k: np.zeros(n, dtype=np.int32) for k in ("signs", "primitives", "clip_first", "clip_count")})
-        bufs = {k: device_buffer(self.ctx, a.nbytes, "sample output") for k, a in out.items()}
-        counters = np.zeros(2, dtype=np.uint32)
-        rows = self.packed.tape.itemsize
+        self._outputs(first + n, cap_samples)
+        bound = n * (tape_max + 1)
+        if not self.checked and self.reserved + bound > self.cap_clip:
+            self._read_used()
+            if self.used + bound > self.cap_clip and self.used + bound <= self.budget:
+                self._grow_clip(int(min(max(self.used + bound, 2 * self.cap_clip), self.budget)))
+        if not self.checked and self.reserved + bound <= self.cap_clip:
+            self._launch(samples, first, n, arena)
+            self.reserved += bound
+            self.done = first + n
+            return
+        before = self._read_used()
         while True:
-            if self.clip_buf is None:
-                self.clip_buf = device_buffer(self.ctx, self.cap_clip * rows, "clip")
-            counters[:] = 0
-            counters_buf = upload(self.ctx, counters, writable=True)
-            self.kernel(q, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames, self.tasks,
-                        samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
-                        counters_buf, *self.scene.colour_args(), bufs["normals"], bufs["signs"],
-                        bufs["primitives"], bufs["clip_first"], bufs["clip_count"])
-            cl.enqueue_copy(q, counters, counters_buf)
-            if int(counters[0]) <= self.cap_clip:
+            self._launch(samples, first, n, arena)
+            c = self._read_used(checked_pass=True)
+            if int(c[0]) <= self.cap_clip:
                 break
-            self.cap_clip = _grow(self.cap_clip, int(counters[0]))
-            self.clip_buf = None
-            self.grown += 1
-        for k, a in out.items():
-            cl.enqueue_copy(q, a, bufs[k])
-        used = int(counters[0])
-        clip = np.zeros(used, dtype=self.packed.tape.dtype)
-        if used:
-            cl.enqueue_copy(q, clip, self.clip_buf)
-        out["clip_ops"] = np.asarray(clip.view(np.int32).reshape(-1, 4))
-        out["clip_first"] = out["clip_first"] + self.clip_rows
-        self.clip_rows += used
-        self.evals += int(counters[1])
-        self.parts.append(out)
+            # run again from the counts before: a fresh counter buffer from host memory
+            # (Oclgrind does not see host writes into an existing buffer)
+            self.used = self.reserved = int(before[0])
+            self._grow_clip(_grow(self.cap_clip, int(c[0])))
+            self.counters = upload(self.ctx, before, writable=True)
+        self.done = first + n
 
     def samples(self, sub, tape, radius) -> Samples:
         """All finished samples as :class:`Samples` (positions from the raw buffer)."""
+        import pyopencl as cl
+
         packed = self.packed
-        if not self.parts:
+        n = sub.n_samples
+        if not n:
             return Samples.empty(radius, tape, packed, {})
-        cat = {k: np.concatenate([p[k] for p in self.parts]) for k in self.parts[0]}
-        first, count, ops = dedupe_programs(cat["clip_ops"], cat["clip_first"], cat["clip_count"])
+        c = self._read_used()
+        cat = {}
+        for name, dtype, k in _FINISH_OUTPUTS:
+            a = np.zeros((n, k) if k > 1 else n, dtype=self.real if dtype == "real" else dtype)
+            cl.enqueue_copy(self.ctx.queue, a, self.out[name])
+            cat[name] = a
+        clip = np.zeros(self.used, dtype=packed.tape.dtype)
+        if self.used:
+            cl.enqueue_copy(self.ctx.queue, clip, self.clip_buf)
+        clip_ops = np.asarray(clip.view(np.int32).reshape(-1, 4))
+        first, count, ops = dedupe_programs(clip_ops, cat["clip_first"], cat["clip_count"])
         raw = sub.raw
         return Samples(
             positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
@@ -721,7 +840,7 @@ class _Finisher:
             radius=radius,
             tape=tape,
             packed=packed,
-            stats={"finish_prune_evaluations": self.evals, "clip_buffer_growths": self.grown},
+            stats={"finish_prune_evaluations": int(c[1]), "clip_buffer_growths": self.grown},
         )
 
 

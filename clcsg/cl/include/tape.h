@@ -195,18 +195,31 @@ inline int leaf_over_patch(__global const quadric_rec *qs, int q, int sign, cons
     return v > spread ? ST_F : v < -spread ? ST_T : ST_LIVE;
 }
 
+/* Leaf states of a forward pass kept for a second pass over the same tape and region (2 bits
+ * a row, for rows below PRUNE_MEMO_ROWS): mode 1 records them, mode 2 replays them, so a split
+ * that counts its children's rows and then writes them tests each leaf once. */
+#define PRUNE_MEMO_ROWS 256
+typedef struct {
+    uint bits[PRUNE_MEMO_ROWS / 16];
+    int mode;
+} prune_memo;
+
 /* The forward pass of pruning t (n rows) over g with self_q substituted: leaves of one sign over
  * g become constants, constants are folded (TRUE absorbs OR, FALSE absorbs AND, the neutral
  * operand drops out and the result becomes a COPY of the other).  Rows that stay are written to
  * out[0..*m) when out is not null and counted in *m either way (each input row gives at most one
  * row, so *m <= n); *last is the output register of the last row kept (-1: none).  Returns the
- * root's packed state.  *evals counts the leaves tested against the region. */
+ * root's packed state.  *evals counts the leaves tested against the region; `memo` (or null)
+ * records or replays the leaves' states. */
 inline uchar prune_forward(__global const tape_op *t, int n, __global const quadric_rec *qs,
                            const prune_region *g, int self_q, __global tape_op *out, int *m, int *last,
-                           uint *evals)
+                           uint *evals, prune_memo *memo)
 {
     uchar st[TAPE_REGS];
     bool write = out != 0;
+    int memo_mode = memo ? memo->mode : 0;
+    if (memo_mode == 1)
+        for (int w = 0; w < PRUNE_MEMO_ROWS / 16; ++w) memo->bits[w] = 0;
     int k_out = 0, lst = -1;
     for (int k = 0; k < n; ++k) {
         tape_op o = t[k];
@@ -217,9 +230,15 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
                 st[o.out] = (o.b > 0 ? ST_PACK(ST_LIVE, ST_T, ST_F) : ST_PACK(ST_LIVE, ST_F, ST_T)) | ST_SELF;
                 kept = true;
             } else {
-                ++*evals;
-                int s = leaf_over_region(qs, o.a, o.b, g);
-                if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g);
+                int s;
+                if (memo_mode == 2 && k < PRUNE_MEMO_ROWS) {
+                    s = (memo->bits[k >> 4] >> (2 * (k & 15))) & 3;
+                } else {
+                    ++*evals;
+                    s = leaf_over_region(qs, o.a, o.b, g);
+                    if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g);
+                    if (memo_mode == 1 && k < PRUNE_MEMO_ROWS) memo->bits[k >> 4] |= (uint)s << (2 * (k & 15));
+                }
                 st[o.out] = ST_PACK(s, s, s);
                 kept = s == ST_LIVE;
             }
@@ -276,14 +295,20 @@ inline uint prune_member_bits(uchar s) { return (ST_MINUS(s) == ST_T ? 1u : 0u) 
  * COPY if the last one does not define the root; 1 for a constant tape.  Reserving exactly
  * this many rows stores a pruned tape as what pruning keeps, never the parent's length.
  * *state is the root's packed state (prune_decision, prune_constant, prune_member_bits). */
-inline int tape_prune_rows(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
-                           int self_q, uchar *state, uint *evals)
+inline int tape_prune_rows_memo(__global const tape_op *t, int n, __global const quadric_rec *qs,
+                                const prune_region *g, int self_q, uchar *state, uint *evals, prune_memo *memo)
 {
     int m, last;
-    uchar s = prune_forward(t, n, qs, g, self_q, 0, &m, &last, evals);
+    uchar s = prune_forward(t, n, qs, g, self_q, 0, &m, &last, evals, memo);
     *state = s;
     if (prune_constant(s) >= 0) return 1;
     return m + (last != t[n - 1].out);
+}
+
+inline int tape_prune_rows(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
+                           int self_q, uchar *state, uint *evals)
+{
+    return tape_prune_rows_memo(t, n, qs, g, self_q, state, evals, 0);
 }
 
 /* Prune tape t (n rows) over region g with self_q substituted; returns the decision
@@ -292,12 +317,12 @@ inline int tape_prune_rows(__global const tape_op *t, int n, __global const quad
  * backward pass (liveness over registers) keeps the rows whose result is read and packs them at
  * the end of that span; *first (offset in `out`) and *count give the result.  A constant tape
  * is one CONST row.  *evals counts the leaves tested against the region. */
-inline int tape_prune(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
-                      int self_q, __global tape_op *out, int *first, int *count, uint *evals)
+inline int tape_prune_memo(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
+                           int self_q, __global tape_op *out, int *first, int *count, uint *evals, prune_memo *memo)
 {
     int m, last;
     int root = t[n - 1].out;
-    uchar s = prune_forward(t, n, qs, g, self_q, out, &m, &last, evals);
+    uchar s = prune_forward(t, n, qs, g, self_q, out, &m, &last, evals, memo);
     int decided = prune_decision(s);
     if (out == 0) return decided;
     if (ST_TAPE(s) != ST_LIVE) {
@@ -328,11 +353,17 @@ inline int tape_prune(__global const tape_op *t, int n, __global const quadric_r
     return decided;
 }
 
+inline int tape_prune(__global const tape_op *t, int n, __global const quadric_rec *qs, const prune_region *g,
+                      int self_q, __global tape_op *out, int *first, int *count, uint *evals)
+{
+    return tape_prune_memo(t, n, qs, g, self_q, out, first, count, evals, 0);
+}
+
 /* The pruned tape into exactly the rows tape_prune_rows counted (`state` from it): a constant
  * tape is written as its CONST row without the forward pass (whose rows would not fit). */
-inline void tape_prune_write(__global const tape_op *t, int n, __global const quadric_rec *qs,
-                             const prune_region *g, int self_q, uchar state, __global tape_op *out, int *first,
-                             int *count, uint *evals)
+inline void tape_prune_write_memo(__global const tape_op *t, int n, __global const quadric_rec *qs,
+                                  const prune_region *g, int self_q, uchar state, __global tape_op *out, int *first,
+                                  int *count, uint *evals, prune_memo *memo)
 {
     int k = prune_constant(state);
     if (k >= 0) {
@@ -341,7 +372,14 @@ inline void tape_prune_write(__global const tape_op *t, int n, __global const qu
         *count = 1;
         return;
     }
-    tape_prune(t, n, qs, g, self_q, out, first, count, evals);
+    tape_prune_memo(t, n, qs, g, self_q, out, first, count, evals, memo);
+}
+
+inline void tape_prune_write(__global const tape_op *t, int n, __global const quadric_rec *qs,
+                             const prune_region *g, int self_q, uchar state, __global tape_op *out, int *first,
+                             int *count, uint *evals)
+{
+    tape_prune_write_memo(t, n, qs, g, self_q, state, out, first, count, evals, 0);
 }
 
 #endif

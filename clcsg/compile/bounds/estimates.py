@@ -517,11 +517,28 @@ def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
     (:func:`refine_regions`) when the first estimate is past :data:`REFINE_FROM` samples."""
     if tape.empty:
         return _make_estimate(float(radius), 0.0, 0.0, 0, real_itemsize)
-    regions = quadric_regions(tape.quadrics, tape.instances, tape.bound)
-    est = estimate_regions(tape.quadrics, regions, radius, real_itemsize)
+    est = _tape_estimate(tape, "regions", radius, real_itemsize)
     if est.finite and est.samples > REFINE_FROM:
-        est = estimate_regions(tape.quadrics, refine_regions(tape, regions), radius, real_itemsize)
+        est = _tape_estimate(tape, "refined", radius, real_itemsize)
     return est
+
+
+def _tape_estimate(tape, which: str, radius: float, real_itemsize: int) -> Estimate:
+    """The estimate from the tape's ``"regions"`` or ``"refined"`` regions at ``radius``.  The
+    regions, the areas and the edges do not depend on the radius, so they are computed once per
+    tape (kept on it, as the scene keeps its compiled tape) and only rescaled
+    (:meth:`Estimate.at`) for another radius."""
+    cache = tape.__dict__.setdefault("_guard_estimates", {})
+    key = (which, int(real_itemsize))
+    est = cache.get(key)
+    if est is None:
+        regions = cache.get("regions")
+        if regions is None:
+            regions = cache["regions"] = quadric_regions(tape.quadrics, tape.instances, tape.bound)
+        if which == "refined":
+            regions = refine_regions(tape, regions)
+        est = cache[key] = estimate_regions(tape.quadrics, regions, radius, real_itemsize)
+    return est if est.radius == float(radius) else est.at(radius)
 
 
 #: the expected sample count's weights, per (area bound of the kind) / (pi r^2) and per
