@@ -4,7 +4,8 @@
  * as in splat.cl (o = e + ((s - e).v) v, Q(o + tau v) = 0, eqs. 5, 6) in `real` precision,
  * taking the root whose depth (s - e).v + tau is nearest the stored float depth.  Outputs the
  * depth (distance along the unit view ray), the quadric and primitive ids and the colour of
- * the primitive whose boundary holds the hit (primitives.h), shaded with shade.h — the same
+ * the primitive whose boundary holds the hit (primitives.h; the sample's splat_primitive where
+ * the rule gives one primitive over the whole splat), shaded with shade.h — the same
  * shading as the ray tracer.  EMPTY_KEY comes from clcsg/cl/constants.py. */
 #include "pixel.h"
 
@@ -37,5 +38,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         t = tau[0];
         if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
     }
-    pixel_hit(out, view, pix, PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, o + t * v, tc + t, v);
+    real3 p = o + t * v;
+    int prim = sp->splat_primitive >= 0 ? sp->splat_primitive : primitive_at(PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, p);
+    pixel_hit_as(out, view, pix, prims, prim, quadrics, sp->quadric, p, tc + t, v);
 }

@@ -9,7 +9,9 @@ splats_drawn           samples whose screen bound is not empty
 splats_culled          samples skipped by the per-splat back-face test
 splats_offscreen       samples whose bound misses the screen (or is behind the eye)
 bound_pixels           pixels visited in the splats' screen bounds
-fragments              ray-quadric solves (rays that pass the ball / box test)
+fragments              rays that pass the ball / box test
+fragments_occluded     of those, rays skipped without a solve: their chord through the ball
+                       starts behind the pixel's stored depth (early depth rejection)
 clip_evaluations       clip-set quadric evaluations
 fragments_passed       fragments that passed radius, clip and back-face tests (depth tests)
 atomics                atom_min calls (after the plain read)
