@@ -9,6 +9,7 @@ import numpy as np
 from ..cl.memory import upload
 from ..model.colors import parse_color, recolor_defaults
 from ..cl.records import PackedScene, SceneBuffers, pack, sample_dtype, tape_rows
+from .splat_colours import splat_primitives
 
 
 @dataclass
@@ -107,41 +108,3 @@ class Samples:
             self._device.clear()
         return n
 
-
-def splat_primitives(packed: PackedScene, pos: np.ndarray, radii: np.ndarray, quadrics: np.ndarray) -> np.ndarray:
-    """Per sample the primitive that the colour rule (``primitives.h``, ``primitive_at``) gives
-    every point of its splat, or -1 where it may vary over the splat (the resolve pass then
-    decides per pixel).  ``pos``: device coordinates.
-
-    ``primitive_at`` at p on quadric q only considers the owners of q whose padded box holds p,
-    and takes the first owner of q where none of them holds p.  So over the ball B(s, r) the
-    answer is that first owner if no owner's box meets the ball, or if the only box that does
-    is the first owner's; a quadric with one owner always gives it.  The ball is grown by a
-    relative 1e-3 and the rounding of the device's precision (fragments are accepted within r
-    in that precision)."""
-    n = len(pos)
-    out = np.full(n, -1, dtype=np.int32)
-    if not n or not len(packed.owners):
-        return out
-    q = np.asarray(quadrics, dtype=np.int64)
-    first, count = packed.owners["first"][q].astype(np.int64), packed.owners["count"][q].astype(np.int64)
-    owned = count > 0
-    out[owned] = packed.owner_list[first[owned]]
-    multi = np.flatnonzero(count > 1)
-    if not len(multi):
-        return out
-    reps = count[multi]
-    rows = np.repeat(multi, reps)  # one row per (sample, owner) pair
-    k = np.arange(len(rows)) - np.repeat(np.cumsum(reps) - reps, reps)
-    inst = packed.owner_list[first[rows] + k]
-    box = packed.prim_boxes.astype(np.float64)[inst]
-    p = pos[rows]
-    with np.errstate(invalid="ignore"):
-        gap = np.maximum(np.maximum(box[:, 0, :3] - p, p - box[:, 1, :3]), 0.0)
-    r = np.asarray(radii, dtype=np.float64)[rows]
-    reach = r * (1 + 1e-3) + 64 * float(np.finfo(packed.real).eps) * (np.linalg.norm(p, axis=1) + r)
-    meets = ~((gap * gap).sum(axis=1) > reach * reach)  # an empty box (lo = inf) never meets
-    hits = np.bincount(rows[meets], minlength=n)[multi]
-    first_meets = np.bincount(rows[meets & (k == 0)], minlength=n)[multi] > 0
-    out[multi[~((hits == 0) | ((hits == 1) & first_meets))]] = -1
-    return out
