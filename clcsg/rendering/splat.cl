@@ -13,7 +13,8 @@
  *    sides.  This is exact from any eye position, inside the solid included.  An empty C
  *    means the whole ball is surface on Q: no clipping;
  *    Before the solve, a ray whose chord through the ball starts behind the pixel's stored
- *    depth is skipped (early depth rejection: no fragment on it can win);
+ *    depth is skipped, and before the clip program a root whose key already loses to the
+ *    stored one ends the pixel (early depth rejection: no fragment there can win);
  * 3. depth test: atom_min of ((ulong)as_uint((float)depth) << 32 | sample index) into the
  *    64-bit framebuffer (positive floats order like their bit patterns), after a plain read
  *    that skips atomics which cannot win.
@@ -175,25 +176,16 @@ inline rect screen_slab(__global const view_rec *vw, real3 a /* s - e */, splat_
     return rect_from_range(vw, xmin - slack, xmax + slack, ymin - slack, ymax + slack);
 }
 
-/* Per-pixel coarse test, before the view ray is normalized: does the ray e + t d meet the ball
- * B(s, r), and (with the surface-aligned bound) does the part of it inside the ball meet the slab
- * h_lo <= n.(x - s) <= h_hi?  (ball and slab both hold every acceptable patch point, so this is
- * exact for their intersection: a flat splat seen at an angle costs the area of its projected
- * disc.)  With a = s - e, K = |a|^2 - r^2 and the unit ray v = d / |d|, the chord through the
- * ball is t in tc -+ m, tc = a.d / |d|, m^2 |d|^2 = M = (a.d)^2 - K |d|^2 (a miss if M < 0); the
- * height along the ray is linear in t, so over the chord it ranges between its values at the
- * ends, |d|^2 h = -(n.a) |d|^2 + (a.d -+ sqrt(M)) (n.d).  Both tests are multiplied through by
- * |d|^2 (no division, one square root) and loosened by the rounding of their terms. */
-inline bool ray_meets_splat(splat_slab *b, bool has_slab, real3 a, real K, real3 d)
+/* Per-pixel coarse test of the surface-aligned bound: does the part of the ray inside the ball
+ * meet the slab h_lo <= n.(x - s) <= h_hi?  (ball and slab both hold every acceptable patch
+ * point, so this is exact for their intersection: a flat splat seen at an angle costs the
+ * area of its projected disc.)  The height along the ray is linear in t,
+ * so over the ball's chord [tc - m, tc + m] it ranges between its values at the ends. */
+inline bool chord_meets_slab(splat_slab *b, real3 a, real3 v, real tc, real m)
 {
-    real dd = dot(d, d), ad = dot(a, d);
-    real M = ad * ad - K * dd;
-    if (M < -4 * SLACK * (ad * ad + fabs(K) * dd)) return false;
-    if (!has_slab) return true;
-    real sq = sqrt(fmax(M, (real)0)), na = dot(b->n, a), nd = dot(b->n, d);
-    real h0 = -na * dd + (ad - sq) * nd, h1 = -na * dd + (ad + sq) * nd;
-    real tol = 4 * SLACK * (fabs(na) * dd + (fabs(ad) + sq) * fabs(nd));
-    return fmax(h0, h1) >= b->h_lo * dd - tol && fmin(h0, h1) <= b->h_hi * dd + tol;
+    real h0 = -dot(b->n, a) + (tc - m) * dot(b->n, v);
+    real h1 = -dot(b->n, a) + (tc + m) * dot(b->n, v);
+    return fmax(h0, h1) >= b->h_lo && fmin(h0, h1) <= b->h_hi;
 }
 
 /* Back-facing test for a whole splat (outside views).  For a patch point p = s + w
@@ -242,10 +234,11 @@ inline rect splat_bound(__global const view_rec *view, quadric q, real lam_min, 
 
 /* Step 2 on the unit view ray e + t v whose point nearest s is o = e + tc v (w0 = o - s): the
  * depth of the splat's fragment, 0 if none (nearer root first; radius, depth, clip and facing
- * tests). */
+ * tests).  word: the pixel's framebuffer word as read; a root whose key (with sample index idx)
+ * is not below it loses, and so does the farther root. */
 inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op *clip, int nc,
                            __global const quadric_rec *quadrics, real r, real3 e, real3 v, real tc, real3 w0,
-                           ulong *cnt)
+                           ulong word, int idx, ulong *cnt)
 {
     real3 o;
     real tau[2];
@@ -254,6 +247,7 @@ inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op 
         real3 w = w0 + tau[k] * v; /* p - s */
         real depth = tc + tau[k];
         if (dot(w, w) > r * r || !(depth > 0)) continue;
+        if ((((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx) >= word) return 0; /* loses, as the far root */
         real3 p = o + tau[k] * v;
         int side = sign;
         if (nc > 0) {
@@ -308,26 +302,29 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     rect bound = splat_bound(view, q, quadrics[qid].lam_min, quadrics[qid].lam_max, sign, qid, cp, nc, s, a, r,
                              &slab, &has_slab, cnt);
     int W = view->width;
-    real K = dot(a, a) - r * r;
     /* the camera in private memory: the compiler cannot keep it in registers across the
      * framebuffer writes otherwise (they might alias the view); same expression as view_ray */
     real3 d00 = vload3(0, view->d00), ddx = vload3(0, view->dx), ddy = vload3(0, view->dy);
     for (int y = bound.y0; y <= bound.y1; ++y) {
         for (int x = bound.x0; x <= bound.x1; ++x) {
             cnt[PC_BOUND_PIXELS]++;
-            real3 d = d00 + (real)x * ddx + (real)y * ddy;
-            if (!ray_meets_splat(&slab, has_slab, a, K, d)) continue;
-            real3 v = normalize(d);
+            real3 v = normalize(d00 + (real)x * ddx + (real)y * ddy);
             real tc = dot(a, v);
             real3 w0 = tc * v - a; /* o - s: o = e + tc v, the ray point closest to s */
-            real m = sqrt(fmax(r * r - dot(w0, w0), (real)0));
+            real m2 = r * r - dot(w0, w0);
+            if (m2 < 0) continue; /* the ray misses the ball */
+            real m = sqrt(m2);
+#if SURFACE_ALIGNED
+            if (has_slab && !chord_meets_slab(&slab, a, v, tc, m)) continue;
+#endif
             cnt[PC_FRAGMENTS]++;
             __global ulong *slot = &framebuffer[y * W + x];
-            if (splat_occluded(tc - m - 16 * SLACK * (fabs(tc) + r), *slot)) {
+            ulong word = *slot;
+            if (splat_occluded(tc - m - 16 * SLACK * (fabs(tc) + r), word)) {
                 cnt[PC_FRAGMENTS_OCCLUDED]++;
                 continue;
             }
-            real depth = splat_fragment(q, sign, qid, cp, nc, quadrics, r, e, v, tc, w0, cnt);
+            real depth = splat_fragment(q, sign, qid, cp, nc, quadrics, r, e, v, tc, w0, word, idx, cnt);
             if (depth > 0) {
                 cnt[PC_FRAGMENTS_PASSED]++;
                 splat_depth_test(slot, depth, idx, cnt);

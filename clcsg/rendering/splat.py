@@ -13,7 +13,9 @@ fragments              rays that pass the ball / box test
 fragments_occluded     of those, rays skipped without a solve: their chord through the ball
                        starts behind the pixel's stored depth (early depth rejection)
 clip_evaluations       clip-set quadric evaluations
-fragments_passed       fragments that passed radius, clip and back-face tests (depth tests)
+fragments_passed       fragments that passed radius, clip and back-face tests and were nearer
+                       than the pixel's word when read (depth tests; one already beaten is
+                       dropped before its clip test)
 atomics                atom_min calls (after the plain read)
 covered_pixels         pixels showing the surface
 overdraw               fragments per covered pixel
