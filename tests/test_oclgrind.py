@@ -75,8 +75,10 @@ BENIGN = {
     "api-probe": "pyopencl asks every device for CL_DEVICE_COMPUTE_CAPABILITY_MAJOR_NV (0x4000) when it "
                  "creates a kernel; Oclgrind answers CL_INVALID_VALUE, which pyopencl expects",
     "splat-pre-read": "splat.cl reads the framebuffer slot with a plain load before its atom_min "
-                      "(`if (key < *slot) atom_min(slot, key);`, documented in the kernel): a stale read "
-                      "only costs an extra atomic; reported to the renderer's owner (docs/robustness.md)",
+                      "(`if (key < *slot) atom_min(slot, key);`, documented in the kernel), and once per "
+                      "fragment for its early depth rejection (`ulong word = *slot;`): the slot only "
+                      "decreases, so a stale read only costs an extra solve or atomic; reported to the "
+                      "renderer's owner (docs/robustness.md)",
 }
 
 
@@ -276,7 +278,7 @@ def classify(block: str) -> str:
         src = {ln.strip() for ln in block.splitlines()[1:]
                if ln.strip() and not re.match(r"(Kernel|First entity|Second entity|At line|%|store|load)", ln.strip())
                and "addrspace" not in ln}
-        if src and src <= {"if (key < *slot) {", "atom_min(slot, key);"}:
+        if src and src <= {"if (key < *slot) {", "atom_min(slot, key);", "ulong word = *slot;"}:
             return "splat-pre-read"
     return "error"
 

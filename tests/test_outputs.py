@@ -175,6 +175,29 @@ def test_saved_samples_round_trip_and_render_the_same_image(part_samples, tmp_pa
     assert np.array_equal(np.asarray(PILImage.open(png)), view.rgba)
 
 
+def test_saved_samples_keep_the_colour_rule(cl_context, tmp_path):
+    """The instance program is saved with the samples: a flush inlay loaded from ``.npz``
+    still shows its own colour (the first boundary that holds a point would show the plate's),
+    pixel for pixel as before saving; a file without one still loads."""
+    plate = clcsg.box((4, 4, 1), color=(0.6, 0.6, 0.6))
+    inlay = (plate - clcsg.box((2, 1.5, 1), center=(0.5, 0, 0.3))) | clcsg.box((2, 1.5, 0.6), center=(0.5, 0, 0.2),
+                                                                             color=(1, 0, 0))
+    s = clcsg.sample(inlay, 0.1, device=cl_context, progress=False)
+    path = tmp_path / "inlay.npz"
+    clcsg.write_samples(s, path)
+    t = load_samples(path)
+    (ops, regs), (ops2, regs2) = s.tape.instance_program, t.tape.instance_program
+    assert np.array_equal(ops, ops2) and regs == regs2 and t.packed.instance_rows == s.packed.instance_rows > 0
+    cam = clcsg.Camera.look_at((0.5, 0, 8), (0.5, 0, 0), up=(0, 1, 0), fov=10, width=32, height=24)
+    one, two = clcsg.render(s, cam, device=cl_context), clcsg.render(t, cam, device=cl_context)
+    assert one.mask.all() and np.all(one.primitives == 2)
+    assert np.array_equal(one.rgba, two.rgba) and np.array_equal(one.primitives, two.primitives)
+    with np.load(path) as z:
+        old = {k: z[k] for k in z.files if k not in ("instance_ops", "instance_n_regs")}
+    np.savez(tmp_path / "old.npz", **old)
+    assert load_samples(tmp_path / "old.npz").tape.instance_program is None
+
+
 def test_cli_sample_writes_npz_and_refuses_what_saved_samples_cannot_do(scene_file, tmp_path, capsys):
     out = tmp_path / "s.npz"
     assert cli.main(["sample", str(scene_file), "-r", "0.2", "-o", str(out)]) == 0

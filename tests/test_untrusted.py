@@ -197,6 +197,7 @@ def test_mutated_sample_files_render_or_fail_with_one_line(reference):
 @pytest.mark.parametrize("key,value,reason", [
     ("clip_first", 2**30, "clip programs"), ("clip_count", 2**20, "clip programs"), ("quadrics", 10**6, "quadrics"),
     ("tape_ops", 2**28, "tape_ops"), ("tape_n_regs", 0, "tape_n_regs"), ("instance_literal_counts", -3, "literal"),
+    ("instance_ops", 2**20, "instance_ops"), ("instance_n_regs", 0, "instance_n_regs"),
 ])
 def test_the_reported_crashes_are_one_line_errors(reference, tmp_path, key, value, reason):
     """The crafted files of the bug report: each exits 3 and names the array."""

@@ -22,7 +22,7 @@ SAMPLER_COUNTERS = (
 
 #: counters of the splat kernel, in slot order
 SPLAT_COUNTERS = (
-    "splats_drawn", "splats_culled", "splats_offscreen", "bound_pixels", "fragments",
+    "splats_drawn", "splats_culled", "splats_offscreen", "bound_pixels", "fragments_occluded", "fragments",
     "clip_evaluations", "fragments_passed", "atomics",
 )
 

@@ -31,7 +31,8 @@ def quadric_dtype(real) -> np.dtype:
 def sample_dtype(real) -> np.dtype:
     return np.dtype(
         [("pos", real, 3), ("normal", real, 3), ("radius", real), ("quadric", np.int32), ("sign", np.int32),
-         ("primitive", np.int32), ("clip_first", np.int32), ("clip_count", np.int32)],
+         ("primitive", np.int32), ("clip_first", np.int32), ("clip_count", np.int32),
+         ("splat_primitive", np.int32)],
         align=True,
     )
 

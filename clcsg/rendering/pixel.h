@@ -36,16 +36,34 @@ inline void pixel_miss(pixel_out out, __global const view_rec *view, int pix)
     out.rgba[pix] = shade_background(view);
 }
 
-inline void pixel_hit(pixel_out out, __global const view_rec *view, int pix, PRIMITIVE_TABLE,
-                      __global const quadric_rec *qs, int qid, real3 p,
-                      real depth, real3 v)
+/* The display colour of primitive prim (-1: grey). */
+inline float4 pixel_color(__global const prim_rec *prims, int prim)
 {
-    int prim = primitive_at(PRIMITIVE_TABLE_ARGS, qs, qid, p);
-    float4 color = prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
+    return prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
+}
+
+/* A hit at p on quadric qid shown as primitive prim, whose albedo (shade_albedo) is given. */
+inline void pixel_hit_lit(pixel_out out, __global const view_rec *view, int pix, float4 albedo, int prim,
+                          __global const quadric_rec *qs, int qid, real3 p, real depth, real3 v)
+{
     quadric q = quadric_load(qs, qid);
     out.depth[pix] = (float)depth;
     out.quadric[pix] = qid;
     out.primitive[pix] = prim;
-    out.rgba[pix] = shade(view, color, convert_float3(normalize(quadric_gradient(q, p))), convert_float3(v));
+    out.rgba[pix] = shade_lit(view, albedo, convert_float3(normalize(quadric_gradient(q, p))), convert_float3(v));
+}
+
+/* A hit at p on quadric qid shown as primitive prim. */
+inline void pixel_hit_as(pixel_out out, __global const view_rec *view, int pix, __global const prim_rec *prims,
+                         int prim, __global const quadric_rec *qs, int qid, real3 p, real depth, real3 v)
+{
+    pixel_hit_lit(out, view, pix, shade_albedo(view, pixel_color(prims, prim)), prim, qs, qid, p, depth, v);
+}
+
+inline void pixel_hit(pixel_out out, __global const view_rec *view, int pix, PRIMITIVE_TABLE,
+                      __global const quadric_rec *qs, int qid, real3 p,
+                      real depth, real3 v)
+{
+    pixel_hit_as(out, view, pix, prims, primitive_at(PRIMITIVE_TABLE_ARGS, qs, qid, p), qs, qid, p, depth, v);
 }
 #endif

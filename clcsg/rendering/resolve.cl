@@ -4,13 +4,22 @@
  * as in splat.cl (o = e + ((s - e).v) v, Q(o + tau v) = 0, eqs. 5, 6) in `real` precision,
  * taking the root whose depth (s - e).v + tau is nearest the stored float depth.  Outputs the
  * depth (distance along the unit view ray), the quadric and primitive ids and the colour of
- * the primitive whose boundary holds the hit (primitives.h), shaded with shade.h — the same
+ * the primitive whose boundary holds the hit (primitives.h; the sample's splat_primitive where
+ * the rule gives one primitive over the whole splat), shaded with shade.h (the primitives'
+ * albedos computed once per view by the albedo kernel) — the same
  * shading as the ray tracer.  EMPTY_KEY comes from clcsg/cl/constants.py. */
 #include "pixel.h"
 
+/* Per primitive k < n (and the grey of "none" at k = n): its albedo (shade_albedo) for this view. */
+__kernel void albedo(__global const prim_rec *prims, int n, __global const view_rec *view, __global float4 *out)
+{
+    int k = get_global_id(0);
+    if (k <= n) out[k] = shade_albedo(view, pixel_color(prims, k < n ? k : -1));
+}
+
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
                       PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
-                      PIXEL_OUTPUTS)
+                      __global const float4 *albedo, int n_prims, PIXEL_OUTPUTS)
 {
     int i, j;
     int pix = pixel_index(view, &i, &j);
@@ -37,5 +46,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         t = tau[0];
         if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
     }
-    pixel_hit(out, view, pix, PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, o + t * v, tc + t, v);
+    real3 p = o + t * v;
+    int prim = sp->splat_primitive >= 0 ? sp->splat_primitive : primitive_at(PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, p);
+    pixel_hit_lit(out, view, pix, albedo[prim >= 0 ? prim : n_prims], prim, quadrics, sp->quadric, p, tc + t, v);
 }

@@ -68,11 +68,17 @@ inline float3 shade_pow3(float3 x, float y) { return exp2(y * log2(x)); }
  * outward unit normal (sign * grad Q / |grad Q|, eq. 4); v: unit view ray.  The normal is
  * flipped towards the viewer (two-sided), so a view from inside still shades.  Returns 8-bit
  * RGBA, gamma encoded. */
-inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v)
+/* The albedo of display colour base in linear light, and its alpha (shade_lit's input). */
+inline float4 shade_albedo(__global const view_rec *vw, float4 base)
+{
+    return (float4)(shade_pow3(clamp(base.xyz, 0.0f, 1.0f), vw->gamma), clamp(base.w, 0.0f, 1.0f));
+}
+
+/* shade() from the linear albedo and alpha of shade_albedo (the resolve pass looks them up per
+ * primitive instead of linearizing at every pixel). */
+inline uchar4 shade_lit(__global const view_rec *vw, float4 albedo, float3 n, float3 v)
 {
     if (dot(n, v) > 0.0f) n = -n;
-    float g = vw->gamma;
-    float3 albedo = shade_pow3(clamp(base.xyz, 0.0f, 1.0f), g);
     float3 key = vload3(0, vw->key);
     float3 head = -v;
     float facing = fmax(dot(n, head), 0.0f);
@@ -84,10 +90,15 @@ inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v
     float light = hemi + vw->diffuse * (vw->headlight * facing + vw->key_light * d_key + vw->fill_light * d_fill)
                 + vw->rim * edge * edge * edge;
     float s_key = d_key > 0.0f ? shade_pow(fmax(dot(n, normalize(key + head)), 0.0f), vw->shininess) : 0.0f;
-    float3 c = albedo * light + vw->specular * s_key;
-    c = shade_pow3(clamp(c, 0.0f, 1.0f), 1.0f / g);
-    float4 out = (float4)(c, clamp(base.w, 0.0f, 1.0f)) * 255.0f + 0.5f;
+    float3 c = albedo.xyz * light + vw->specular * s_key;
+    c = shade_pow3(clamp(c, 0.0f, 1.0f), 1.0f / vw->gamma);
+    float4 out = (float4)(c, albedo.w) * 255.0f + 0.5f;
     return convert_uchar4_sat(out);
+}
+
+inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v)
+{
+    return shade_lit(vw, shade_albedo(vw, base), n, v);
 }
 
 inline uchar4 shade_background(__global const view_rec *vw)

@@ -12,6 +12,9 @@
  *    substituted, and p (on Q) is on the CSG surface iff C's membership differs between Q's two
  *    sides.  This is exact from any eye position, inside the solid included.  An empty C
  *    means the whole ball is surface on Q: no clipping;
+ *    Before the solve, a ray whose chord through the ball starts behind the pixel's stored
+ *    depth is skipped, and before the clip program a root whose key already loses to the
+ *    stored one ends the pixel (early depth rejection: no fragment there can win);
  * 3. depth test: atom_min of ((ulong)as_uint((float)depth) << 32 | sample index) into the
  *    64-bit framebuffer (positive floats order like their bit patterns), after a plain read
  *    that skips atomics which cannot win.
@@ -203,6 +206,81 @@ inline bool splat_backfacing(quadric q, real lam_min, real lam_max, int sign, re
     return lhs > 2 * L * r * al + L * r * r + slack;
 }
 
+inline bool rect_empty(rect b) { return b.x0 > b.x1 || b.y0 > b.y1; }
+
+/* Step 1 and the whole-splat back-face test: the pixels the fragments of the splat (s, r) on
+ * Q can reach, empty if it is culled or off screen (a = s - e; clip program clip[0, nc)). */
+inline rect splat_bound(__global const view_rec *view, quadric q, real lam_min, real lam_max, int sign, int qid,
+                        __global const tape_op *clip, int nc, real3 s, real3 a, real r, splat_slab *slab,
+                        bool *has_slab, ulong *cnt)
+{
+    *has_slab = false;
+    rect bound = screen_ball(view, a, r);
+#if BACKFACE_CULLING
+    /* the whole-splat test needs one orientation over the ball */
+    bool fixed = nc == 0 || tape_self_polarity(clip, nc, qid) != 0;
+    if (fixed && !rect_empty(bound) && splat_backfacing(q, lam_min, lam_max, sign, s, a, r)) {
+        cnt[PC_SPLATS_CULLED] = 1;
+        return (rect){0, 0, -1, -1};
+    }
+#endif
+#if SURFACE_ALIGNED
+    *has_slab = make_slab(q, lam_min, lam_max, s, r, slab);
+    if (*has_slab && !rect_empty(bound)) bound = rect_meet(bound, screen_slab(view, a, slab));
+#endif
+    cnt[rect_empty(bound) ? PC_SPLATS_OFFSCREEN : PC_SPLATS_DRAWN] = 1;
+    return bound;
+}
+
+/* Step 2 on the unit view ray e + t v whose point nearest s is o = e + tc v (w0 = o - s): the
+ * depth of the splat's fragment, 0 if none (nearer root first; radius, depth, clip and facing
+ * tests).  word: the pixel's framebuffer word as read; a root whose key (with sample index idx)
+ * is not below it loses, and so does the farther root. */
+inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op *clip, int nc,
+                           __global const quadric_rec *quadrics, real r, real3 e, real3 v, real tc, real3 w0,
+                           ulong word, int idx, ulong *cnt)
+{
+    real3 o;
+    real tau[2];
+    int nr = quadric_intersect_near(q, e, v, tc, &o, &tau[0], &tau[1]);
+    for (int k = 0; k < nr; ++k) { /* tau[0] <= tau[1]: nearer the eye first */
+        real3 w = w0 + tau[k] * v; /* p - s */
+        real depth = tc + tau[k];
+        if (dot(w, w) > r * r || !(depth > 0)) continue;
+        if ((((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx) >= word) return 0; /* loses, as the far root */
+        real3 p = o + tau[k] * v;
+        int side = sign;
+        if (nc > 0) {
+            cnt[PC_CLIP_EVALUATIONS]++;
+            uint bits = tape_member(clip, nc, quadrics, p, qid);
+            if (bits == 0 || bits == 3) continue; /* same membership on both sides */
+            side = (bits & 1) ? 1 : -1;
+        }
+#if BACKFACE_CULLING
+        if (side * dot(quadric_gradient(q, p), v) > 0) continue;
+#endif
+        return depth;
+    }
+    return 0;
+}
+
+/* Early depth rejection: can no fragment of depth >= zmin beat the pixel's word?  float
+ * rounding is monotone, so such a fragment's key is at least as_uint((float)zmin) << 32. */
+inline bool splat_occluded(real zmin, ulong word)
+{
+    return zmin > 0 && ((ulong)as_uint((float)zmin) << 32) > word;
+}
+
+/* Step 3: the 64-bit depth test, after a plain read that skips atomics which cannot win. */
+inline void splat_depth_test(__global ulong *slot, real depth, int idx, ulong *cnt)
+{
+    ulong key = ((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx;
+    if (key < *slot) {
+        cnt[PC_ATOMICS]++;
+        atom_min(slot, key);
+    }
+}
+
 __kernel void splat(__global const quadric_rec *quadrics, __global const sample_rec *samples, int n_samples,
                     __global const tape_op *clip, __global const view_rec *view,
                     __global ulong *framebuffer, __global ulong *counters)
@@ -211,38 +289,19 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     if (idx >= n_samples) return;
     ulong cnt[N_SPLAT_COUNTERS];
     for (int k = 0; k < N_SPLAT_COUNTERS; ++k) cnt[k] = 0;
-
     __global const sample_rec *sp = &samples[idx];
     real3 s = vload3(0, sp->pos);
     real r = sp->radius;
-    int sign = sp->sign;
-    int c0 = sp->clip_first, nc = sp->clip_count;
-    quadric q = quadric_load(quadrics, sp->quadric);
-    real lam_min = quadrics[sp->quadric].lam_min, lam_max = quadrics[sp->quadric].lam_max;
+    int qid = sp->quadric, sign = sp->sign, nc = sp->clip_count;
+    __global const tape_op *cp = clip + sp->clip_first;
+    quadric q = quadric_load(quadrics, qid);
     real3 e = view_eye(view);
     real3 a = s - e;
-    int W = view->width;
-
-    rect bound = screen_ball(view, a, r);
-#if BACKFACE_CULLING
-    /* the whole-splat test needs one orientation over the ball */
-    bool fixed = nc == 0 || tape_self_polarity(clip + c0, nc, sp->quadric) != 0;
-    if (fixed && bound.x0 <= bound.x1 && bound.y0 <= bound.y1 &&
-        splat_backfacing(q, lam_min, lam_max, sign, s, a, r)) {
-        cnt[PC_SPLATS_CULLED] = 1;
-        bound = (rect){0, 0, -1, -1};
-    }
-#endif
-#if SURFACE_ALIGNED
     splat_slab slab;
-    bool has_slab = make_slab(q, lam_min, lam_max, s, r, &slab);
-    if (has_slab && bound.x0 <= bound.x1 && bound.y0 <= bound.y1) bound = rect_meet(bound, screen_slab(view, a, &slab));
-#endif
-    if (bound.x0 <= bound.x1 && bound.y0 <= bound.y1)
-        cnt[PC_SPLATS_DRAWN] = 1;
-    else if (!cnt[PC_SPLATS_CULLED])
-        cnt[PC_SPLATS_OFFSCREEN] = 1;
-
+    bool has_slab;
+    rect bound = splat_bound(view, q, quadrics[qid].lam_min, quadrics[qid].lam_max, sign, qid, cp, nc, s, a, r,
+                             &slab, &has_slab, cnt);
+    int W = view->width;
     /* the camera in private memory: the compiler cannot keep it in registers across the
      * framebuffer writes otherwise (they might alias the view); same expression as view_ray */
     real3 d00 = vload3(0, view->d00), ddx = vload3(0, view->dx), ddy = vload3(0, view->dy);
@@ -254,37 +313,21 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             real3 w0 = tc * v - a; /* o - s: o = e + tc v, the ray point closest to s */
             real m2 = r * r - dot(w0, w0);
             if (m2 < 0) continue; /* the ray misses the ball */
+            real m = sqrt(m2);
 #if SURFACE_ALIGNED
-            if (has_slab && !chord_meets_slab(&slab, a, v, tc, sqrt(m2))) continue;
+            if (has_slab && !chord_meets_slab(&slab, a, v, tc, m)) continue;
 #endif
             cnt[PC_FRAGMENTS]++;
-            real3 o;
-            real tau[2];
-            int nr = quadric_intersect_near(q, e, v, tc, &o, &tau[0], &tau[1]);
-            for (int k = 0; k < nr; ++k) { /* tau[0] <= tau[1]: nearer the eye first */
-                real3 w = w0 + tau[k] * v; /* p - s */
-                if (dot(w, w) > r * r) continue;
-                real depth = tc + tau[k];
-                if (!(depth > 0)) continue;
-                real3 p = o + tau[k] * v;
-                int side = sign;
-                if (nc > 0) {
-                    cnt[PC_CLIP_EVALUATIONS]++;
-                    uint bits = tape_member(clip + c0, nc, quadrics, p, sp->quadric);
-                    if (bits == 0 || bits == 3) continue; /* same membership on both sides */
-                    side = (bits & 1) ? 1 : -1;
-                }
-#if BACKFACE_CULLING
-                if (side * dot(quadric_gradient(q, p), v) > 0) continue;
-#endif
+            __global ulong *slot = &framebuffer[y * W + x];
+            ulong word = *slot;
+            if (splat_occluded(tc - m - 16 * SLACK * (fabs(tc) + r), word)) {
+                cnt[PC_FRAGMENTS_OCCLUDED]++;
+                continue;
+            }
+            real depth = splat_fragment(q, sign, qid, cp, nc, quadrics, r, e, v, tc, w0, word, idx, cnt);
+            if (depth > 0) {
                 cnt[PC_FRAGMENTS_PASSED]++;
-                ulong key = ((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx;
-                __global ulong *slot = &framebuffer[y * W + x];
-                if (key < *slot) {
-                    cnt[PC_ATOMICS]++;
-                    atom_min(slot, key);
-                }
-                break;
+                splat_depth_test(slot, depth, idx, cnt);
             }
         }
     }

@@ -9,9 +9,13 @@ splats_drawn           samples whose screen bound is not empty
 splats_culled          samples skipped by the per-splat back-face test
 splats_offscreen       samples whose bound misses the screen (or is behind the eye)
 bound_pixels           pixels visited in the splats' screen bounds
-fragments              ray-quadric solves (rays that pass the ball / box test)
+fragments              rays that pass the ball / box test
+fragments_occluded     of those, rays skipped without a solve: their chord through the ball
+                       starts behind the pixel's stored depth (early depth rejection)
 clip_evaluations       clip-set quadric evaluations
-fragments_passed       fragments that passed radius, clip and back-face tests (depth tests)
+fragments_passed       fragments that passed radius, clip and back-face tests and were nearer
+                       than the pixel's word when read (depth tests; one already beaten is
+                       dropped before its clip test)
 atomics                atom_min calls (after the plain read)
 covered_pixels         pixels showing the surface
 overdraw               fragments per covered pixel
@@ -132,9 +136,13 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
             q, (-(-n // SPLAT_GROUP) * SPLAT_GROUP,), (SPLAT_GROUP,), scene.quadrics, sample_buf, np.int32(n),
             clip_buf, view_buf, fb, cnt_buf,
             wait_for=[ev_clear]))
+    n_prims = len(scene.packed.prims)
+    albedo = device_buffer(context, (n_prims + 1) * 16, "albedo table", hint=hint)
+    ev_albedo = kernel(resolve_prg, "albedo")(q, (-(-(n_prims + 1) // 64) * 64,), (64,), scene.prims,
+                                              np.int32(n_prims), view_buf, albedo)
     ev_resolve = kernel(resolve_prg, "resolve")(
-        q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, *outs,
-        wait_for=events[-1:])
+        q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, albedo,
+        np.int32(n_prims), *outs, wait_for=events[-1:] + [ev_albedo])
     wanted = set(read) | {"ids", "rgba"}
     for name, a, b in zip(OUTPUTS, (depth, ids, prims, rgba), outs):
         if name in wanted:

@@ -9,6 +9,7 @@ import numpy as np
 from ..cl.memory import upload
 from ..model.colors import parse_color, recolor_defaults
 from ..cl.records import PackedScene, SceneBuffers, pack, sample_dtype, tape_rows
+from .splat_colours import splat_primitives
 
 
 @dataclass
@@ -84,6 +85,7 @@ class Samples:
                   "clip_first": self.clip_first, "clip_count": self.clip_count}
         for name, values in fields.items():
             rec[name] = values
+        rec["splat_primitive"] = splat_primitives(self.packed, fields["pos"], self.radii, self.quadrics)
         return rec
 
     def device_buffers(self, context, real=None):
@@ -106,3 +108,4 @@ class Samples:
             self.packed = pack(self.tape, self.packed.real, self.packed.origin)
             self._device.clear()
         return n
+

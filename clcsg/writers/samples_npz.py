@@ -6,8 +6,11 @@
   radii, quadrics, signs, primitives, clip_first, clip_count) with the deduplicated clip rows
   (clip_ops) and the sampler's radius, in their own dtypes (positions float64, bit for bit);
 * the tape the samples clip against: ``tape_ops``, ``tape_n_regs``, ``tape_quadrics``,
-  ``tape_bound``, ``tape_shape``, ``tape_stats`` (JSON), ``tape_empty`` and per primitive
-  instance its literals, colour, world matrix and box (the CSG node itself is not stored);
+  ``tape_bound``, ``tape_shape``, ``tape_stats`` (JSON), ``tape_empty``, per primitive
+  instance its literals, colour, world matrix and box (the CSG node itself is not stored),
+  and the CSG over the instances (``instance_ops``, ``instance_n_regs``: the instance program
+  of the colour rule, :mod:`clcsg.compile.instance_program`; absent from older files, whose
+  samples then render with the first instance whose boundary holds a point);
 * the device origin and precision of the packed scene, and the sampling statistics (JSON).
 
 :func:`load_samples` rebuilds a :class:`~clcsg.compile.tape.Tape` (instances with
@@ -69,6 +72,8 @@ def save_samples(samples, path) -> None:
         origin=np.asarray(samples.packed.origin, dtype=np.float64), real=np.array(np.dtype(samples.packed.real).str),
         stats=_json(samples.stats),
     )
+    if t.instance_program is not None:
+        data.update(instance_ops=np.asarray(t.instance_program[0]), instance_n_regs=np.array(int(t.instance_program[1])))
     with atomic_open(path, "wb", "samples") as f:
         np.savez(f, **data)
 
@@ -190,6 +195,19 @@ def _check_instances(chk, n_quadrics: int) -> list:
             for k in range(n)]
 
 
+def _check_instance_program(chk, n_instances: int):
+    """(ops, registers) of the saved instance program, checked; None if the file has none."""
+    if "instance_ops" not in chk.arrays and "instance_n_regs" not in chk.arrays:
+        return None
+    ops = chk.get("instance_ops", "int", (None, 4))
+    n_regs = chk.scalar("instance_n_regs", "int")
+    if not len(ops) or not 1 <= n_regs <= MAX_REGS:
+        chk.fail("instance_n_regs", f"{n_regs} registers for {len(ops)} rows: expected 1 to {MAX_REGS} and a row")
+    # the program's leaves are instances: check_programs' "quadrics" range is the instances here
+    check_programs(chk, "instance_ops", ops, np.zeros(1, np.int64), np.array([len(ops)]), n_regs, n_instances)
+    return ops.astype(np.int32), int(n_regs)
+
+
 def _check_samples(chk, n_quadrics: int, n_instances: int, n_regs: int) -> dict:
     """The per-sample arrays, checked, in the dtypes :class:`Samples` uses."""
 
@@ -241,6 +259,7 @@ def load_samples(path):
     instances = [Instance(index=k, node=None, matrix=m, literals=lits, color=c, box=box)
                  for k, (m, lits, c, box) in enumerate(insts)]
     tape = Tape(instances=instances, **t)
+    tape.instance_program = _check_instance_program(chk, len(insts))
     try:
         with np.errstate(all="ignore"):  # an overflow is reported below, as one error
             packed = pack(tape, np.dtype(real), origin)

@@ -121,6 +121,7 @@ def check_spans(chk: Checker, name: str, first: np.ndarray, count: np.ndarray, n
     c = count.astype(np.int64)
     chk.in_range(f"{name} counts", c, 0, n_rows + 1, f" ({n_rows} rows)")
     live = c > 0
+    chk.in_range(f"{name} offsets", f, 0, n_rows + 1, f" ({n_rows} rows)")  # empty spans too: every index in range
     chk.in_range(f"{name} offsets", f[live], 0, n_rows, f" ({n_rows} rows)")
     if live.any() and int((f[live] + c[live]).max()) > n_rows:
         chk.fail(name, f"a program runs past the {n_rows} rows stored")

@@ -57,7 +57,8 @@ typedef struct {
  * negative side, outward normal +grad Q), the primitive instance whose boundary holds it, and
  * its clip program: clip_count tape rows from clip_first of the clip buffer (0: no clipping);
  * a fragment on the quadric is kept iff the program's membership differs between the
- * quadric's two sides. */
+ * quadric's two sides.  splat_primitive: the primitive every point of the splat takes (the
+ * colour rule, primitives.h), -1 where it may vary over the splat (clcsg/sampling/samples.py). */
 typedef struct {
     real pos[3];
     real normal[3];
@@ -67,6 +68,7 @@ typedef struct {
     int primitive;
     int clip_first;
     int clip_count;
+    int splat_primitive;
 } sample_rec;
 
 /* ---- sampler (clcsg/sampling) -------------------------------------------------------------- */

@@ -89,6 +89,7 @@ inline int instance_bounding(PRIMITIVE_TABLE, __global const quadric_rec *qs, in
 inline int primitive_at(PRIMITIVE_TABLE, __global const quadric_rec *qs, int q, real3 p)
 {
     owner_rec o = owners[q];
+    if (o.count == 1) return owner_list[o.first]; /* the loop below gives it, held or not */
     int cand[INSTANCE_LANES];
     int nc = 1, first = -1, holding = 0;
     for (int k = 0; k < o.count; ++k) {
