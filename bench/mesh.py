@@ -17,7 +17,6 @@ trimesh's ``is_watertight``).
 
 from __future__ import annotations
 
-import importlib
 import os
 import resource
 import shutil
@@ -31,23 +30,12 @@ import numpy as np
 import clcsg
 
 from . import zoo
-from .common import Load, diagonal, fmt, write
+from .common import Load, Translator, Unsupported, diagonal, fmt, surface_error, write
 
 SEGMENTS = (12, 16, 24, 32, 48, 64, 96, 128)
 QUICK_SEGMENTS = (16, 32, 64)
 DEFAULT_REL = 1e-3
 SAMPLES = 20000
-
-
-def _peers():
-    """bench.peers (the manifold3d translation of a clcsg shape and the first-order surface
-    error), imported on use: bench parts import only common and zoo at module level, and this
-    part shares those two pieces with peers rather than copying them."""
-    return importlib.import_module("bench.peers")
-
-
-def surface_error(tape, points):
-    return _peers().surface_error(tape, points)
 
 
 def _sample(vertices, triangles, rng, count=SAMPLES):
@@ -84,14 +72,13 @@ def manifold_row(shape, tape, target_rel, segments, rng) -> dict:
     """manifold3d at the fewest segments whose measured error is under ``target_rel``."""
     import manifold3d
 
-    peers = _peers()
     rec = {"levels": []}
     for n in segments:
         try:
             t0 = time.process_time()
-            mesh = peers.Translator(manifold3d, n, tape.bound).build(shape).to_mesh()
+            mesh = Translator(manifold3d, n, tape.bound).build(shape).to_mesh()
             cpu = time.process_time() - t0
-        except peers.Unsupported as e:
+        except Unsupported as e:
             rec["unsupported"] = str(e)
             return rec
         v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
