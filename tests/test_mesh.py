@@ -68,7 +68,7 @@ def check_vertices_on_surface(scene, m):
     on_q, on_csg = oracle.sample_residuals(scene.shape, m.vertices, q, tol=1e-9 * scale)
     assert on_q.max() <= 1e-10 * scale
     # at a corner the oracle's rounding allowance (forcing all ambiguous literals one way)
-    # may not decide: there, some of 14 nearby points are inside the solid and some outside
+    # may not decide: there, some of 512 nearby points are inside the solid and some outside
     corner = ~on_csg & (m.vertex_quadrics[:, 1] >= 0)
     on_csg[corner] = _straddles(scene.shape, m.vertices[corner], 1e-6 * scale)
     assert on_csg.all(), f"{(~on_csg).sum()} of {len(on_csg)} vertices off the CSG surface"
@@ -82,7 +82,9 @@ def check_vertices_on_surface(scene, m):
 def _straddles(shape, x, eps):
     if not len(x):
         return np.zeros(0, dtype=bool)
-    dirs = np.random.default_rng(1).normal(size=(32, 3))  # random: none on an axis-aligned face
+    # random: none on an axis-aligned face; many: a corner at the tip of a thin spike of the
+    # solid (a few per cent of the directions inside) still straddles
+    dirs = np.random.default_rng(1).normal(size=(512, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     ins = oracle.contains(shape, (x[:, None] + eps * dirs[None]).reshape(-1, 3)).reshape(len(x), -1)
     return ins.any(axis=1) & ~ins.all(axis=1)
@@ -135,11 +137,7 @@ def test_mesh_within_tolerance_of_surface(path):
     assert on_one.mean() > 0.98
 
 
-_CHAMFERED = pytest.mark.xfail(strict=True, reason="drilled_die: where the drill meets the sphere and a cube face "
-                               "Newton finds no corner on the solid, a few hundred triangles span the edge (a chamfer)")
-
-
-@pytest.mark.parametrize("path", [p if "drilled" not in p else pytest.param(p, marks=_CHAMFERED) for p in EXAMPLES[:4]])
+@pytest.mark.parametrize("path", EXAMPLES[:4])
 def test_surface_within_tolerance_of_mesh(path):
     """Exact surface points (roots on random lines, the oracle) lie within the tolerance of the
     mesh, apart from a small fraction at sharp edges the mesh has not split."""
