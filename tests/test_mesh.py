@@ -20,6 +20,7 @@ import clcsg
 import tree_oracle as oracle
 from clcsg.cli.app import main
 from clcsg.errors import SceneError, UsageError
+from clcsg.meshing.planar import flat_quadrics
 from clcsg.meshing.writers import stl_bytes, write
 from clcsg.model.random_programs import random_program
 
@@ -151,15 +152,23 @@ def test_surface_within_tolerance_of_mesh(path):
 
 def test_volume_box_minus_cylinder():
     shape = clcsg.difference(clcsg.box((2.0, 2.0, 1.0)), clcsg.cylinder(radius=0.5, height=3.0))
-    m = clcsg.mesh(shape, tolerance=0.001)
+    sc = clcsg.Scene(shape)
+    m = clcsg.mesh(sc, tolerance=0.001)
     check_closed_manifold(m)
     exact = 4.0 - math.pi * 0.25
     area = 2 * 4.0 - 2 * math.pi * 0.25 + 8 * 1.0 + 2 * math.pi * 0.5
     vol = trimesh.Trimesh(m.vertices, m.triangles, process=False).volume
     assert abs(vol - exact) <= area * m.tolerance
     assert vol >= exact - 1e-9  # the hole's chords lie inside the cylinder: less is removed
-    planar = m.stats["planar_patches"]
-    assert planar >= 5
+    # flat faces from their boundary alone: every vertex of a triangle on a plane lies on a
+    # sharp edge (two quadrics or more), and the four side faces (rectangles) have at most four
+    # triangles each
+    flat = flat_quadrics(sc.compile().quadrics)
+    on_flat = np.isin(m.quadric, flat)
+    assert (m.vertex_quadrics[m.triangles[on_flat]][..., 1] >= 0).all()
+    n = np.cross(*(m.vertices[m.triangles][:, k] - m.vertices[m.triangles][:, 0] for k in (1, 2)))
+    side = on_flat & (np.abs(n[:, 2]) <= 1e-12 * np.linalg.norm(n, axis=1))
+    assert 8 <= side.sum() <= 16
 
 
 @pytest.mark.parametrize("seed", range(6))
