@@ -83,8 +83,8 @@ def _chord_error(m, corners, sets, flat):
         on = sets[:, k] >= 0
         sel = np.flatnonzero(on & flat[np.maximum(sets[:, k], 0)])
         if len(sel):
-            kx = np.einsum("rij,rj->ri", m.tape.quadrics[sets[sel, k]], ph[sel, 0])
-            f = np.abs(np.einsum("ri,ri->r", kx, ph[sel, 0]))
+            kx = np.matmul(m.tape.quadrics[sets[sel, k]], ph[sel, 0, :, None])[..., 0]
+            f = np.abs((kx * ph[sel, 0]).sum(axis=1))
             g = 2.0 * np.linalg.norm(kx[:, :3], axis=1)
             with np.errstate(divide="ignore", invalid="ignore"):
                 d = np.where(g > 0, f / g, np.where(f == 0, 0.0, np.inf))
@@ -92,8 +92,8 @@ def _chord_error(m, corners, sets, flat):
         sel = np.flatnonzero(on & ~flat[np.maximum(sets[:, k], 0)])
         if not len(sel):
             continue
-        kx = np.einsum("rij,rsj->rsi", m.tape.quadrics[sets[sel, k]], ph[sel])
-        f = np.abs(np.einsum("rsi,rsi->rs", kx, ph[sel]))
+        kx = np.matmul(ph[sel], m.tape.quadrics[sets[sel, k]])  # K symmetric: x^T K = (K x)^T
+        f = np.abs((kx * ph[sel]).sum(axis=2))
         g = 2.0 * np.linalg.norm(kx[..., :3], axis=2)
         with np.errstate(divide="ignore", invalid="ignore"):
             d = np.where(g > 0, f / g, np.where(f == 0, 0.0, np.inf)).max(axis=1)
