@@ -44,7 +44,7 @@ MIN_EDGE = 1e-3
 PROBE = 1e-7
 #: a curve point up to this many edge lengths from the edge's midpoint may split it (a thin
 #: wedge's apex projects beyond the chord that crosses it)
-REACH = 1.5
+REACH = 3.0
 #: a curve point this close to an edge's end (a fraction of the tolerance) moves that end
 SNAP = 0.05
 
