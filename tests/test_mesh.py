@@ -128,14 +128,19 @@ def test_mesh_within_tolerance_of_surface(path):
     quadric the triangle lies on (first-order distance), for every triangle that lies on one
     quadric (those across a sharp edge are counted in the stats and excluded)."""
     sc, m = _mesh(path)
-    tape = sc.compile()
+    assert check_within_tolerance(sc.compile(), m) > 0.98
+
+
+def check_within_tolerance(tape, m) -> float:
+    """Centroids and edge midpoints of the triangles on one quadric within the tolerance of it;
+    returns the fraction of triangles on one quadric."""
     s = m.vertex_quadrics[m.triangles]
     on_one = np.array([bool(set(a[a >= 0]) & set(b[b >= 0]) & set(c[c >= 0])) for a, b, c in s])
     v = m.vertices[m.triangles[on_one]]
     pts = np.concatenate([v.mean(axis=1), 0.5 * (v[:, 0] + v[:, 1]), 0.5 * (v[:, 1] + v[:, 2])])
     q = np.tile(tape.quadrics[m.quadric[on_one]], (3, 1, 1))
     assert _quadric_distance(q, pts).max() <= m.tolerance * 1.0 + 1e-12
-    assert on_one.mean() > 0.98
+    return float(on_one.mean())
 
 
 @pytest.mark.parametrize("path", EXAMPLES[:4])
@@ -183,6 +188,21 @@ def test_random_programs(seed):
         return
     check_closed_manifold(m)
     check_vertices_on_surface(sc, m)
+
+
+_CURVE_CHORDS = pytest.mark.xfail(strict=True, reason="program 0: refinement leaves edges along an intersection curve "
+                                  "whose projected midpoints are not on the solid (12 triangles up to 3.2x the "
+                                  "tolerance, with or without decimation)")
+
+
+@pytest.mark.parametrize("seed", [pytest.param(0, marks=_CURVE_CHORDS)] + list(range(1, 6)))
+def test_random_programs_within_tolerance(seed):
+    """The triangles on one quadric within the tolerance of it on random programs (the
+    decimation's chord error bound, and the refinement's)."""
+    prog = random_program(np.random.default_rng(seed), max_depth=2)
+    sc = clcsg.Scene(prog.shape)
+    m = clcsg.mesh(sc, tolerance="0.2%")  # none of these programs is empty
+    assert check_within_tolerance(sc.compile(), m) > 0.9
 
 
 # -- bad input -----------------------------------------------------------------------------------
