@@ -1,4 +1,6 @@
-"""Shared benchmark plumbing: machine/device description, result files, timing helpers.
+"""Shared benchmark plumbing: machine/device description, result files, timing helpers, the
+manifold3d translation of a clcsg shape (:class:`Translator`) and the first-order surface error
+(:func:`surface_error`) that the peer and mesh benchmarks both measure with.
 
 Every other bench module may import this one and :mod:`bench.zoo`; neither imports another
 bench module, so there are no import cycles.
@@ -16,6 +18,9 @@ import time
 import warnings
 
 import numpy as np
+
+from clcsg.model.csg import Complement, Difference, Intersection, Primitive, Transformed, Union
+from clcsg.model.quadric import frame_z_to
 
 RESULTS = os.path.join(os.path.dirname(__file__), "results")
 #: the default result directory (the gallery is written only with it)
@@ -283,3 +288,119 @@ def fit_to_silhouette(tape, width, height, direction, fill=0.9, ctx=None):
         cam = Camera.look_at(cam.target + d * (span / fill), cam.target, up=(0, 0, 1), fov=cam.fov,
                              width=width, height=height)
     return cam
+
+
+# -- manifold3d translation and the first-order surface error (bench.peers, bench.mesh) ---------
+
+class Unsupported(Exception):
+    pass
+
+
+def _frame_to(axis):
+    """3x3 rotation taking +z to ``axis``."""
+    return frame_z_to(np.asarray(axis, dtype=float))
+
+
+def _place(m, rot, center):
+    """Rotate ``m`` by the 3x3 ``rot`` about the origin, then translate it to ``center``."""
+    M = np.zeros((3, 4))
+    M[:, :3] = rot
+    M[:, 3] = center
+    return m.transform(M)
+
+
+class Translator:
+    def __init__(self, manifold3d, segments, bound):
+        self.mf = manifold3d
+        self.n = int(segments)
+        b = np.asarray(bound, dtype=float)
+        self.center = 0.5 * (b[0] + b[1])
+        self.big = 4.0 * float(np.linalg.norm(b[1] - b[0])) + 1.0
+
+    def build(self, shape):
+        M = self.mf.Manifold
+        if isinstance(shape, Primitive):
+            return self.primitive(shape)
+        if isinstance(shape, Union):
+            return M.batch_boolean([self.build(s) for s in shape.operands], self.mf.OpType.Add) \
+                if shape.operands else M()
+        if isinstance(shape, Intersection):
+            pos = [s for s in shape.operands if not isinstance(s, Complement)]
+            neg = [s.operand for s in shape.operands if isinstance(s, Complement)]
+            if not pos:
+                raise Unsupported("an intersection of complements only")
+            out = M.batch_boolean([self.build(s) for s in pos], self.mf.OpType.Intersect) if len(pos) > 1 \
+                else self.build(pos[0])
+            for s in neg:
+                out = out - self.build(s)
+            return out
+        if isinstance(shape, Difference):
+            first = self.build(shape.operands[0])
+            rest = [self.build(s) for s in shape.operands[1:]]
+            if not rest:
+                return first
+            return first - (M.batch_boolean(rest, self.mf.OpType.Add) if len(rest) > 1 else rest[0])
+        if isinstance(shape, Transformed):
+            return self.build(shape.operand).transform(np.asarray(shape.matrix)[:3, :4])
+        raise Unsupported(f"{type(shape).__name__} outside an intersection")
+
+    def halfspace(self, normal, offset):
+        """normal . x <= offset, as a cube of side `big` with one face on the plane."""
+        n = np.asarray(normal, dtype=float)
+        ln = np.linalg.norm(n)
+        w, o = n / ln, offset / ln
+        p0 = self.center - (w @ self.center - o) * w  # the scene center projected onto the plane
+        L = self.big
+        cube = self.mf.Manifold.cube((L, L, L), True)
+        return _place(cube, _frame_to(w), p0 - 0.5 * L * w)
+
+    def primitive(self, p: Primitive):
+        M = self.mf.Manifold
+        k, a, n = p.kind, p.params, self.n
+        if k == "box":
+            size = np.broadcast_to(np.asarray(a.get("size", 1.0), dtype=float), (3,))
+            return M.cube(tuple(size), True).translate(tuple(np.asarray(a.get("center", (0, 0, 0)), dtype=float)))
+        if k in ("cylinder", "cone"):
+            h = float(a.get("height", 1.0))
+            if k == "cylinder":
+                r1 = r2 = float(a.get("radius", 1.0))
+            else:
+                r1, r2 = float(a.get("r1", 1.0)), float(a.get("r2", 0.0))
+            m = M.cylinder(h, r1, r2, n, True)
+            return _place(m, _frame_to(a.get("axis", (0, 0, 1))), np.asarray(a.get("center", (0, 0, 0)), float))
+        if k == "sphere":
+            return M.sphere(float(a.get("radius", 1.0)), n).translate(tuple(np.asarray(a.get("center", (0, 0, 0)), float)))
+        if k == "ellipsoid":
+            r = np.broadcast_to(np.asarray(a.get("radii", (1, 1, 1)), dtype=float), (3,))
+            return M.sphere(1.0, n).scale(tuple(r)).translate(tuple(np.asarray(a.get("center", (0, 0, 0)), float)))
+        if k == "halfspace":
+            return self.halfspace(a.get("normal", (0, 0, 1)), float(a.get("offset", 0.0)))
+        if k == "slab":
+            nrm = np.asarray(a.get("normal", (0, 0, 1)), dtype=float)
+            return self.halfspace(nrm, float(a.get("hi", 0.5))) ^ self.halfspace(-nrm, -float(a.get("lo", -0.5)))
+        if k == "infinite_cylinder":
+            m = M.cylinder(self.big, float(a.get("radius", 1.0)), -1.0, n, True)
+            axis = np.asarray(a.get("axis", (0, 0, 1)), dtype=float)
+            c = np.asarray(a.get("center", (0, 0, 0)), dtype=float)
+            w = axis / np.linalg.norm(axis)
+            c = c + (w @ (self.center - c)) * w  # centered on the scene along its axis
+            return _place(m, _frame_to(w), c)
+        raise Unsupported(f"primitive {k!r}")
+
+
+def surface_error(tape, points, chunk=20000):
+    """First-order distance to the nearest unique quadric of ``tape`` (a compiled scene, or
+    anything with ``quadrics`` (U, 4, 4)): min_u |Q_u(x)| / |grad Q_u(x)|."""
+    Qs = np.asarray(tape.quadrics)  # (U, 4, 4)
+    out = np.empty(len(points))
+    for s in range(0, len(points), chunk):
+        x = points[s:s + chunk]
+        xh = np.concatenate([x, np.ones((len(x), 1))], axis=1)
+        mx = np.einsum("uij,nj->nui", Qs, xh)  # (N, U, 4): Q_u xh
+        val = np.einsum("nui,ni->nu", mx, xh)
+        grad = 2.0 * mx[:, :, :3]
+        g = np.linalg.norm(grad, axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.where(g > 0, np.abs(val) / g, np.where(val == 0, 0.0, np.inf))
+        out[s:s + chunk] = d.min(axis=1)
+    return out

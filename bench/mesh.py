@@ -9,7 +9,10 @@ diagonal.  Rows:
 * the everyday OpenSCAD parts: openscad's STL at the file's own ``$fn`` (its error measured),
   clcsg at the default tolerance (0.1% of the diagonal) and at openscad's measured error
   (equal tolerance), manifold3d at the fewest segments that reach the default tolerance;
-* the zoo models: clcsg at the default tolerance and manifold3d at equal tolerance.
+* the zoo models: clcsg at the default tolerance and manifold3d at equal tolerance;
+* the Menger sponge (not with ``--quick``): clcsg at the default tolerance, manifold3d (exact).
+
+Per row the ratios clcsg / peer of CPU time and triangle count (``ratios``).
 
 Whether the mesh is closed and 2-manifold is checked for every mesh (manifold3d's status and
 trimesh's ``is_watertight``).
@@ -17,7 +20,6 @@ trimesh's ``is_watertight``).
 
 from __future__ import annotations
 
-import importlib
 import os
 import resource
 import shutil
@@ -31,23 +33,12 @@ import numpy as np
 import clcsg
 
 from . import zoo
-from .common import Load, diagonal, fmt, write
+from .common import Load, Translator, Unsupported, diagonal, fmt, surface_error, write
 
 SEGMENTS = (12, 16, 24, 32, 48, 64, 96, 128)
 QUICK_SEGMENTS = (16, 32, 64)
 DEFAULT_REL = 1e-3
 SAMPLES = 20000
-
-
-def _peers():
-    """bench.peers (the manifold3d translation of a clcsg shape and the first-order surface
-    error), imported on use: bench parts import only common and zoo at module level, and this
-    part shares those two pieces with peers rather than copying them."""
-    return importlib.import_module("bench.peers")
-
-
-def surface_error(tape, points):
-    return _peers().surface_error(tape, points)
 
 
 def _sample(vertices, triangles, rng, count=SAMPLES):
@@ -84,14 +75,13 @@ def manifold_row(shape, tape, target_rel, segments, rng) -> dict:
     """manifold3d at the fewest segments whose measured error is under ``target_rel``."""
     import manifold3d
 
-    peers = _peers()
     rec = {"levels": []}
     for n in segments:
         try:
             t0 = time.process_time()
-            mesh = peers.Translator(manifold3d, n, tape.bound).build(shape).to_mesh()
+            mesh = Translator(manifold3d, n, tape.bound).build(shape).to_mesh()
             cpu = time.process_time() - t0
-        except peers.Unsupported as e:
+        except Unsupported as e:
             rec["unsupported"] = str(e)
             return rec
         v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
@@ -140,6 +130,7 @@ def _everyday(names, segments, rng):
             if "max_rel_error" in osc:
                 rec["ours_at_openscad_error"] = ours(scene, tape, f"{100 * osc['max_rel_error']}%", rng)
         rec["manifold3d"] = manifold_row(scene.shape, tape, DEFAULT_REL, segments, rng)
+        rec["ratios"] = ratios(rec)
         rows.append(rec)
         print(_line(name, rec), flush=True)
     return rows
@@ -154,9 +145,37 @@ def _zoo(names, segments, rng):
         tape = scene.compile()
         rec = {"part": m.name, "ours": ours(scene, tape, f"{100 * DEFAULT_REL}%", rng),
                "manifold3d": manifold_row(scene.shape, tape, DEFAULT_REL, segments, rng)}
+        rec["ratios"] = ratios(rec)
         rows.append(rec)
         print(_line(m.name, rec), flush=True)
     return rows
+
+
+def _sponge(rng):
+    """The Menger sponge: clcsg at the default tolerance, manifold3d (boxes are exact: one level)."""
+    scene = clcsg.load(zoo.example_path(zoo.SPONGE, "csg"))
+    tape = scene.compile()
+    rec = {"part": zoo.SPONGE, "ours": ours(scene, tape, f"{100 * DEFAULT_REL}%", rng),
+           "manifold3d": manifold_row(scene.shape, tape, DEFAULT_REL, SEGMENTS[:1], rng)}
+    rec["ratios"] = ratios(rec)
+    print(_line(zoo.SPONGE, rec), flush=True)
+    return [rec]
+
+
+def ratios(rec) -> dict:
+    """clcsg / peer for CPU time and triangles (below 1: clcsg is faster, or has fewer)."""
+    o, out = rec["ours"], {}
+    peers = {"openscad": rec.get("openscad", {}), "manifold3d": rec["manifold3d"].get("at_tolerance") or {}}
+    for name, p in peers.items():
+        if p.get("cpu_s"):
+            out[f"cpu_vs_{name}"] = o["cpu_s"] / p["cpu_s"]
+        if p.get("triangles"):
+            out[f"triangles_vs_{name}"] = o["triangles"] / p["triangles"]
+    eq = rec.get("ours_at_openscad_error")
+    if eq and peers["openscad"].get("cpu_s"):
+        out["cpu_vs_openscad_at_its_error"] = eq["cpu_s"] / peers["openscad"]["cpu_s"]
+        out["triangles_vs_openscad_at_its_error"] = eq["triangles"] / peers["openscad"]["triangles"]
+    return out
 
 
 def _line(name, rec) -> str:
@@ -173,9 +192,10 @@ def _line(name, rec) -> str:
 
 def table(payload) -> str:
     head = ("| part | clcsg triangles | clcsg CPU s | clcsg max error | openscad triangles | openscad CPU s | "
-            "openscad max error | clcsg at openscad's error: triangles / CPU s | manifold3d at 0.1%: triangles / CPU s |")
-    lines = [head, "|" + "---|" * 9]
-    for r in payload["everyday"] + payload["zoo"]:
+            "openscad max error | clcsg at openscad's error: triangles / CPU s | manifold3d at 0.1%: triangles / CPU s | "
+            "CPU clcsg / openscad | CPU clcsg / manifold3d | triangles clcsg / manifold3d |")
+    lines = [head, "|" + "---|" * 12]
+    for r in payload["everyday"] + payload["zoo"] + payload.get("sponge", []):
         o, osc = r["ours"], r.get("openscad", {})
         eq = r.get("ours_at_openscad_error")
         mf = r["manifold3d"].get("at_tolerance")
@@ -183,7 +203,9 @@ def table(payload) -> str:
                      f"{osc.get('triangles', '-')} | {fmt(osc.get('cpu_s'), '.2f')} | "
                      f"{fmt(osc.get('max_rel_error'), '.1e')} | "
                      f"{(str(eq['triangles']) + ' / ' + format(eq['cpu_s'], '.2f')) if eq else '-'} | "
-                     f"{(str(mf['triangles']) + ' / ' + format(mf['cpu_s'], '.3f')) if mf else '-'} |")
+                     f"{(str(mf['triangles']) + ' / ' + format(mf['cpu_s'], '.3f')) if mf else '-'} | "
+                     f"{fmt(r['ratios'].get('cpu_vs_openscad'), '.2f')} | {fmt(r['ratios'].get('cpu_vs_manifold3d'), '.0f')} | "
+                     f"{fmt(r['ratios'].get('triangles_vs_manifold3d'), '.2f')} |")
     return "\n".join(lines)
 
 
@@ -195,7 +217,8 @@ def run(quick=False, device=None):
     everyday = ("l_bracket", "rook") if quick else zoo.EVERYDAY
     models = ("lens", "drilled_die") if quick else tuple(m.name for m in zoo.MODELS)
     payload = {"method": " ".join(__doc__.split()), "quick": bool(quick), "default_rel_tolerance": DEFAULT_REL,
-               "everyday": _everyday(everyday, segments, rng), "zoo": _zoo(models, segments, rng)}
+               "everyday": _everyday(everyday, segments, rng), "zoo": _zoo(models, segments, rng),
+               "sponge": [] if quick else _sponge(rng)}
     payload["environment"] = load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(),
                                         "clcsg": clcsg.__version__, "timing": "process CPU time"})
     path = write("mesh", payload)

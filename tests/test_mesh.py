@@ -20,6 +20,7 @@ import clcsg
 import tree_oracle as oracle
 from clcsg.cli.app import main
 from clcsg.errors import SceneError, UsageError
+from clcsg.meshing.planar import flat_quadrics
 from clcsg.meshing.writers import stl_bytes, write
 from clcsg.model.random_programs import random_program
 
@@ -68,7 +69,7 @@ def check_vertices_on_surface(scene, m):
     on_q, on_csg = oracle.sample_residuals(scene.shape, m.vertices, q, tol=1e-9 * scale)
     assert on_q.max() <= 1e-10 * scale
     # at a corner the oracle's rounding allowance (forcing all ambiguous literals one way)
-    # may not decide: there, some of 14 nearby points are inside the solid and some outside
+    # may not decide: there, some of 512 nearby points are inside the solid and some outside
     corner = ~on_csg & (m.vertex_quadrics[:, 1] >= 0)
     on_csg[corner] = _straddles(scene.shape, m.vertices[corner], 1e-6 * scale)
     assert on_csg.all(), f"{(~on_csg).sum()} of {len(on_csg)} vertices off the CSG surface"
@@ -82,7 +83,9 @@ def check_vertices_on_surface(scene, m):
 def _straddles(shape, x, eps):
     if not len(x):
         return np.zeros(0, dtype=bool)
-    dirs = np.random.default_rng(1).normal(size=(32, 3))  # random: none on an axis-aligned face
+    # random: none on an axis-aligned face; many: a corner at the tip of a thin spike of the
+    # solid (a few per cent of the directions inside) still straddles
+    dirs = np.random.default_rng(1).normal(size=(512, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     ins = oracle.contains(shape, (x[:, None] + eps * dirs[None]).reshape(-1, 3)).reshape(len(x), -1)
     return ins.any(axis=1) & ~ins.all(axis=1)
@@ -125,21 +128,22 @@ def test_mesh_within_tolerance_of_surface(path):
     quadric the triangle lies on (first-order distance), for every triangle that lies on one
     quadric (those across a sharp edge are counted in the stats and excluded)."""
     sc, m = _mesh(path)
-    tape = sc.compile()
+    assert check_within_tolerance(sc.compile(), m) > 0.98
+
+
+def check_within_tolerance(tape, m) -> float:
+    """Centroids and edge midpoints of the triangles on one quadric within the tolerance of it;
+    returns the fraction of triangles on one quadric."""
     s = m.vertex_quadrics[m.triangles]
     on_one = np.array([bool(set(a[a >= 0]) & set(b[b >= 0]) & set(c[c >= 0])) for a, b, c in s])
     v = m.vertices[m.triangles[on_one]]
     pts = np.concatenate([v.mean(axis=1), 0.5 * (v[:, 0] + v[:, 1]), 0.5 * (v[:, 1] + v[:, 2])])
     q = np.tile(tape.quadrics[m.quadric[on_one]], (3, 1, 1))
     assert _quadric_distance(q, pts).max() <= m.tolerance * 1.0 + 1e-12
-    assert on_one.mean() > 0.98
+    return float(on_one.mean())
 
 
-_CHAMFERED = pytest.mark.xfail(strict=True, reason="drilled_die: where the drill meets the sphere and a cube face "
-                               "Newton finds no corner on the solid, a few hundred triangles span the edge (a chamfer)")
-
-
-@pytest.mark.parametrize("path", [p if "drilled" not in p else pytest.param(p, marks=_CHAMFERED) for p in EXAMPLES[:4]])
+@pytest.mark.parametrize("path", EXAMPLES[:4])
 def test_surface_within_tolerance_of_mesh(path):
     """Exact surface points (roots on random lines, the oracle) lie within the tolerance of the
     mesh, apart from a small fraction at sharp edges the mesh has not split."""
@@ -153,15 +157,23 @@ def test_surface_within_tolerance_of_mesh(path):
 
 def test_volume_box_minus_cylinder():
     shape = clcsg.difference(clcsg.box((2.0, 2.0, 1.0)), clcsg.cylinder(radius=0.5, height=3.0))
-    m = clcsg.mesh(shape, tolerance=0.001)
+    sc = clcsg.Scene(shape)
+    m = clcsg.mesh(sc, tolerance=0.001)
     check_closed_manifold(m)
     exact = 4.0 - math.pi * 0.25
     area = 2 * 4.0 - 2 * math.pi * 0.25 + 8 * 1.0 + 2 * math.pi * 0.5
     vol = trimesh.Trimesh(m.vertices, m.triangles, process=False).volume
     assert abs(vol - exact) <= area * m.tolerance
     assert vol >= exact - 1e-9  # the hole's chords lie inside the cylinder: less is removed
-    planar = m.stats["planar_patches"]
-    assert planar >= 5
+    # flat faces from their boundary alone: every vertex of a triangle on a plane lies on a
+    # sharp edge (two quadrics or more), and the four side faces (rectangles) have at most four
+    # triangles each
+    flat = flat_quadrics(sc.compile().quadrics)
+    on_flat = np.isin(m.quadric, flat)
+    assert (m.vertex_quadrics[m.triangles[on_flat]][..., 1] >= 0).all()
+    n = np.cross(*(m.vertices[m.triangles][:, k] - m.vertices[m.triangles][:, 0] for k in (1, 2)))
+    side = on_flat & (np.abs(n[:, 2]) <= 1e-12 * np.linalg.norm(n, axis=1))
+    assert 8 <= side.sum() <= 16
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -176,6 +188,21 @@ def test_random_programs(seed):
         return
     check_closed_manifold(m)
     check_vertices_on_surface(sc, m)
+
+
+_CURVE_CHORDS = pytest.mark.xfail(strict=True, reason="program 0: refinement leaves edges along an intersection curve "
+                                  "whose projected midpoints are not on the solid (12 triangles up to 3.2x the "
+                                  "tolerance, with or without decimation)")
+
+
+@pytest.mark.parametrize("seed", [pytest.param(0, marks=_CURVE_CHORDS)] + list(range(1, 6)))
+def test_random_programs_within_tolerance(seed):
+    """The triangles on one quadric within the tolerance of it on random programs (the
+    decimation's chord error bound, and the refinement's)."""
+    prog = random_program(np.random.default_rng(seed), max_depth=2)
+    sc = clcsg.Scene(prog.shape)
+    m = clcsg.mesh(sc, tolerance="0.2%")  # none of these programs is empty
+    assert check_within_tolerance(sc.compile(), m) > 0.9
 
 
 # -- bad input -----------------------------------------------------------------------------------

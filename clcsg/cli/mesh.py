@@ -19,8 +19,9 @@ def add_parser(subparsers):
             2-manifold triangle mesh: marching tetrahedra on the grid cells the pruned tape
             keeps, every vertex solved onto the exact quadric surface in double precision,
             edges split onto the exact intersection curves of the quadrics (sharp edges and
-            corners) and on curved patches until the chord error is under the tolerance; flat
-            faces are re-triangulated from their boundary.  Formats: {', '.join(FORMATS)}
+            corners) and on curved patches until the chord error is under the tolerance, then
+            edges collapsed wherever the chord error bound and the sharp edges allow (curved
+            patches coarsened to the tolerance, flat faces to their boundary).  Formats: {', '.join(FORMATS)}
             (from the extension, checked before any work; STL is binary; 3MF, PLY and OBJ get
             each triangle's primitive colour).  An empty solid is an error (exit code 3) and
             writes no file.  Runs on the host (numpy); --device is not used.

@@ -9,6 +9,8 @@ The stages, one module each:
    corners, solved by Newton onto two or three quadrics, :mod:`.project`) and on curved patches
    until the chord error is under the tolerance;
 5. :mod:`.collapse`: zero-length edges (a corner solved twice) collapsed;
+   :mod:`.decimate`: half-edge collapses within the chord error bound that keep every vertex
+   on its quadrics (curved patches coarsened to the tolerance, flat faces to their boundary);
    :mod:`.planar`: each planar patch re-triangulated from its boundary alone (few triangles);
 6. :mod:`.colors`: per triangle its quadric, primitive and colour.
 """
@@ -27,6 +29,7 @@ from ..readers.scenes import as_scene
 from ..sampling.radius import Radius
 from . import planar, refine
 from .collapse import collapse_coincident
+from .decimate import decimate
 from .owners import triangle_owners
 from .crossings import crossings
 from .octree import surface_cells
@@ -63,6 +66,14 @@ def resolve_tolerance(tolerance, diagonal: float) -> float:
     return Radius.parse(tolerance, "tolerance").of(diagonal)
 
 
+def _timed(stats, stage, fn, *args):
+    """``fn(*args)``, its process CPU time added to ``stats["stage_cpu_s"][stage]``."""
+    t0 = time.process_time()
+    out = fn(*args)
+    stats["stage_cpu_s"][stage] = stats["stage_cpu_s"].get(stage, 0.0) + time.process_time() - t0
+    return out
+
+
 def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=None) -> Mesh:
     """The mesh of ``scene`` (a Scene, Shape or scene file path) within ``tolerance`` of its
     surface (scene units, or ``"0.1%"`` of the bound's diagonal).  Raises SceneError for an
@@ -77,29 +88,31 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
         raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
     diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
     tol = spec.of(diag if diag > 0 and math.isfinite(diag) else 1.0)
-    stats = {"tolerance": tol}
-    grid = surface_cells(tape, cells)
+    stats = {"tolerance": tol, "stage_cpu_s": {}}
+    grid = _timed(stats, "cells", surface_cells, tape, cells)
     stats.update(cells=int(len(grid.ijk)), boxes_tested=int(grid.visited), h=grid.h)
 
     def inside_of(ids):
         return contains(tape.ops, tape.quadrics, grid.points(grid.ijk_of(ids)))
 
-    edges, lo_in, tri, edge_cell = triangulate(grid, inside_of)
+    edges, lo_in, tri, edge_cell = _timed(stats, "tetra", triangulate, grid, inside_of)
     if not len(tri):
         raise SceneError(f"{sc.source}: the solid is empty (or thinner than the grid, "
                          f"{grid.h:.3g} units): there is nothing to mesh")
     pa, pb = grid.points(grid.ijk_of(edges[:, 0])), grid.points(grid.ijk_of(edges[:, 1]))
     p_in = np.where(lo_in[:, None], pa, pb)
     p_out = np.where(lo_in[:, None], pb, pa)
-    verts, vq, fallbacks = crossings(tape, p_in, p_out, np.ones(len(edges), bool), grid.quadrics[edge_cell])
+    verts, vq, fallbacks = _timed(stats, "crossings", crossings, tape, p_in, p_out, np.ones(len(edges), bool),
+                                  grid.quadrics[edge_cell])
     stats.update(base_triangles=int(len(tri)), crossing_fallbacks=fallbacks)
     vsets = np.full((len(verts), 3), -1, dtype=np.int64)
     vsets[:, 0] = vq
     m = refine.Surface(tape, verts, vsets, tri)
-    refine.refine(m, tol, stats)
-    collapse_coincident(m, stats)
-    planar.coarsen(m, stats)
-    quad, prim, colors = triangle_owners(tape, m, tol)
+    _timed(stats, "refine", refine.refine, m, tol, stats)
+    _timed(stats, "collapse", collapse_coincident, m, stats)
+    _timed(stats, "decimate", decimate, m, tol, stats)
+    _timed(stats, "planar", planar.coarsen, m, stats)
+    quad, prim, colors = _timed(stats, "owners", triangle_owners, tape, m, tol)
     stats.update(triangles=int(len(m.triangles)), vertices=int(len(m.vertices)),
                  cpu_s=time.process_time() - t0)
     return Mesh(m.vertices, m.triangles, quad, prim, colors, m.sets, tol, stats)

@@ -21,8 +21,8 @@ REL = 1e-12
 def residuals(matrices, x):
     """(F (N, k), J (N, k, 3)) of the quadrics ``matrices`` (N, k, 4, 4) at ``x`` (N, 3)."""
     xh = np.concatenate([x, np.ones((len(x), 1))], axis=1)
-    kx = np.einsum("nkij,nj->nki", matrices, xh)
-    return np.einsum("nki,ni->nk", kx, xh), 2.0 * kx[..., :3]
+    kx = np.matmul(matrices, xh[:, None, :, None])[..., 0]  # (N, k, 4)
+    return (kx * xh[:, None, :]).sum(axis=2), 2.0 * kx[..., :3]
 
 
 def first_order_distance(matrices, x) -> np.ndarray:
@@ -42,12 +42,12 @@ def newton(matrices, x0):
     with np.errstate(all="ignore"):
         for _ in range(ITERATIONS):
             f, j = residuals(matrices, x)
-            jjt = np.einsum("nki,nli->nkl", j, j) + eye
+            jjt = np.matmul(j, j.transpose(0, 2, 1)) + eye
             ok = np.abs(np.linalg.det(jjt)) > 0
             lam = np.zeros_like(f)
             if ok.any():
                 lam[ok] = np.linalg.solve(jjt[ok], f[ok][..., None])[..., 0]
-            step = np.einsum("nki,nk->ni", j, lam)
+            step = np.matmul(lam[:, None, :], j)[:, 0]
             x = np.where(np.isfinite(step).all(axis=1, keepdims=True), x - step, x)
         d = first_order_distance(matrices, x)
     scale = np.maximum(1.0, np.abs(x).max(axis=1))

@@ -6,8 +6,11 @@ three at a corner).  An edge is split at a new vertex when
 
 * its ends share no quadric (it spans a sharp edge): the new vertex is the corner of the
   ends' three quadrics if Newton (:func:`~.project.newton`) finds one on the solid within
-  reach, else the point of the intersection curve of one quadric of each end nearest to the
-  edge's midpoint (the closest converged candidate on the solid);
+  reach, else the point where the intersection curve of one quadric of each end crosses the
+  edge's plane (the plane through the edge that holds the mesh normal there: Newton on the two
+  quadrics and that plane), the closest converged candidate on the solid within
+  :data:`REACH` edge lengths (a curve running almost along the edge, or the apex of a thin
+  wedge, still crosses that plane near the edge);
 * its ends share quadrics (it runs on a patch or along a curve) and its midpoint is farther
   than :data:`CHORD_FRACTION` of the tolerance from them (the chord error): the new vertex is
   the midpoint projected onto them.
@@ -39,6 +42,9 @@ MAX_PASSES = 16
 MIN_EDGE = 1e-3
 #: the probe distance of :func:`on_boundary`, relative to the coordinates' scale
 PROBE = 1e-7
+#: a curve point up to this many edge lengths from the edge's midpoint may split it (a thin
+#: wedge's apex projects beyond the chord that crosses it)
+REACH = 3.0
 #: a curve point this close to an edge's end (a fraction of the tolerance) moves that end
 SNAP = 0.05
 
@@ -95,8 +101,10 @@ def _candidates(sa, sb):
     return np.concatenate(rows), np.concatenate(sets)
 
 
-def _solve(tape, sets, x0):
-    """Newton onto the quadrics of ``sets`` (N, 3) from ``x0``, grouped by how many there are."""
+def _solve(tape, sets, x0, planes=None):
+    """Newton onto the quadrics of ``sets`` (N, 3) from ``x0``, grouped by how many there are.
+    With ``planes`` (N, 4, 4), a point on two quadrics is also held to its row's plane (the
+    curve's crossing with that plane, not the curve point nearest to ``x0``)."""
     x = np.full_like(x0, np.nan)
     ok = np.zeros(len(x0), dtype=bool)
     k = (sets >= 0).sum(axis=1)
@@ -104,8 +112,36 @@ def _solve(tape, sets, x0):
         sel = np.flatnonzero(k == n)
         if len(sel):
             mats = tape.quadrics[sets[sel, :n]]
+            if n == 2 and planes is not None:
+                mats = np.concatenate([mats, planes[sel][:, None]], axis=1)
             x[sel], ok[sel] = newton(mats, x0[sel])
     return x, ok
+
+
+def plane_matrix(normal, point):
+    """The plane through ``point`` (N, 3) with ``normal`` (N, 3) as a quadric (N, 4, 4): its
+    value at homogeneous x is n . x - n . p (the normal halved into the symmetric last row and
+    column), its gradient n."""
+    out = np.zeros((len(normal), 4, 4))
+    out[:, :3, 3] = out[:, 3, :3] = 0.5 * normal
+    out[:, 3, 3] = -np.einsum("ni,ni->n", normal, point)
+    return out
+
+
+def edge_planes(m, edges, tri_edge):
+    """Per edge the plane through it that contains the mesh normal there (the sum of its two
+    triangles' unit normals), as quadric matrices (E, 4, 4).  A sharp edge crossing the mesh
+    edge crosses this plane near it, even when the curve runs almost along the edge."""
+    v, t = m.vertices, m.triangles
+    tn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    ln = np.linalg.norm(tn, axis=1, keepdims=True)
+    tn = np.divide(tn, ln, out=np.zeros_like(tn), where=ln > 0)
+    en = np.zeros((len(edges), 3))
+    np.add.at(en, tri_edge.ravel(), np.repeat(tn, 3, axis=0))
+    pn = np.cross(v[edges[:, 1]] - v[edges[:, 0]], en)
+    ln = np.linalg.norm(pn, axis=1, keepdims=True)
+    pn = np.divide(pn, ln, out=np.zeros_like(pn), where=ln > 0)
+    return plane_matrix(pn, 0.5 * (v[edges[:, 0]] + v[edges[:, 1]]))
 
 
 def _on_csg(tape, x, q):
@@ -133,23 +169,36 @@ def _probe_directions(n: int = 64):
 _PROBES = _probe_directions()
 
 
+def _straddles(tape, x, radius, directions) -> np.ndarray:
+    """Points (N, 3) with some probes ``x + radius d`` inside the solid and some outside."""
+    if not len(x):
+        return np.zeros(0, dtype=bool)
+    pts = (x[:, None, :] + radius * directions[None]).reshape(-1, 3)
+    ins = contains(tape.ops, tape.quadrics, pts).reshape(len(x), -1)
+    return ins.any(axis=1) & ~ins.all(axis=1)
+
+
 def on_boundary(tape, x) -> np.ndarray:
     """Points (N, 3) on the solid's boundary to rounding: among the points at distance
     :data:`PROBE` x scale (:func:`_probe_directions`) some are inside and some outside, and
-    likewise at 100 times that distance.  Used for points on curves and corners, where substituting one quadric is
-    ambiguous."""
+    likewise at 100 times that distance.  Used for points on curves and corners, where
+    substituting one quadric is ambiguous.  Every fourth direction first: the points those
+    already decide (most: an edge's wedge is wide) need no others, so the answer is that of
+    all directions at a quarter of the evaluations."""
     if not len(x):
         return np.zeros(0, dtype=bool)
     scale = max(1.0, float(np.abs(x).max()))
     out = np.ones(len(x), dtype=bool)
     for r in (PROBE, 100 * PROBE):  # two radii: a rounding-level disagreement of one probe is not enough
-        pts = (x[:, None, :] + r * scale * _PROBES[None]).reshape(-1, 3)
-        ins = contains(tape.ops, tape.quadrics, pts).reshape(len(x), -1)
-        out &= ins.any(axis=1) & ~ins.all(axis=1)
+        sel = np.flatnonzero(out)
+        got = _straddles(tape, x[sel], r * scale, _PROBES[::4])
+        rest = sel[~got]
+        if len(rest):
+            out[rest] = _straddles(tape, x[rest], r * scale, _PROBES)
     return out
 
 
-def _edge_splits(m, tol, edges):
+def _edge_splits(m, tol, edges, tri_edge):
     """New vertices for the edges to split: (edge indices, points, sets), plus the count of
     edges that needed a split but got none."""
     v, s = m.vertices, m.sets
@@ -172,10 +221,10 @@ def _edge_splits(m, tol, edges):
     cok[curve] = on_boundary(m.tape, cx[curve])
     span = np.flatnonzero((n_shared == 0) & long_enough)
     rows, sets = _candidates(s[a[span]], s[b[span]])
-    sx, sok = _solve(m.tape, sets, mid[span[rows]])
+    sx, sok = _solve(m.tape, sets, mid[span[rows]], edge_planes(m, edges, tri_edge)[span[rows]])
     sok[sok] = on_boundary(m.tape, sx[sok])
     dist = np.where(sok, np.linalg.norm(sx - mid[span[rows]], axis=1), np.inf)
-    dist[dist > 0.75 * length[span[rows]]] = np.inf
+    dist[dist > REACH * length[span[rows]]] = np.inf
     best = np.full(len(span), -1)
     corner = sets[:, 2] >= 0  # a corner ends the edge's chain of splits: first choice when valid
     order = np.lexsort((dist, ~corner, rows))
@@ -281,7 +330,7 @@ def refine(m: Surface, tol: float, stats: dict) -> None:
     per_pass = []
     for _ in range(MAX_PASSES):
         edges, tri_edge = edges_of(m.triangles)
-        e_idx, pts, sets, missed = _edge_splits(m, tol, edges)
+        e_idx, pts, sets, missed = _edge_splits(m, tol, edges, tri_edge)
         if not len(e_idx):
             n = _corner_splits(m)
             corners += n
