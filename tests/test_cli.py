@@ -356,3 +356,18 @@ def test_radius_relative_to_the_scene_diagonal(tmp_path):
     a, b = read_samples(tmp_path / "a.ply"), read_samples(tmp_path / "b.ply")
     assert len(a["positions"]) > 100 and np.array_equal(np.sort(a["positions"], axis=0), np.sort(b["positions"], axis=0))
     assert cli.main(["render", str(path), "-r", "3%", "-o", str(tmp_path / "a.png"), "--size", "64x48", "--quiet"]) == 0
+
+
+def test_sample_radius_defaults_to_one_percent_of_the_diagonal(tmp_path):
+    """Without ``-r`` the coverage radius is 1% of the bound's diagonal, as for render."""
+    import clcsg
+    from clcsg.writers.ply import read_samples
+
+    path = tmp_path / "s.json"
+    clcsg.save(clcsg.box(2.0) - clcsg.sphere(1.2), path)
+    assert cli.main(["sample", str(path), "-o", str(tmp_path / "a.ply"), "--quiet", "--stats", str(tmp_path / "a.json")]) == 0
+    assert cli.main(["sample", str(path), "-r", "1%", "-o", str(tmp_path / "b.ply"), "--quiet"]) == 0
+    a, b = read_samples(tmp_path / "a.ply"), read_samples(tmp_path / "b.ply")
+    assert len(a["positions"]) > 100 and np.array_equal(np.sort(a["positions"], axis=0), np.sort(b["positions"], axis=0))
+    diag = float(np.linalg.norm(np.subtract(*clcsg.load(path).compile().bound[::-1])))
+    assert np.isclose(json.loads((tmp_path / "a.json").read_text())["radius"], 0.01 * diag)

@@ -49,6 +49,39 @@ def test_default_prefers_gpu_and_skips_oclgrind():
     assert choose(GRIND_FIRST, None, None) == 1
 
 
+def test_a_device_whose_compiler_fails_is_passed_over_by_rule_only():
+    """The pip PoCL that cannot compile for the CPU ("unknown target CPU 'generic'"), listed
+    first, is passed over by the default and ``cpu``; a name or PYOPENCL_CTX still means it."""
+    broken = "error: unknown target CPU 'generic'"
+    infos = [info(0, 0, "cpu", "Portable Computing Language", "pthread-AMD EPYC"),
+             info(1, 0, "cpu", "Portable Computing Language", "pthread-skylake-avx512-AMD EPYC"),
+             info(2, 0, "cpu", oclgrind=True)]
+    fails = {0: broken}
+    tried = []
+
+    def build_error(k):
+        tried.append(k)
+        return fails.get(k)
+
+    assert D.choose_usable(infos, None, {}, build_error) == 1 and tried == [0, 1]
+    assert D.choose_usable(infos, "cpu", {}, build_error) == 1
+    for spec, env in (("0:0", {}), (None, {"PYOPENCL_CTX": "0"})):
+        with pytest.raises(DeviceError) as e:
+            D.choose_usable(infos, spec, env, build_error)
+        assert broken in str(e.value) and "pocl-opencl-icd" in str(e.value) and "\n" not in str(e.value)
+    fails[1] = "error: no compiler"
+    with pytest.raises(DeviceError) as e:
+        D.choose_usable(infos, None, {}, build_error)
+    assert "0:0" in str(e.value) and "1:0" in str(e.value) and "Oclgrind" not in str(e.value)
+    assert D.choose_usable(infos, "oclgrind", {}, build_error) == 2
+
+
+def test_the_default_device_compiles():
+    """The device clcsg picks here builds a kernel (the probe is what selection relies on)."""
+    dev = D.select_device()
+    assert D._build_error(dev) is None
+
+
 def test_default_with_only_accelerator():
     infos = [info(0, 0, "cpu", oclgrind=True), info(1, 0, "accelerator", "FPGA", "fpga")]
     assert choose(infos, None, {}) == 1
@@ -184,22 +217,27 @@ def test_select_cpu_and_index(monkeypatch):
     assert D.select_device("0") == D.select_device("0:0")
 
 
+def _compiles(i):
+    return D._build_error(cl.get_platforms()[i.platform_index].get_devices()[i.device_index]) is None
+
+
 def test_select_follows_pyopencl_ctx(monkeypatch):
     infos = D.list_devices()
-    last = infos[-1]
+    last = [i for i in infos if _compiles(i)][-1]
     monkeypatch.setenv("PYOPENCL_CTX", last.spec)
     assert D.select_device().name.strip() == last.name
     monkeypatch.setenv("PYOPENCL_CTX", "99:0")
     with pytest.raises(DeviceError, match="PYOPENCL_CTX='99:0'"):
         D.select_device()
     # an explicit spec does not look at PYOPENCL_CTX
-    assert D.select_device(infos[0].spec).name.strip() == infos[0].name
+    first = [i for i in infos if _compiles(i)][0]
+    assert D.select_device(first.spec).name.strip() == first.name
 
 
 def test_default_selection_matches_rule(monkeypatch):
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
     infos = D.list_devices()
-    want = infos[choose(infos, None, {})]
+    want = infos[D.choose_usable(infos, None, {}, lambda k: None if _compiles(infos[k]) else "fails")]
     assert not want.is_oclgrind
     assert D.select_device().name.strip() == want.name
 

@@ -20,6 +20,10 @@ Oclgrind (a platform whose name contains "Oclgrind") is a simulator about a thou
 slower than a real device.  The default, ``cpu`` and ``gpu`` never pick it; only ``oclgrind``,
 a ``P:D`` / ``P`` naming it, or ``PYOPENCL_CTX`` pointing at it do.
 
+A device is used only if its compiler builds a one-line kernel.  PoCL's pip wheel, for one,
+fails on CPUs newer than its LLVM ("unknown target CPU 'generic'"): the default, ``cpu`` and
+``gpu`` then pass over it to the next device of the rule, and naming it gets that reason.
+
 The rule lives in the pure function :func:`choose`, which works on a list of
 :class:`DeviceInfo` and a mapping of environment variables, so it can be tested on synthetic
 device lists.  Every failure raises :class:`~clcsg.errors.DeviceError` (exit code 4) with a
@@ -31,7 +35,7 @@ from __future__ import annotations
 import os
 import threading
 from dataclasses import asdict, dataclass
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -42,6 +46,7 @@ __all__ = [
     "DeviceInfo",
     "NO_PLATFORM",
     "choose",
+    "choose_usable",
     "default_rule",
     "devices",
     "get_context",
@@ -291,9 +296,74 @@ def list_devices() -> list[DeviceInfo]:
 devices = list_devices
 
 
+#: built once per device to learn whether its compiler works
+PROBE_SOURCE = "__kernel void clcsg_probe(__global int *out) { out[get_global_id(0)] = 1; }"
+
+#: what to do when no device compiles (the message's tail)
+NO_COMPILER_HINT = ("PoCL's pip wheel cannot compile for CPUs newer than its LLVM; install Debian's "
+                    "pocl-opencl-icd (apt-get install pocl-opencl-icd) or another OpenCL runtime")
+
+_probe_results: dict = {}
+_probe_contexts: dict = {}
+
+
+def _build_error(dev) -> str | None:
+    """None if ``dev`` builds :data:`PROBE_SOURCE`, else the first error line of its compiler
+    (remembered per device for the process; the probe's context is kept for :class:`Context`)."""
+    key = int(dev.int_ptr)
+    if key not in _probe_results:
+        cl = _cl()
+        try:
+            ctx = cl.Context([dev])
+            cl.Program(ctx, PROBE_SOURCE).build()
+            _probe_results[key] = None
+            _probe_contexts[key] = ctx
+        except (cl.Error, RuntimeError) as e:
+            lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+            errors = [ln for ln in lines if ln.lower().startswith("error")]
+            _probe_results[key] = (errors or lines or [type(e).__name__])[0]
+    return _probe_results[key]
+
+
+def _by_rule(spec: str | None, env: Mapping[str, str]) -> bool:
+    """True if ``spec`` picks a device by rule (default, ``cpu``, ``gpu``), not by name."""
+    if spec is None or not str(spec).strip():
+        return not env.get("PYOPENCL_CTX", "").strip()
+    return str(spec).strip().lower() in ("cpu", "gpu")
+
+
+def choose_usable(infos: Sequence[DeviceInfo], spec: str | None, env: Mapping[str, str],
+                  build_error: Callable[[int], str | None]) -> int:
+    """Index into ``infos`` of the device ``spec`` selects whose compiler works.
+
+    ``build_error(k)`` is None if device ``k`` compiles, else the reason.  A choice by rule
+    (default, ``cpu``, ``gpu``) passes over devices that do not compile, in the rule's order; a
+    device named by ``P:D`` / ``PYOPENCL_CTX`` is used or refused, never replaced.  Raises
+    :class:`DeviceError` naming every device tried and why it failed.
+    """
+    left = list(range(len(infos)))
+    failures = []
+    while left:
+        try:
+            pick = choose([infos[j] for j in left], spec, env)
+        except DeviceError:
+            if not failures:
+                raise
+            break
+        k = left[pick]
+        error = build_error(k)
+        if error is None:
+            return k
+        failures.append(f"{infos[k].describe()}: {error}")
+        if not _by_rule(spec, env):
+            break
+        left.remove(k)
+    raise DeviceError(f"no usable OpenCL device: {'; '.join(failures)}; {NO_COMPILER_HINT}")
+
+
 def _select(spec: str | None):
     found = _enumerate()
-    k = choose([i for i, _ in found], spec, os.environ)
+    k = choose_usable([i for i, _ in found], spec, os.environ, lambda j: _build_error(found[j][1]))
     return found[k]
 
 
@@ -313,7 +383,7 @@ class Context:
         self.device = device
         self.info = info
         try:
-            self.ctx = cl.Context([device])
+            self.ctx = _probe_contexts.pop(int(device.int_ptr), None) or cl.Context([device])
             self.queue = cl.CommandQueue(
                 self.ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE
             )

@@ -53,8 +53,8 @@ def add_parser(subparsers):
     p.add_argument("inputs", metavar="INPUTS", nargs="+",
                    help="scene files, directories, globs or manifest files (one path or JSON scene per line)")
     p.add_argument("-o", "--output", metavar="OUTDIR", required=True, help="folder for the outputs and manifest")
-    p.add_argument("-r", "--radius", metavar="R", required=True,
-                   help="coverage radius: scene units, or a percentage of each scene's bound diagonal (1%%)")
+    p.add_argument("-r", "--radius", metavar="R", default="1%",
+                   help="coverage radius: scene units, or a percentage of each scene's bound diagonal (default: 1%%)")
     p.add_argument("--format", choices=("parquet", "ply"), default="parquet", help="samples file format (default parquet)")
     p.add_argument("--views", metavar="N", type=int, default=0,
                    help="render N views per scene (orbit cameras, PNG); default 0")

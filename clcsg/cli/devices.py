@@ -7,7 +7,7 @@ import os
 
 from ..errors import DeviceError
 from .app import SUMMARIES, add_subcommand
-from ..cl.device import choose, list_devices
+from ..cl.device import _build_error, _enumerate, choose_usable
 
 def add_parser(subparsers):
     p = add_subcommand(
@@ -32,16 +32,23 @@ def add_parser(subparsers):
 
 
 def run(args) -> int:
-    infos = list_devices()
+    found = _enumerate()
+    infos = [i for i, _ in found]
+    errors: dict = {}
+
+    def build_error(k):
+        errors[k] = _build_error(found[k][1])
+        return errors[k]
+
     problem = None
     try:
-        chosen = choose(infos, args.device, os.environ)
+        chosen = choose_usable(infos, args.device, os.environ, build_error)
     except DeviceError as e:
         if args.device is not None:
             raise
         chosen, problem = None, e  # show the table anyway: it helps fix PYOPENCL_CTX
     if args.json:
-        rows = [dict(i.as_dict(), selected=(k == chosen)) for k, i in enumerate(infos)]
+        rows = [dict(i.as_dict(), selected=(k == chosen), build_error=errors.get(k)) for k, i in enumerate(infos)]
         print(json.dumps(rows, indent=2))
     else:
         head = ["", "P:D", "type", "name", "platform", "CUs", "fp64", "64-bit atomics", ""]
@@ -57,7 +64,8 @@ def run(args) -> int:
                     str(i.compute_units),
                     "yes" if i.fp64 else "no",
                     "yes" if i.int64_atomics else "no",
-                    "(simulator, never chosen by default)" if i.is_oclgrind else "",
+                    "(simulator, never chosen by default)" if i.is_oclgrind
+                    else f"(cannot compile: {errors[k]})" if errors.get(k) else "",
                 ]
             )
         widths = [max(len(r[c]) for r in rows + [head]) for c in range(len(head))]

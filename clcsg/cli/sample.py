@@ -40,7 +40,8 @@ def add_parser(subparsers):
         """) + textwrap.dedent(UNRESOLVED_HELP),
     )
     p.add_argument("scene", metavar="SCENE", help="scene file (.json, OpenSCAD .csg or .scad)")
-    p.add_argument("-r", "--radius", metavar="R", required=True, help="coverage radius: scene units, or a percentage of the scene bound's diagonal (2%%)")
+    p.add_argument("-r", "--radius", metavar="R", default="1%",
+                   help="coverage radius: scene units, or a percentage of the scene bound's diagonal (default: 1%%)")
     p.add_argument("-o", "--output", metavar="OUT.ply", required=True,
                    help="file to write: .ply (binary PLY) or .npz (samples and tape, renders again)")
     p.add_argument("--stats", metavar="S.json", default=None, help="write sampling statistics as JSON")
