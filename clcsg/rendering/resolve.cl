@@ -6,8 +6,8 @@
  * depth (distance along the unit view ray), the quadric and primitive ids and the colour of
  * the primitive whose boundary holds the hit (primitives.h; the sample's splat_primitive where
  * the rule gives one primitive over the whole splat), shaded with shade.h (the primitives'
- * albedos computed once per view by the albedo kernel) — the same
- * shading as the ray tracer.  EMPTY_KEY comes from clcsg/cl/constants.py. */
+ * albedos computed once per view by the albedo kernel, the encoding
+ * through the table of the encoding kernel) — the same shading as the ray tracer.  EMPTY_KEY comes from clcsg/cl/constants.py. */
 #include "pixel.h"
 
 /* Per primitive k < n (and the grey of "none" at k = n): its albedo (shade_albedo) for this view. */
@@ -17,9 +17,17 @@ __kernel void albedo(__global const prim_rec *prims, int n, __global const view_
     if (k <= n) out[k] = shade_albedo(view, pixel_color(prims, k < n ? k : -1));
 }
 
+/* Entry b <= SHADE_BINS of the colour encoding's table for this view (shade_table_entry). */
+__kernel void encoding(__global const view_rec *view, __global ushort *out)
+{
+    int b = get_global_id(0);
+    if (b <= SHADE_BINS) out[b] = shade_table_entry(view, b);
+}
+
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
                       PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
-                      __global const float4 *albedo, int n_prims, PIXEL_OUTPUTS)
+                      __global const float4 *albedo, int n_prims, __global const ushort *encoding,
+                      PIXEL_OUTPUTS)
 {
     int i, j;
     int pix = pixel_index(view, &i, &j);
@@ -48,5 +56,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     }
     real3 p = o + t * v;
     int prim = sp->splat_primitive >= 0 ? sp->splat_primitive : primitive_at(PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, p);
-    pixel_hit_lit(out, view, pix, albedo[prim >= 0 ? prim : n_prims], prim, quadrics, sp->quadric, p, tc + t, v);
+    float4 alb = albedo[prim >= 0 ? prim : n_prims];
+    float3 c = shade_light(view, alb, pixel_normal(quadrics, sp->quadric, p), convert_float3(v));
+    pixel_write(out, pix, prim, sp->quadric, tc + t, shade_encode_table(view, encoding, c, alb.w));
 }
