@@ -135,18 +135,20 @@ inline bool make_slab(quadric q, real lam_min, real lam_max, real3 s, real r, sp
 
 /* Range of X / Z over the circle c + r (cos(phi) u + sin(phi) w) (camera coordinates X, Z;
  * the circle in front of the eye).  d/dphi (X / Z) = 0 gives  A sin(phi) + B cos(phi) + C = 0
- * with A = u_z c_X - u_X c_z, B = w_X c_z - w_z c_X, C = r (w_X u_z - u_X w_z), i.e.
- * phi = atan2(A, B) -+ acos(-C / sqrt(A^2 + B^2)): the two extremes. */
+ * with A = u_z c_X - u_X c_z, B = w_X c_z - w_z c_X, C = r (w_X u_z - u_X w_z); with
+ * k = |(A, B)|, al = -C / k and be = +-sqrt(1 - al^2), the two extremes are
+ * (sin(phi), cos(phi)) = (al A + be B, al B - be A) / k (no trigonometry). */
 inline real2 circle_slopes(real cx, real cz, real ux, real uz, real wx, real wz, real r)
 {
     real A = uz * cx - ux * cz, B = wx * cz - wz * cx, C = r * (wx * uz - ux * wz);
     real ab = sqrt(A * A + B * B);
-    real base = atan2(A, B);
-    real dphi = ab > 0 ? acos(clamp(-C / ab, (real)-1, (real)1)) : 0;
+    real al = ab > 0 ? clamp(-C / ab, (real)-1, (real)1) : 0;
+    real be = sqrt(1 - al * al);
+    real ka = ab > 0 ? A / ab : 1, kb = ab > 0 ? B / ab : 0;
     real lo = INFINITY, hi = -INFINITY;
     for (int k = 0; k < 2; ++k) {
-        real phi = base + (k ? dphi : -dphi);
-        real c = cos(phi), sn = sin(phi);
+        real bk = k ? be : -be;
+        real sn = al * ka + bk * kb, c = al * kb - bk * ka;
         real u = (cx + r * (c * ux + sn * wx)) / (cz + r * (c * uz + sn * wz));
         lo = fmin(lo, u);
         hi = fmax(hi, u);
@@ -157,7 +159,7 @@ inline real2 circle_slopes(real cx, real cz, real ux, real uz, real wx, real wz,
 /* Screen bound of the cylinder {|x - s - h n| <= r in the tangent plane, h_lo <= h <= h_hi}:
  * it is the convex hull of its two end discs, so its projection is the hull of the two
  * projected discs (ellipses) and its bounding rect is the union of theirs (circle_slopes per
- * axis; a few pixels of slack absorb the rounding of the trigonometry).  Full screen if a disc
+ * axis; a little slack absorbs the rounding).  Full screen if a disc
  * is not entirely in front of the eye. */
 inline rect screen_slab(__global const view_rec *vw, real3 a /* s - e */, splat_slab *b)
 {
