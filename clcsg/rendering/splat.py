@@ -9,7 +9,8 @@ splats_drawn           samples whose screen bound is not empty
 splats_culled          samples skipped by the per-splat back-face test
 splats_offscreen       samples whose bound misses the screen (or is behind the eye)
 bound_pixels           pixels visited in the splats' screen bounds
-fragments              rays that pass the ball / box test
+fragments              rays of a row's span (the rays meeting the ball and slab, grown by a
+                       margin) that meet the ball
 fragments_occluded     of those, rays skipped without a solve: their chord through the ball
                        starts behind the pixel's stored depth (early depth rejection)
 clip_evaluations       clip-set quadric evaluations
