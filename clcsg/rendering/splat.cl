@@ -321,16 +321,20 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
         int first = bound.x1 + 1, last = bound.x0 - 1;
         real3 dy = d00 + (real)y * ddy;
         real3 cy = cross(a, dy), ndy = cross(n, dy);
-        for (int x = bound.x0; x <= bound.x1; ++x) {
-            real3 d = dy + (real)x * ddx;
-            real3 c = cy + (real)x * cx;     /* a x d: |a x d| / |d| is the ray's distance to s */
-            real3 nxd = ndy + (real)x * ndx; /* n x d */
-            real dd = dot(d, d), nd = dot(n, d);
-            real E = R * R * dd - dot(c, c); /* |d|^2 m^2 for the grown ball */
-            real Y = fabs(-dot(c, nxd) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
-            bool hit = (E >= 0) & (!has_slab | (Y <= 0) | (Y * Y <= E * nd * nd));
-            first = hit ? min(first, x) : first;
-            last = hit ? x : last;
+        for (int x = bound.x0; x <= bound.x1; x += 4) { /* four pixels per step, as vectors */
+            int4 xi = x + (int4)(0, 1, 2, 3);
+            real4 xs = (real)x + (real4)(0, 1, 2, 3);
+            real4 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
+            real4 cX = cy.x + xs * cx.x, cY = cy.y + xs * cx.y, cZ = cy.z + xs * cx.z; /* a x d */
+            real4 nX = ndy.x + xs * ndx.x, nY = ndy.y + xs * ndx.y, nZ = ndy.z + xs * ndx.z; /* n x d */
+            real4 dd = dX * dX + dY * dY + dZ * dZ, nd = n.x * dX + n.y * dY + n.z * dZ;
+            real4 E = R * R * dd - (cX * cX + cY * cY + cZ * cZ); /* |d|^2 m^2, the grown ball */
+            real4 Y = fabs(-(cX * nX + cY * nY + cZ * nZ) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
+            int4 hit = convert_int4(E >= 0) & (xi <= bound.x1);
+            if (has_slab) hit &= convert_int4((Y <= 0) | (Y * Y <= E * nd * nd));
+            int4 lo = select((int4)(INT_MAX), xi, hit), hi = select((int4)(INT_MIN), xi, hit);
+            first = min(first, min(min(lo.x, lo.y), min(lo.z, lo.w)));
+            last = max(last, max(max(hi.x, hi.y), max(hi.z, hi.w)));
         }
         cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
         for (int x = first; x <= last; ++x) {
