@@ -42,15 +42,25 @@ inline float4 pixel_color(__global const prim_rec *prims, int prim)
     return prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
 }
 
+/* The unit normal grad Q(p) / |grad Q(p)| of the shading, in float. */
+inline float3 pixel_normal(__global const quadric_rec *qs, int qid, real3 p)
+{
+    return convert_float3(normalize(quadric_gradient(quadric_load(qs, qid), p)));
+}
+
+inline void pixel_write(pixel_out out, int pix, int prim, int qid, real depth, uchar4 rgba)
+{
+    out.depth[pix] = (float)depth;
+    out.quadric[pix] = qid;
+    out.primitive[pix] = prim;
+    out.rgba[pix] = rgba;
+}
+
 /* A hit at p on quadric qid shown as primitive prim, whose albedo (shade_albedo) is given. */
 inline void pixel_hit_lit(pixel_out out, __global const view_rec *view, int pix, float4 albedo, int prim,
                           __global const quadric_rec *qs, int qid, real3 p, real depth, real3 v)
 {
-    quadric q = quadric_load(qs, qid);
-    out.depth[pix] = (float)depth;
-    out.quadric[pix] = qid;
-    out.primitive[pix] = prim;
-    out.rgba[pix] = shade_lit(view, albedo, convert_float3(normalize(quadric_gradient(q, p))), convert_float3(v));
+    pixel_write(out, pix, prim, qid, depth, shade_lit(view, albedo, pixel_normal(qs, qid, p), convert_float3(v)));
 }
 
 /* A hit at p on quadric qid shown as primitive prim. */

@@ -37,6 +37,7 @@ typedef struct {
     float specular;      /* Blinn-Phong highlight of the key light */
     float shininess;
     float gamma;         /* colors are linearized with gamma, lit, and encoded with 1 / gamma */
+    float spec_cut;      /* highlights of n.h <= spec_cut are skipped: (n.h)^shininess <= 2^-64 */
 } view_rec;
 
 inline real3 view_eye(__global const view_rec *vw) { return vload3(0, vw->eye); }
@@ -74,9 +75,10 @@ inline float4 shade_albedo(__global const view_rec *vw, float4 base)
     return (float4)(shade_pow3(clamp(base.xyz, 0.0f, 1.0f), vw->gamma), clamp(base.w, 0.0f, 1.0f));
 }
 
-/* shade() from the linear albedo and alpha of shade_albedo (the resolve pass looks them up per
- * primitive instead of linearizing at every pixel). */
-inline uchar4 shade_lit(__global const view_rec *vw, float4 albedo, float3 n, float3 v)
+/* The lit colour in linear light, clamped to [0, 1], from the linear albedo of shade_albedo.
+ * The highlight (n.h)^shininess is skipped where n.h <= spec_cut (pack_view: at most 2^-64,
+ * under the rounding of any lit colour). */
+inline float3 shade_light(__global const view_rec *vw, float4 albedo, float3 n, float3 v)
 {
     if (dot(n, v) > 0.0f) n = -n;
     float3 key = vload3(0, vw->key);
@@ -89,11 +91,51 @@ inline uchar4 shade_lit(__global const view_rec *vw, float4 albedo, float3 n, fl
     float edge = 1.0f - facing;
     float light = hemi + vw->diffuse * (vw->headlight * facing + vw->key_light * d_key + vw->fill_light * d_fill)
                 + vw->rim * edge * edge * edge;
-    float s_key = d_key > 0.0f ? shade_pow(fmax(dot(n, normalize(key + head)), 0.0f), vw->shininess) : 0.0f;
+    float s_key = 0.0f;
+    if (d_key > 0.0f) {
+        float nh = fmax(dot(n, normalize(key + head)), 0.0f);
+        if (nh > vw->spec_cut) s_key = shade_pow(nh, vw->shininess);
+    }
     float3 c = albedo.xyz * light + vw->specular * s_key;
-    c = shade_pow3(clamp(c, 0.0f, 1.0f), 1.0f / vw->gamma);
-    float4 out = (float4)(c, albedo.w) * 255.0f + 0.5f;
+    return clamp(c, 0.0f, 1.0f);
+}
+
+/* 8-bit RGBA of linear colour c in [0, 1] and alpha: c^(1 / gamma) and alpha, rounded. */
+inline uchar4 shade_encode(__global const view_rec *vw, float3 c, float alpha)
+{
+    c = shade_pow3(c, 1.0f / vw->gamma);
+    float4 out = (float4)(c, alpha) * 255.0f + 0.5f;
     return convert_uchar4_sat(out);
+}
+
+/* shade() from the linear albedo and alpha of shade_albedo (the resolve pass looks them up per
+ * primitive instead of linearizing at every pixel). */
+inline uchar4 shade_lit(__global const view_rec *vw, float4 albedo, float3 n, float3 v)
+{
+    return shade_encode(vw, shade_light(vw, albedo, n, v), albedo.w);
+}
+
+/* The encoding as a table over SHADE_BINS bins of [0, 1]: bin b holds c in [b, b + 1) / SHADE_BINS
+ * (exact: SHADE_BINS is a power of two), and entry b is the channel byte of every c in the bin
+ * where its two ends encode alike (the encoding is monotone), else SHADE_SPLIT.  Entry
+ * SHADE_BINS is c = 1.  Built once per view by shade_table_entry. */
+#define SHADE_SPLIT 0x100
+
+inline ushort shade_table_entry(__global const view_rec *vw, int b)
+{
+    float lo = (float)b / SHADE_BINS, hi = fmin((float)(b + 1) / SHADE_BINS, 1.0f);
+    uchar4 e = shade_encode(vw, (float3)(lo, hi, lo), 1.0f);
+    return e.x == e.y ? e.x : SHADE_SPLIT;
+}
+
+/* shade_encode through the table: the same bytes, with the power functions only for channels
+ * in split bins. */
+inline uchar4 shade_encode_table(__global const view_rec *vw, __global const ushort *table, float3 c, float alpha)
+{
+    int3 b = convert_int3_sat(c * (float)SHADE_BINS);
+    ushort ex = table[min(b.x, SHADE_BINS)], ey = table[min(b.y, SHADE_BINS)], ez = table[min(b.z, SHADE_BINS)];
+    if (((ex | ey | ez) & SHADE_SPLIT) || any(isnan(c))) return shade_encode(vw, c, alpha);
+    return (uchar4)((uchar)ex, (uchar)ey, (uchar)ez, convert_uchar_sat(alpha * 255.0f + 0.5f));
 }
 
 inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v)

@@ -25,7 +25,8 @@ def view_dtype(real) -> np.dtype:
         camera
         + [("focal", real), ("width", np.int32), ("height", np.int32), ("background", np.float32, 4)]
         + [(name, np.float32, 3) for name in ("key", "fill", "sky")]
-        + [(name, np.float32) for name in _WEIGHTS],
+        + [(name, np.float32) for name in _WEIGHTS]
+        + [("spec_cut", np.float32)],
         align=True,
     )
 
@@ -97,6 +98,17 @@ def _camera_direction(camera, weights) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
+def highlight_cut(specular: float, shininess: float) -> float:
+    """The n.h at or under which shade.h skips the highlight: specular (n.h)^shininess <= 2^-64
+    there, so the term changes no lit colour but one within 2^-64 of an 8-bit threshold
+    (-1, never skipped, for shininess 0: there x^0 = 1)."""
+    if shininess <= 0:
+        return -1.0
+    if specular <= 0:
+        return math.inf
+    return min(1.0, 2.0 ** ((-64.0 - math.log2(specular)) / shininess))
+
+
 def pack_view(camera, origin, real, shading: Shading | None = None) -> np.ndarray:
     """The ``view_rec`` of ``camera`` in device coordinates (eye - origin), one element."""
     shading = shading or Shading()
@@ -111,6 +123,7 @@ def pack_view(camera, origin, real, shading: Shading | None = None) -> np.ndarra
         "key": _camera_direction(camera, shading.key), "fill": _camera_direction(camera, shading.fill),
         "sky": camera.up if sky is None else sky,
         **{name: getattr(shading, name) for name in _WEIGHTS},
+        "spec_cut": highlight_cut(shading.specular, shading.shininess),
     }
     for name, v in values.items():
         rec[name] = v

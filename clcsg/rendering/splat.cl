@@ -4,8 +4,11 @@
  * 1. screen bound: the projection of the ball B(s, r) (exact tangent bound, screen_ball);
  *    with SURFACE_ALIGNED also the projection of a flat cylinder aligned with the normal that
  *    holds the quadric patch inside the ball (splat_slab; paper section 6.1), intersected;
- * 2. per pixel of the bound, with unit view ray v from the eye e: skip rays that miss the ball
- *    (with SURFACE_ALIGNED: whose chord through the ball misses the slab); then solve near the
+ * 2. per row of the bound, the span of pixels whose ray meets the ball (with SURFACE_ALIGNED:
+ *    whose chord through the ball meets the slab), both grown by a margin, found with
+ *    un-normalized rays d (without square roots, divisions or branches); per pixel
+ *    of the span, with unit view ray v = d / |d| from the eye e: skip rays that miss the ball;
+ *    then solve near the
  *    sample: o = e + ((s - e).v) v, Q(o + tau v) = 0 (eqs. 5, 6), depth = (s - e).v + tau.
  *    The root nearer the eye is tried first, the other one if it fails: |p - s| <= r,
  *    depth > 0, and the clip program: C is the sample's tape pruned over B(s, r) with Q
@@ -132,18 +135,20 @@ inline bool make_slab(quadric q, real lam_min, real lam_max, real3 s, real r, sp
 
 /* Range of X / Z over the circle c + r (cos(phi) u + sin(phi) w) (camera coordinates X, Z;
  * the circle in front of the eye).  d/dphi (X / Z) = 0 gives  A sin(phi) + B cos(phi) + C = 0
- * with A = u_z c_X - u_X c_z, B = w_X c_z - w_z c_X, C = r (w_X u_z - u_X w_z), i.e.
- * phi = atan2(A, B) -+ acos(-C / sqrt(A^2 + B^2)): the two extremes. */
+ * with A = u_z c_X - u_X c_z, B = w_X c_z - w_z c_X, C = r (w_X u_z - u_X w_z); with
+ * k = |(A, B)|, al = -C / k and be = +-sqrt(1 - al^2), the two extremes are
+ * (sin(phi), cos(phi)) = (al A + be B, al B - be A) / k (no trigonometry). */
 inline real2 circle_slopes(real cx, real cz, real ux, real uz, real wx, real wz, real r)
 {
     real A = uz * cx - ux * cz, B = wx * cz - wz * cx, C = r * (wx * uz - ux * wz);
     real ab = sqrt(A * A + B * B);
-    real base = atan2(A, B);
-    real dphi = ab > 0 ? acos(clamp(-C / ab, (real)-1, (real)1)) : 0;
+    real al = ab > 0 ? clamp(-C / ab, (real)-1, (real)1) : 0;
+    real be = sqrt(1 - al * al);
+    real ka = ab > 0 ? A / ab : 1, kb = ab > 0 ? B / ab : 0;
     real lo = INFINITY, hi = -INFINITY;
     for (int k = 0; k < 2; ++k) {
-        real phi = base + (k ? dphi : -dphi);
-        real c = cos(phi), sn = sin(phi);
+        real bk = k ? be : -be;
+        real sn = al * ka + bk * kb, c = al * kb - bk * ka;
         real u = (cx + r * (c * ux + sn * wx)) / (cz + r * (c * uz + sn * wz));
         lo = fmin(lo, u);
         hi = fmax(hi, u);
@@ -154,7 +159,7 @@ inline real2 circle_slopes(real cx, real cz, real ux, real uz, real wx, real wz,
 /* Screen bound of the cylinder {|x - s - h n| <= r in the tangent plane, h_lo <= h <= h_hi}:
  * it is the convex hull of its two end discs, so its projection is the hull of the two
  * projected discs (ellipses) and its bounding rect is the union of theirs (circle_slopes per
- * axis; a few pixels of slack absorb the rounding of the trigonometry).  Full screen if a disc
+ * axis; a little slack absorbs the rounding).  Full screen if a disc
  * is not entirely in front of the eye. */
 inline rect screen_slab(__global const view_rec *vw, real3 a /* s - e */, splat_slab *b)
 {
@@ -174,18 +179,6 @@ inline rect screen_slab(__global const view_rec *vw, real3 a /* s - e */, splat_
     }
     real slack = 1e-3 + 1e3 * REAL_EPS * (fabs(xmax - hw) + fabs(ymax - hh) + fabs(xmin - hw) + fabs(ymin - hh));
     return rect_from_range(vw, xmin - slack, xmax + slack, ymin - slack, ymax + slack);
-}
-
-/* Per-pixel coarse test of the surface-aligned bound: does the part of the ray inside the ball
- * meet the slab h_lo <= n.(x - s) <= h_hi?  (ball and slab both hold every acceptable patch
- * point, so this is exact for their intersection: a flat splat seen at an angle costs the
- * area of its projected disc.)  The height along the ray is linear in t,
- * so over the ball's chord [tc - m, tc + m] it ranges between its values at the ends. */
-inline bool chord_meets_slab(splat_slab *b, real3 a, real3 v, real tc, real m)
-{
-    real h0 = -dot(b->n, a) + (tc - m) * dot(b->n, v);
-    real h1 = -dot(b->n, a) + (tc + m) * dot(b->n, v);
-    return fmax(h0, h1) >= b->h_lo && fmin(h0, h1) <= b->h_hi;
 }
 
 /* Back-facing test for a whole splat (outside views).  For a patch point p = s + w
@@ -264,11 +257,17 @@ inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op 
     return 0;
 }
 
-/* Early depth rejection: can no fragment of depth >= zmin beat the pixel's word?  float
- * rounding is monotone, so such a fragment's key is at least as_uint((float)zmin) << 32. */
-inline bool splat_occluded(real zmin, ulong word)
+/* Early depth rejection: can no fragment of depth >= zc - m (m = sqrt(m2): the ball's chord
+ * starts there) beat the pixel's word?  float rounding is monotone, so such a fragment's key
+ * is at least as_uint((float)(zc - m)) << 32, above the word if zc - m exceeds the next float
+ * after the stored depth.  Without a square root: zc - m > z  <=>  zc - z > 0 and
+ * (zc - z)^2 > m2. */
+inline bool splat_occluded(real zc, real m2, ulong word)
 {
-    return zmin > 0 && ((ulong)as_uint((float)zmin) << 32) > word;
+    uint hi = (uint)(word >> 32);
+    if (hi >= 0x7f800000u) return false; /* nothing stored (EMPTY_KEY) */
+    real u = zc - (real)as_float(hi + 1);
+    return u > 0 && u * u > m2;
 }
 
 /* Step 3: the 64-bit depth test, after a plain read that skips atomics which cannot win. */
@@ -305,22 +304,49 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     /* the camera in private memory: the compiler cannot keep it in registers across the
      * framebuffer writes otherwise (they might alias the view); same expression as view_ray */
     real3 d00 = vload3(0, view->d00), ddx = vload3(0, view->dx), ddy = vload3(0, view->dy);
+    /* the row span: with c = a x d and the slab's normal n, |c|^2 <= R^2 |d|^2 is the ray meeting
+     * the ball grown to R; its point nearest s is o - s = w0 = -(d x c) / |d|^2, so
+     * |d|^2 n.w0 = -c.(n x d), and the chord [tc -+ m] meets the slab iff
+     * |n.w0 - mid| <= width + m |n.v|, with |d|^2 m |n.v| = sqrt(E) |n.d|, E = R^2 |d|^2 - |c|^2.
+     * c, n x d and d are linear along the row; the margin (pad) covers the rounding. */
+    real al = length(a);
+    real pad = 1e-4 * r + 16 * SLACK * al;
+    real R = r + pad;
+    real3 n = has_slab ? slab.n : (real3)(0, 0, 1);
+    real mid = has_slab ? 0.5 * (slab.h_lo + slab.h_hi) : 0, width = has_slab ? 0.5 * (slab.h_hi - slab.h_lo) + pad : 0;
+    real3 cx = cross(a, ddx), ndx = cross(n, ddx);
     for (int y = bound.y0; y <= bound.y1; ++y) {
-        for (int x = bound.x0; x <= bound.x1; ++x) {
-            cnt[PC_BOUND_PIXELS]++;
+        /* the rays through the ball and slab (convex) are a span of the row: found without
+         * branches, square roots or divisions, then walked with the tests below */
+        int first = bound.x1 + 1, last = bound.x0 - 1;
+        real3 dy = d00 + (real)y * ddy;
+        real3 cy = cross(a, dy), ndy = cross(n, dy);
+        for (int x = bound.x0; x <= bound.x1; x += 4) { /* four pixels per step, as vectors */
+            int4 xi = x + (int4)(0, 1, 2, 3);
+            real4 xs = (real)x + (real4)(0, 1, 2, 3);
+            real4 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
+            real4 cX = cy.x + xs * cx.x, cY = cy.y + xs * cx.y, cZ = cy.z + xs * cx.z; /* a x d */
+            real4 nX = ndy.x + xs * ndx.x, nY = ndy.y + xs * ndx.y, nZ = ndy.z + xs * ndx.z; /* n x d */
+            real4 dd = dX * dX + dY * dY + dZ * dZ, nd = n.x * dX + n.y * dY + n.z * dZ;
+            real4 E = R * R * dd - (cX * cX + cY * cY + cZ * cZ); /* |d|^2 m^2, the grown ball */
+            real4 Y = fabs(-(cX * nX + cY * nY + cZ * nZ) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
+            int4 hit = convert_int4(E >= 0) & (xi <= bound.x1);
+            if (has_slab) hit &= convert_int4((Y <= 0) | (Y * Y <= E * nd * nd));
+            int4 lo = select((int4)(INT_MAX), xi, hit), hi = select((int4)(INT_MIN), xi, hit);
+            first = min(first, min(min(lo.x, lo.y), min(lo.z, lo.w)));
+            last = max(last, max(max(hi.x, hi.y), max(hi.z, hi.w)));
+        }
+        cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
+        for (int x = first; x <= last; ++x) {
             real3 v = normalize(d00 + (real)x * ddx + (real)y * ddy);
             real tc = dot(a, v);
             real3 w0 = tc * v - a; /* o - s: o = e + tc v, the ray point closest to s */
             real m2 = r * r - dot(w0, w0);
             if (m2 < 0) continue; /* the ray misses the ball */
-            real m = sqrt(m2);
-#if SURFACE_ALIGNED
-            if (has_slab && !chord_meets_slab(&slab, a, v, tc, m)) continue;
-#endif
             cnt[PC_FRAGMENTS]++;
             __global ulong *slot = &framebuffer[y * W + x];
             ulong word = *slot;
-            if (splat_occluded(tc - m - 16 * SLACK * (fabs(tc) + r), word)) {
+            if (splat_occluded(tc - 16 * SLACK * (fabs(tc) + r), m2, word)) {
                 cnt[PC_FRAGMENTS_OCCLUDED]++;
                 continue;
             }

@@ -9,7 +9,8 @@ splats_drawn           samples whose screen bound is not empty
 splats_culled          samples skipped by the per-splat back-face test
 splats_offscreen       samples whose bound misses the screen (or is behind the eye)
 bound_pixels           pixels visited in the splats' screen bounds
-fragments              rays that pass the ball / box test
+fragments              rays of a row's span (the rays meeting the ball and slab, grown by a
+                       margin) that meet the ball
 fragments_occluded     of those, rays skipped without a solve: their chord through the ball
                        starts behind the pixel's stored depth (early depth rejection)
 clip_evaluations       clip-set quadric evaluations
@@ -28,7 +29,7 @@ import time
 
 import numpy as np
 
-from ..cl.constants import EMPTY_KEY, SPLAT_COUNTERS
+from ..cl.constants import EMPTY_KEY, SHADE_BINS, SPLAT_COUNTERS
 from ..cl.device import choose_real, context_of, require_int64_atomics
 from ..cl.programs import build, event_seconds, kernel
 from ..cl.memory import device_buffer, upload
@@ -140,9 +141,11 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     albedo = device_buffer(context, (n_prims + 1) * 16, "albedo table", hint=hint)
     ev_albedo = kernel(resolve_prg, "albedo")(q, (-(-(n_prims + 1) // 64) * 64,), (64,), scene.prims,
                                               np.int32(n_prims), view_buf, albedo)
+    encoding = device_buffer(context, (SHADE_BINS + 1) * 2, "encoding table", hint=hint)
+    ev_encoding = kernel(resolve_prg, "encoding")(q, (-(-(SHADE_BINS + 1) // 64) * 64,), (64,), view_buf, encoding)
     ev_resolve = kernel(resolve_prg, "resolve")(
         q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, albedo,
-        np.int32(n_prims), *outs, wait_for=events[-1:] + [ev_albedo])
+        np.int32(n_prims), encoding, *outs, wait_for=events[-1:] + [ev_albedo, ev_encoding])
     wanted = set(read) | {"ids", "rgba"}
     for name, a, b in zip(OUTPUTS, (depth, ids, prims, rgba), outs):
         if name in wanted:
