@@ -122,10 +122,12 @@ def proxy_scene(scene: Scene) -> Scene:
 
 
 def plane_matrix(c, n) -> np.ndarray:
-    """The plane quadric (x - c) . n as a 4x4 matrix (negative behind the surfel)."""
-    m = np.zeros((4, 4))
-    m[:3, 3] = m[3, :3] = 0.5 * np.asarray(n)
-    m[3, 3] = -float(np.dot(n, c))
+    """The plane quadrics (x - c) . n as 4x4 matrices (negative behind the surfel): (4, 4) for
+    one center and normal, (m, 4, 4) for (m, 3) of each."""
+    c, n = np.asarray(c, dtype=np.float64), np.asarray(n, dtype=np.float64)
+    m = np.zeros(n.shape[:-1] + (4, 4))
+    m[..., :3, 3] = m[..., 3, :3] = 0.5 * n
+    m[..., 3, 3] = -np.einsum("...j,...j->...", n, c)
     return m
 
 
@@ -177,6 +179,11 @@ class _Programs:
     def plane(self, c, n) -> tuple[int, int]:
         """(index, sign) of the surfel plane (x - c) . n in the table: P = sign |P| K."""
         return self.table.add(plane_matrix(c, n))
+
+    def planes(self, c, n) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`plane` of many: (indices, signs)."""
+        got = self.table.add_many(plane_matrix(c, n))
+        return np.array([i for i, _ in got], dtype=np.int32), np.array([s for _, s in got], dtype=np.int32)
 
     def add_rows(self, rows) -> tuple[int, int]:
         rows = np.asarray(rows, dtype=np.int32).reshape(-1, 4)
@@ -328,9 +335,7 @@ def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: _Programs, i
     for i, s in enumerate(tape.operands):
         if i != j:
             near |= partners[i][0] < r + 2.0 * float(s.radii.max())
-    idx_sign = [prog.plane(c[i], n[i]) for i in range(len(c))]
-    quadrics = np.array([q for q, _ in idx_sign], dtype=np.int32)
-    csign = np.array([s for _, s in idx_sign], dtype=np.int32)
+    quadrics, csign = prog.planes(c, n)
     signs = np.where(side[1], csign, -csign).astype(np.int32)
     normals = np.where(side[1][:, None], n, -n)
     first = np.zeros(len(c), dtype=np.int32)
