@@ -143,6 +143,8 @@ class SurfelTape(Tape):
     folded: dict = field(default_factory=dict)
     #: quadrics from this index on are surfel tangent planes
     first_surfel_quadric: int = 0
+    #: per operand the instance its surfels are samples of (its marker's)
+    operand_instances: list = field(default_factory=list)
 
     def contains(self, points) -> np.ndarray:
         """Membership of ``points`` in the solid: F_sigma with sigma the classification."""
@@ -246,6 +248,7 @@ def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
     tape = SurfelTape(**{f: getattr(tape, f) for f in Tape.__dataclass_fields__}, operands=clouds,
                       markers=[literal[id(markers[k])][1] for k in keys])
     tape.first_surfel_quadric = tape.n_quadrics
+    tape.operand_instances = marker_inst
     prog = _Programs(tape)
     inst_index = {(id(i.node), i.matrix.tobytes()): i.index for i in tape.instances}
     parts: list = []
@@ -365,7 +368,7 @@ def _combined(parts, tape: SurfelTape, prog: _Programs, n_regs, radius, stats) -
     tape.n_regs = n_regs
     tape.instance_program = None  # the marker instances own the surfel planes; no instance CSG
     for j, s in enumerate(tape.operands):
-        inst = next(i for i in tape.instances if i.literals and i.literals[0][0] == tape.markers[j][0])
+        inst = tape.instances[tape.operand_instances[j]]
         inst.color = s.color
         inst.box = s.box()
         inst.face_boxes = None
