@@ -8,10 +8,13 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 import clcsg
 from clcsg.cli import app as cli
 from clcsg.errors import ParameterError, SceneError, UsageError
+from clcsg.model.csg import rotation_matrix
+from clcsg.model.quadric import affine
 from clcsg.model.surfels import Surfels
 from clcsg.readers.openscad import load_csg
 
@@ -81,6 +84,24 @@ def test_classification_near_box_edges(concave):
         exact = ~exact
     got = s.contains(x)
     assert np.array_equal(got, exact), f"{(got != exact).sum()} of {len(x)} misclassified"
+
+
+@settings(max_examples=15, deadline=None)
+@given(axis=st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1),
+       angle=st.floats(0, 360), shift=st.tuples(*[st.floats(-5, 5)] * 3), scale=st.floats(0.2, 5),
+       concave=st.booleans())
+def test_classification_under_similarities(axis, angle, shift, scale, concave):
+    """The cube's cloud moved by a random similarity (Surfels.transformed) classifies points
+    near its edges like the moved exact cube (float64 oracle in the cube's own frame)."""
+    p, n, r = box_cloud()
+    m = affine(scale * rotation_matrix(axis, angle), np.asarray(shift))
+    s = Surfels(p, -n if concave else n, r).transformed(m)
+    x = near_edges(np.random.default_rng(1), 5000, 0.15)
+    x = x[box_distance(x) > 0.01]
+    exact = np.all(np.abs(x) <= 1.0, axis=1) != concave
+    world = x @ m[:3, :3].T + m[:3, 3]
+    assert np.array_equal(s.contains(world), exact)
+    assert np.allclose(s.radii, r * scale)
 
 
 @pytest.mark.parametrize("build", ["rim", "crease"])
@@ -180,6 +201,27 @@ def test_surfels_kept_by_the_tree(bored_sphere):
     assert np.allclose(smp.normals[mine], smp.positions[mine], atol=1e-9)
 
 
+def test_transformed_cloud_in_a_tree():
+    """A cloud under transforms (scaled by 2, moved) intersected with a box: the surfels kept
+    are the moved ones inside the box, with outward normals; the box's samples kept are those
+    inside the moved sphere, and every kept box sample lies on the box."""
+    p, n = sphere_cloud(4000)
+    cloud = clcsg.surfels(p, n, 0.06).scale(2.0).translate((1.0, 0.0, 0.0))
+    cube = clcsg.box(2.4, center=(1.0, 0.0, 0.0))
+    smp = clcsg.sample(cloud & cube, 0.06)
+    world = 2.0 * p + [1.0, 0.0, 0.0]
+    inside = np.all(np.abs(world - [1.0, 0, 0]) <= 1.2, axis=1)
+    mine = smp.quadrics >= smp.tape.first_surfel_quadric
+    assert mine.sum() == inside.sum()
+    got = smp.positions[mine]
+    assert np.allclose(np.sort(got, axis=0), np.sort(world[inside], axis=0))
+    assert np.allclose(smp.normals[mine], (got - [1.0, 0, 0]) / 2.0, atol=1e-9)
+    faces = smp.positions[~mine]
+    assert len(faces) > 0
+    assert np.all(np.linalg.norm(faces - [1.0, 0, 0], axis=1) <= 2.0 + 0.06)
+    assert np.allclose(np.abs(faces - [1.0, 0, 0]).max(axis=1), 1.2)
+
+
 def test_two_point_operands_cut_by_partner_planes():
     """Sphere cloud minus a smaller sphere cloud (4 runs): the mask equals the exact ray
     tracer's of the two quadric spheres except within 2 pixels of the silhouette; where the
@@ -247,6 +289,9 @@ def test_ply_scene_file_and_import(tmp_path):
     (tmp_path / "m.csg").write_text('difference() {\n  import(file = "cloud.ply", layer = "", origin = [0, 0], '
                                     'scale = 1, convexity = 1, $fn = 0, $fa = 12, $fs = 2, timestamp = 0);\n'
                                     '  cylinder($fn = 0, $fa = 12, $fs = 2, h = 3, r1 = 0.4, r2 = 0.4, center = true);\n}\n')
+    clcsg.save(loaded, tmp_path / "saved.json")  # saved inline: points, normals, radii
+    again = clcsg.load(tmp_path / "saved.json").shape.operands[0]
+    assert np.array_equal(again.points, s.points) and np.array_equal(again.radii, s.radii)
     csg = load_csg(tmp_path / "m.csg")
     assert any(isinstance(o, Surfels) for o in clcsg.model.csg.walk(csg.shape))
 

@@ -466,6 +466,13 @@ class _Saver:
                 c = [_jnum(x) for x in node.color]
                 out["color"] = c[:3] if c[3] == 1.0 else c
             return out
+        if isinstance(node, Surfels):
+            out = {"surfels": {"points": node.points.tolist(), "normals": node.normals.tolist(),
+                               "radii": node.radii.tolist()}}
+            if tuple(node.color) != tuple(DEFAULT_COLOR):
+                c = [_jnum(x) for x in node.color]
+                out["color"] = c[:3] if c[3] == 1.0 else c
+            return out
         if depth >= SAVE_DEPTH and not top:
             # too deep for one JSON object (json.loads recurses per level): the rest of the
             # chain is written as a def, used once, which loads back to the same graph
