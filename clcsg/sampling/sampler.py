@@ -98,7 +98,7 @@ from ..progress import for_option
 WORK_GROUP = 64
 
 #: counters summed over levels into the stats (the others are per-level positions)
-_SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
+SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
            "prune_evaluations", "pruned_decided", "tapes_written")
 _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
 

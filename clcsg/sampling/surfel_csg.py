@@ -260,6 +260,10 @@ def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
             warnings.simplefilter("ignore")  # a run whose solid is empty (S = nothing in S - C) is normal
             got = run(Scene(folded, bound, scene.source))
         stats["runs"] += 1
+        for name in sampler.SUMMED_STATS:
+            stats[name] = stats.get(name, 0) + int(got.stats.get(name, 0))
+        stats["levels"] = max(stats.get("levels", 0), int(got.stats.get("levels", 0)))
+        stats.setdefault("floor", got.stats.get("floor"))
         tape.folded[sigma] = got.tape
         n_regs = max(n_regs, got.tape.n_regs)
         if len(got):
@@ -378,7 +382,9 @@ def _combined(parts, tape: SurfelTape, prog: _Programs, n_regs, radius, stats) -
         return Samples.empty(radius, tape, packed, stats)
     first, count, ops = dedupe_programs(rows, cat["clip_first"], cat["clip_count"]) if len(rows) else \
         (np.zeros_like(cat["clip_first"]), cat["clip_count"], rows)
-    stats.update(samples=int(len(cat["positions"])), clipped_samples=int((count > 0).sum()), clip_rows=int(len(ops)))
+    stats.update(samples=int(len(cat["positions"])), clipped_samples=int((count > 0).sum()), clip_rows=int(len(ops)),
+                 radius=radius, tape_quadrics=int(tape.first_surfel_quadric - len(tape.markers)),
+                 surfels_kept=int((cat["quadrics"] >= tape.first_surfel_quadric).sum()))
     return Samples(cat["positions"], cat["normals"], cat["radii"], cat["quadrics"].astype(np.int32),
                    cat["signs"].astype(np.int32), cat["primitives"].astype(np.int32), first, count, ops,
                    radius, tape, packed, stats)
