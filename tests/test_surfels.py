@@ -13,6 +13,7 @@ from hypothesis import given, settings, strategies as st
 import clcsg
 from clcsg.cli import app as cli
 from clcsg.errors import ParameterError, SceneError, UsageError
+from clcsg.compile.interpret import member
 from clcsg.model.csg import rotation_matrix
 from clcsg.model.quadric import affine
 from clcsg.model.surfels import Surfels
@@ -190,14 +191,56 @@ def test_surfel_difference_renders_like_the_exact_solid(bored_sphere):
     assert np.linalg.norm(smp.positions[wall], axis=1).max() <= 1.0 + SURFEL_R
 
 
+def _kept_by_program(smp, i, x) -> bool:
+    """Does sample i's clip program keep the point ``x`` of its splat (float64 interpreter)?"""
+    if smp.clip_count[i] == 0:
+        return True
+    rows = smp.clip_ops[smp.clip_first[i]: smp.clip_first[i] + smp.clip_count[i]]
+    lo, hi = member(rows, smp.tape.quadrics, x.reshape(1, 3), int(smp.quadrics[i]))
+    return bool(lo[0] != hi[0])
+
+
+def test_no_gap_along_the_rim(bored_sphere):
+    """Points of the exact surface next to the bore's rim, on the wall just inside the sphere
+    and on the sphere just outside the wall, are covered by a kept splat of their own surface
+    whose clip program keeps them (the cut falls on the rim, not a radius short of it)."""
+    smp, _ = bored_sphere
+    rng = np.random.default_rng(5)
+    first = smp.tape.first_surfel_quadric
+    wall = np.flatnonzero((smp.quadrics < first) & (np.abs(np.hypot(smp.positions[:, 0], smp.positions[:, 1]) - 0.4) < 1e-6))
+    mine = np.flatnonzero(smp.quadrics >= first)
+    zr = np.sqrt(1 - 0.4 ** 2)
+    for _ in range(150):
+        th = rng.uniform(0, 2 * np.pi)
+        z = rng.choice([-1, 1]) * rng.uniform(zr - 0.05, zr - 1e-3)
+        x = np.array([0.4 * np.cos(th), 0.4 * np.sin(th), z])
+        near = wall[np.linalg.norm(smp.positions[wall] - x, axis=1) <= smp.radii[wall]]
+        assert any(_kept_by_program(smp, i, x) for i in near), x
+        rho = rng.uniform(0.4 + 1e-3, 0.45)
+        y = np.array([rho * np.cos(th), rho * np.sin(th), np.sign(z) * np.sqrt(1 - rho ** 2)])
+        ok = False
+        for i in mine[np.linalg.norm(smp.positions[mine] - y, axis=1) <= 2 * SURFEL_R]:
+            c, nn = smp.positions[i], smp.normals[i]
+            yp = y - np.dot(y - c, nn) * nn  # y seen on the splat's plane
+            if np.linalg.norm(yp - c) <= smp.radii[i] and _kept_by_program(smp, i, yp):
+                ok = True
+                break
+        assert ok, y
+
+
 def test_surfels_kept_by_the_tree(bored_sphere):
     """A surfel is kept iff it lies outside the cylinder (switching the operand switches the
-    solid there); its outward normal is the surfel's."""
+    solid there), or its center is inside but its disk reaches out (its clip program cuts it
+    at the wall); its outward normal is the surfel's."""
     smp, _ = bored_sphere
     mine = smp.quadrics >= smp.tape.first_surfel_quadric
     p, n = sphere_cloud(20000)
-    outside = np.hypot(p[:, 0], p[:, 1]) > 0.4
-    assert mine.sum() == outside.sum()
+    rho = np.hypot(p[:, 0], p[:, 1])
+    kept = smp.positions[mine]
+    kept_rho = np.hypot(kept[:, 0], kept[:, 1])
+    assert (kept_rho > 0.4).sum() == (rho > 0.4).sum()
+    assert kept_rho.min() > 0.4 - SURFEL_R
+    assert (mine & (smp.clip_count > 0)).sum() >= (kept_rho <= 0.4).sum() > 0
     assert np.allclose(smp.normals[mine], smp.positions[mine], atol=1e-9)
 
 
@@ -212,9 +255,11 @@ def test_transformed_cloud_in_a_tree():
     world = 2.0 * p + [1.0, 0.0, 0.0]
     inside = np.all(np.abs(world - [1.0, 0, 0]) <= 1.2, axis=1)
     mine = smp.quadrics >= smp.tape.first_surfel_quadric
-    assert mine.sum() == inside.sum()
     got = smp.positions[mine]
-    assert np.allclose(np.sort(got, axis=0), np.sort(world[inside], axis=0))
+    in_box = np.all(np.abs(got - [1.0, 0, 0]) <= 1.2, axis=1)
+    assert np.allclose(np.sort(got[in_box], axis=0), np.sort(world[inside], axis=0))
+    outside = np.linalg.norm(np.maximum(np.abs(got[~in_box] - [1.0, 0, 0]) - 1.2, 0), axis=1)
+    assert np.all(outside < 2.0 * 0.06)  # disks that reach into the box (radius scaled by 2)
     assert np.allclose(smp.normals[mine], (got - [1.0, 0, 0]) / 2.0, atol=1e-9)
     faces = smp.positions[~mine]
     assert len(faces) > 0

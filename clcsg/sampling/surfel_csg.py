@@ -24,7 +24,10 @@ center for any other (its *partner*).  A quadric splat near a point operand is s
 the partner's tangent plane, a surfel splat near a quadric exactly along the quadric.  The
 tape with markers (one placeholder plane per operand, swapped per splat) is compiled once.
 Splats farther than their radius from every other operand keep the run's clip program (or
-none).  Assumption: the surfels cover their surface (every surface point within a radius of a
+none).  A splat near another operand is kept or dropped by that clip program, not by its
+center: a quadric sample whose center falls on the wrong side of a cloud, or a surfel whose
+center is off the surface (probed at points of its disk for the side the solid is on), may
+still cover the surface up to the edge with part of its disk.  Assumption: the surfels cover their surface (every surface point within a radius of a
 surfel), so a splat whose center is farther than its radius plus twice the largest surfel
 radius from every center of an operand does not meet that operand's surface.
 """
@@ -298,6 +301,9 @@ def _quadric_samples(got: Samples, sigma, clouds, prog: _Programs, inst_index) -
     first = np.zeros(len(p), dtype=np.int32)
     count = np.zeros(len(p), dtype=np.int32)
     quadrics = remap[got.quadrics]
+    # a splat near a cloud is decided by its clip program, not by its center: its center may
+    # be on the wrong side while part of its disk covers the surface
+    keep |= near
     for i in np.flatnonzero(keep):
         if near[i]:
             planes = [(s.points[idx[i]], s.normals[idx[i]]) for (_, idx), s in zip(partners, clouds)]
@@ -319,21 +325,8 @@ def _quadric_samples(got: Samples, sigma, clouds, prog: _Programs, inst_index) -
 def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: _Programs, inst: int) -> dict:
     """The surfels of operand j on the solid's surface, as plane samples."""
     c, n, r = cloud.points, cloud.normals, cloud.radii
-    cls = [s.contains(c) if i != j else None for i, s in enumerate(tape.operands)]
-    side = {}
-    for v in (0, 1):
-        m = np.zeros(len(c), dtype=bool)
-        for sigma, t in tape.folded.items():
-            if sigma[j] != v or t.empty:
-                continue
-            sel = np.ones(len(c), dtype=bool)
-            for i, ci in enumerate(cls):
-                if ci is not None:
-                    sel &= ci == bool(sigma[i])
-            if sel.any():
-                m[sel] = contains(t.ops, t.quadrics, c[sel])
-        side[v] = m
-    keep = side[1] != side[0]
+    inside, outside = _sides(tape, j, c)
+    keep = inside != outside
     partners = _partners(tape.operands, c)
     near = np.zeros(len(c), dtype=bool)
     scene_q = [q for q in range(tape.n_quadrics) if q not in {mq for mq, _ in tape.markers}]
@@ -342,9 +335,15 @@ def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: _Programs, i
     for i, s in enumerate(tape.operands):
         if i != j:
             near |= partners[i][0] < r + 2.0 * float(s.radii.max())
+    solid_inside = inside.copy()
+    late = np.flatnonzero(near & ~keep)  # centers off the surface: a point of the disk may be on it
+    if len(late):
+        found, side = _disk_sides(tape, j, c[late], n[late], r[late])
+        keep[late[found]] = True
+        solid_inside[late[found]] = side[found]
     quadrics, csign = prog.planes(c, n)
-    signs = np.where(side[1], csign, -csign).astype(np.int32)
-    normals = np.where(side[1][:, None], n, -n)
+    signs = np.where(solid_inside, csign, -csign).astype(np.int32)
+    normals = np.where(solid_inside[:, None], n, -n)
     first = np.zeros(len(c), dtype=np.int32)
     count = np.zeros(len(c), dtype=np.int32)
     for i in np.flatnonzero(keep & near):
@@ -362,6 +361,45 @@ def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: _Programs, i
     k = keep
     return dict(positions=c[k], normals=normals[k], radii=r[k].copy(), quadrics=quadrics[k], signs=signs[k],
                 primitives=np.full(int(k.sum()), inst, dtype=np.int32), clip_first=first[k], clip_count=count[k])
+
+
+def _sides(tape: SurfelTape, j: int, x) -> tuple[np.ndarray, np.ndarray]:
+    """The solid at ``x`` with operand j everything and with it nothing, every other operand
+    at its classification there."""
+    cls = [s.contains(x) if i != j else None for i, s in enumerate(tape.operands)]
+    side = {}
+    for v in (0, 1):
+        m = np.zeros(len(x), dtype=bool)
+        for sigma, t in tape.folded.items():
+            if sigma[j] != v or t.empty:
+                continue
+            sel = np.ones(len(x), dtype=bool)
+            for i, ci in enumerate(cls):
+                if ci is not None:
+                    sel &= ci == bool(sigma[i])
+            if sel.any():
+                m[sel] = contains(t.ops, t.quadrics, x[sel])
+        side[v] = m
+    return side[1], side[0]
+
+
+#: points on a disk probed for the surface when its center is not on it: this many on the
+#: circle at 0.9 of its radius
+DISK_PROBES = 12
+
+
+def _disk_sides(tape: SurfelTape, j: int, c, n, r) -> tuple[np.ndarray, np.ndarray]:
+    """(found, inside) per disk: whether a probe point of the disk is on the surface (switching
+    operand j switches the solid there), and if so whether the solid is behind the disk."""
+    t1 = np.cross(n, np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    phi = 2 * np.pi * np.arange(DISK_PROBES) / DISK_PROBES
+    x = c[:, None] + 0.9 * r[:, None, None] * (np.cos(phi)[None, :, None] * t1[:, None] + np.sin(phi)[None, :, None] * t2[:, None])
+    inside, outside = _sides(tape, j, x.reshape(-1, 3))
+    inside, flips = inside.reshape(len(c), -1), (inside != outside).reshape(len(c), -1)
+    first = np.argmax(flips, axis=1)
+    return flips.any(axis=1), inside[np.arange(len(c)), first]
 
 
 def _combined(parts, tape: SurfelTape, prog: _Programs, n_regs, radius, stats) -> Samples:
