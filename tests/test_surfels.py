@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 
 import clcsg
 from clcsg.cli import app as cli
-from clcsg.errors import ParameterError, SceneError, UsageError
+from clcsg.errors import LimitError, ParameterError, SceneError, UsageError
 from clcsg.compile.interpret import member
 from clcsg.model.csg import rotation_matrix
 from clcsg.model.quadric import affine
@@ -353,6 +353,13 @@ def test_bad_surfels(what, args, message):
     with pytest.raises(ParameterError) as e:
         clcsg.surfels(*args)
     assert message in str(e.value) and "\n" not in str(e.value)
+
+
+def test_too_many_point_operands():
+    clouds = [clcsg.surfels([[float(k), 0, 0]], [[0, 0, 1]], 0.5) for k in range(5)]
+    with pytest.raises(LimitError) as e:
+        clcsg.sample(clcsg.union(*clouds), 0.1)
+    assert "5 point operands; at most 4" in str(e.value) and "\n" not in str(e.value)
 
 
 def test_bad_ply_files(tmp_path):
