@@ -44,14 +44,13 @@ from ..compile.interpret import contains, prune
 from ..compile.tape import QuadricTable, Tape, compile_shape
 from ..cl.constants import OP_LEAF
 from ..errors import LimitError
+from ..cl.records import pack
 from ..model.csg import Complement, Intersection, Difference, Primitive, Transformed, Union
 from ..model.quadric import Quadric
 from ..model.scene import Scene
 from ..model.solids import box, halfspace
-from ..model.surfels import Surfels
-from ..cl.records import pack
+from ..model.surfels import Surfels, has_surfels
 from ..readers.scenes import as_scene
-from ..model.surfels import has_surfels
 from . import sampler
 from .sampler import dedupe_programs
 from .samples import Samples
@@ -341,7 +340,9 @@ def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: _Programs, i
         found, side = _disk_sides(tape, j, c[late], n[late], r[late])
         keep[late[found]] = True
         solid_inside[late[found]] = side[found]
-    quadrics, csign = prog.planes(c, n)
+    quadrics = np.full(len(c), -1, dtype=np.int32)
+    csign = np.ones(len(c), dtype=np.int32)
+    quadrics[keep], csign[keep] = prog.planes(c[keep], n[keep])
     signs = np.where(solid_inside, csign, -csign).astype(np.int32)
     normals = np.where(solid_inside[:, None], n, -n)
     first = np.zeros(len(c), dtype=np.int32)
@@ -354,10 +355,12 @@ def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: _Programs, i
             keep[i] = False
             continue
         first[i], count[i] = got
-    for i in np.flatnonzero(keep):
-        lits = tape.instances[inst].literals
-        if not lits or lits[-1][0] != quadrics[i]:
-            lits.append((int(quadrics[i]), int(signs[i])))
+    lits = tape.instances[inst].literals  # the instance owns its surfels' planes (colours)
+    owned = {q for q, _ in lits}
+    for q, sg in zip(quadrics[keep].tolist(), signs[keep].tolist()):
+        if q not in owned:
+            owned.add(q)
+            lits.append((q, sg))
     k = keep
     return dict(positions=c[k], normals=normals[k], radii=r[k].copy(), quadrics=quadrics[k], signs=signs[k],
                 primitives=np.full(int(k.sum()), inst, dtype=np.int32), clip_first=first[k], clip_count=count[k])
