@@ -16,7 +16,8 @@ any point x the solid is F_sigma(x) with sigma_j = [x in S_j] (the two-surfel cl
   Its splat is a disk on its tangent plane (a plane quadric); the solid lies behind the plane
   if F(S_j = 1) holds at c, in front of it otherwise.
 
-Clipping (section 3.3 of the paper, on the clip programs the splat renderer already runs):
+Clipping (section 3.3 of the paper, on the clip programs the splat renderer already runs;
+built by :mod:`clcsg.sampling.surfel_clips`):
 near another operand a splat keeps the tape pruned over its ball with its own quadric
 substituted, where every point operand is replaced by the half-space of one surfel: its own
 tangent plane for the splat's own operand, the surfel whose center is nearest to the splat's
@@ -40,8 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..compile.interpret import contains, prune
-from ..compile.tape import QuadricTable, Tape, compile_shape
+from ..compile.interpret import contains
+from ..compile.tape import Tape, compile_shape
 from ..cl.constants import OP_LEAF
 from ..errors import LimitError
 from ..cl.records import pack
@@ -54,6 +55,7 @@ from ..readers.scenes import as_scene
 from . import sampler
 from .sampler import dedupe_programs
 from .samples import Samples
+from .surfel_clips import ClipPrograms
 
 #: 2^k device runs for k point operands
 MAX_OPERANDS = 4
@@ -123,16 +125,6 @@ def proxy_scene(scene: Scene) -> Scene:
                  scene.bound, scene.source)
 
 
-def plane_matrix(c, n) -> np.ndarray:
-    """The plane quadrics (x - c) . n as 4x4 matrices (negative behind the surfel): (4, 4) for
-    one center and normal, (m, 4, 4) for (m, 3) of each."""
-    c, n = np.asarray(c, dtype=np.float64), np.asarray(n, dtype=np.float64)
-    m = np.zeros(n.shape[:-1] + (4, 4))
-    m[..., :3, 3] = m[..., 3, :3] = 0.5 * n
-    m[..., 3, 3] = -np.einsum("...j,...j->...", n, c)
-    return m
-
-
 @dataclass
 class SurfelTape(Tape):
     """The tape of a solid with point operands: the tape with one marker plane per operand
@@ -168,59 +160,6 @@ def _marker(j: int, bound) -> Primitive:
     return halfspace(n, float(n @ (0.5 * (bound[0] + bound[1]))))
 
 
-class _Programs:
-    """The combined quadric table and clip rows being built."""
-
-    def __init__(self, marker_tape: SurfelTape):
-        self.tape = marker_tape
-        self.table = QuadricTable()
-        for m in marker_tape.quadrics:
-            self.table.add(m)
-        assert len(self.table) == marker_tape.n_quadrics
-        self.rows: list = []
-        self.used = 0
-
-    def plane(self, c, n) -> tuple[int, int]:
-        """(index, sign) of the surfel plane (x - c) . n in the table: P = sign |P| K."""
-        return self.table.add(plane_matrix(c, n))
-
-    def planes(self, c, n) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`plane` of many: (indices, signs)."""
-        got = self.table.add_many(plane_matrix(c, n))
-        return np.array([i for i, _ in got], dtype=np.int32), np.array([s for _, s in got], dtype=np.int32)
-
-    def add_rows(self, rows) -> tuple[int, int]:
-        rows = np.asarray(rows, dtype=np.int32).reshape(-1, 4)
-        self.rows.append(rows)
-        first = self.used
-        self.used += len(rows)
-        return first, len(rows)
-
-    def clip(self, center, radius, own, planes) -> tuple[int, int] | None:
-        """The clip program (first, count) of a splat at ``center`` with ``radius`` on quadric
-        ``own`` of the marker tape (a scene quadric, or operand j's marker for its own surfels),
-        each point operand j replaced by the half-space ``planes[j]`` = (c, n); None when its
-        splat is nowhere on the surface."""
-        t = self.tape
-        q = t.quadrics.copy()
-        target = {}
-        for (mq, ms), (c, n) in zip(t.markers, planes):
-            q[mq] = ms * plane_matrix(c, n)
-            idx, sg = self.plane(c, n)
-            target[mq] = (idx, ms * sg)
-        rows, decided, _ = prune(t.ops, q, center, radius, own)
-        if decided == 1:
-            return None
-        if decided == -1:
-            return (0, 0)
-        rows = rows.copy()
-        for r in rows:
-            if r[0] == OP_LEAF and int(r[2]) in target:
-                idx, sg = target[int(r[2])]
-                r[2], r[3] = idx, int(r[3]) * sg
-        return self.add_rows(rows)
-
-
 def sample(scene, radius, device=None, **options) -> Samples:
     """:func:`clcsg.sample`: the device sampler (:func:`clcsg.sampling.sampler.sample`, same
     arguments), and for a scene with point operands the combination of its runs described in
@@ -251,7 +190,7 @@ def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
                       markers=[literal[id(markers[k])][1] for k in keys])
     tape.first_surfel_quadric = tape.n_quadrics
     tape.operand_instances = marker_inst
-    prog = _Programs(tape)
+    prog = ClipPrograms(tape)
     inst_index = {(id(i.node), i.matrix.tobytes()): i.index for i in tape.instances}
     parts: list = []
     n_regs = tape.n_regs
@@ -284,7 +223,7 @@ def _partners(clouds, points):
     return out
 
 
-def _quadric_samples(got: Samples, sigma, clouds, prog: _Programs, inst_index) -> dict:
+def _quadric_samples(got: Samples, sigma, clouds, prog: ClipPrograms, inst_index) -> dict:
     """The samples of the run on F_sigma that are on the solid's surface, in combined numbering."""
     p = got.positions
     keep = np.ones(len(p), dtype=bool)
@@ -321,7 +260,7 @@ def _quadric_samples(got: Samples, sigma, clouds, prog: _Programs, inst_index) -
                 signs=got.signs[k], primitives=insts[got.primitives[k]], clip_first=first[k], clip_count=count[k])
 
 
-def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: _Programs, inst: int) -> dict:
+def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: ClipPrograms, inst: int) -> dict:
     """The surfels of operand j on the solid's surface, as plane samples."""
     c, n, r = cloud.points, cloud.normals, cloud.radii
     inside, outside = _sides(tape, j, c)
@@ -405,7 +344,7 @@ def _disk_sides(tape: SurfelTape, j: int, c, n, r) -> tuple[np.ndarray, np.ndarr
     return flips.any(axis=1), inside[np.arange(len(c)), first]
 
 
-def _combined(parts, tape: SurfelTape, prog: _Programs, n_regs, radius, stats) -> Samples:
+def _combined(parts, tape: SurfelTape, prog: ClipPrograms, n_regs, radius, stats) -> Samples:
     """One :class:`Samples` over the combined quadric table, equal clip programs stored once."""
     cat = {name: np.concatenate([p[name] for p in parts]) if parts else None
            for name in ("positions", "normals", "radii", "quadrics", "signs", "primitives", "clip_first", "clip_count")}
