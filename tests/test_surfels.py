@@ -416,6 +416,11 @@ def test_cli_render_and_sample_a_surfel_scene(tmp_path, capsys):
     assert cli.main(["sample", str(tmp_path / "s.json"), "-r", "0.05", "-o", str(tmp_path / "s.ply"),
                      "-q"]) == 0
     assert (tmp_path / "s.ply").stat().st_size > 1000
+    assert cli.main(["sample", str(tmp_path / "s.json"), "-r", "0.05", "-o", str(tmp_path / "s.npz"), "-q"]) == 0
+    assert cli.main(["render", str(tmp_path / "s.npz"), "-o", str(tmp_path / "again.png"), "--size", "96x72",
+                     "-q"]) == 0
+    again = np.asarray(Image.open(tmp_path / "again.png"))
+    assert again.shape == im.shape and (again[..., :3] < 250).any()
     capsys.readouterr()
     code = cli.main(["render", str(tmp_path / "s.json"), "-o", str(out), "--method", "raytrace", "--size", "32x24"])
     err = capsys.readouterr().err
