@@ -39,7 +39,7 @@ _EXPORTS = {
     "Image": "rendering.image",
     "raytrace": "rendering.raytracer",
     "render": "rendering.splat",
-    "sample": "sampling.sampler",
+    "sample": "sampling.surfel_csg",
     "Samples": "sampling.samples",
     "load_samples": "writers.samples_npz",
     "write_samples": "writers.output_files",
@@ -53,6 +53,7 @@ _EXPORTS = {
     **dict.fromkeys(("hull", "minkowski"), "model.hull"),
     "mesh": "meshing",
     "polyhedron": "model.polyhedron",
+    "surfels": "model.surfels",
     "load_mesh": "readers.mesh_files",
 }
 __all__ = ["__version__", *_EXPORTS]

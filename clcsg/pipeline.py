@@ -27,7 +27,9 @@ from .rendering.camera import Camera
 from .rendering.raytracer import raytrace
 from .rendering.splat import render
 from .sampling.radius import Radius
-from .sampling.sampler import sample
+from .errors import UsageError
+from .model.surfels import has_surfels
+from .sampling.surfel_csg import proxy_scene, sample
 
 #: the radius when none is given: 1% of the diagonal of the scene's bound
 DEFAULT_RADIUS = Radius(0.01, relative=True)
@@ -68,7 +70,13 @@ class Pipeline:
 
     @property
     def tape(self):
-        """The compiled tape (compiled on first use, then cached by the scene)."""
+        """The compiled tape (compiled on first use, then cached by the scene).  With point
+        operands it is the tape of :func:`~clcsg.sampling.surfel_csg.proxy_scene` (each replaced
+        by its box): the bound and the camera fit use it; the samples do not."""
+        if has_surfels(self.scene.shape):
+            if getattr(self, "_proxy", None) is None:
+                self._proxy = proxy_scene(self.scene)
+            return self._proxy.compile(self.normal_form, self.term_limit)
         return self.scene.compile(self.normal_form, self.term_limit)
 
     def radius(self, radius=None) -> float:
@@ -95,5 +103,8 @@ class Pipeline:
         tracer of the tape (``"raytrace"``); ``options`` go to :func:`clcsg.render` /
         :func:`clcsg.raytrace` (background, aa, ...)."""
         if method == "raytrace":
+            if has_surfels(self.scene.shape):
+                raise UsageError(f"{self.scene.source}: the exact ray tracer needs quadric operands; a scene with point "
+                                 "operands (surfels) is drawn by splats (--method splat)")
             return raytrace(self.tape, camera, device=self.device, **options)
         return render(samples, camera, device=self.device, **options)

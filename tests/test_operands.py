@@ -209,7 +209,7 @@ def test_bad_meshes_are_one_line_errors(tmp_path):
         "format": ({"mesh": {"file": "odd.xyz"}}, "unknown mesh format '.xyz'; known: .3mf, .obj, .off, .ply, .stl"),
         "open": ({"mesh": {"file": "open.stl"}}, "has no opposite face: the mesh is open"),
         "zero faces": ({"mesh": {"file": "empty.off"}}, "the file has no faces"),
-        "points only": ({"mesh": {"file": "cloud.ply"}}, "a point cloud (a file without faces): point operands (surfels) are not supported"),
+        "points only": ({"mesh": {"file": "cloud.ply"}}, "the point cloud has no normals (vertex properties nx, ny, nz): a point operand needs outward normals"),
         "orientation": ({"mesh": {"points": v.tolist(), "faces": flipped.tolist()}},
                         "edge 0-3 (0, 0, 0 to 1, 1, 0) is used twice in the same direction (faces 0 and 1): the faces are not consistently oriented"),
     }

@@ -17,7 +17,7 @@ import numpy as np
 from .constants import INSTANCE_REGS, ROUNDING_ULPS
 from .memory import upload
 
-from ..model.quadric import Quadric, affine
+from ..model.quadric import COEFFICIENT_INDEX, affine, check_affine
 
 TAPE_OP_DTYPE = np.dtype([("op", np.int32), ("out", np.int32), ("a", np.int32), ("b", np.int32)], align=True)
 OWNER_DTYPE = np.dtype([("first", np.int32), ("count", np.int32)], align=True)
@@ -115,12 +115,15 @@ def pack(tape, real=np.float64, origin=None) -> PackedScene:
     shift = affine(translation=-origin)
     U = tape.n_quadrics
     q = np.zeros(U, dtype=quadric_dtype(real))
-    local = np.zeros((U, 4, 4))
-    for i in range(U):
-        ql = Quadric(tape.quadrics[i]).transform(shift)
-        local[i] = ql.matrix
-        q["coef"][i] = ql.coefficients()
-        q["lam_min"][i], q["lam_max"][i] = ql.eigenvalue_range()
+    # Q' = M^-T Q M^-1 (Quadric.transform) for all quadrics at once
+    inv = np.linalg.inv(check_affine(shift))
+    m = np.asarray(tape.quadrics, dtype=np.float64).reshape(U, 4, 4)
+    local = np.einsum("ji,njk,kl->nil", inv, 0.5 * (m + m.transpose(0, 2, 1)), inv)
+    local = 0.5 * (local + local.transpose(0, 2, 1))
+    if U:
+        q["coef"] = local[:, [i for i, _ in COEFFICIENT_INDEX], [j for _, j in COEFFICIENT_INDEX]]
+        lam = np.linalg.eigvalsh(local[:, :3, :3])
+        q["lam_min"], q["lam_max"] = lam[:, 0], lam[:, -1]
     prims = np.zeros(len(tape.instances), dtype=PRIM_DTYPE)
     lits = []
     for k, inst in enumerate(tape.instances):

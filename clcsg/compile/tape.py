@@ -266,6 +266,9 @@ def _children(node, m, neg):
     if isinstance(node, Difference):
         ops = [(node.operands[0], m, neg)] + [(c, m, not neg) for c in node.operands[1:]]
         return (_OR if neg else _AND), ops
+    if hasattr(node, "normals") and hasattr(node, "radii"):
+        raise SceneError("a point operand (surfels) is only sampled (clcsg.sample, then clcsg.render): the exact "
+                         "ray tracer, meshing and queries need quadric operands")
     raise SceneError(f"not a CSG node: {type(node).__name__}")
 
 

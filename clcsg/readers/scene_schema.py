@@ -31,7 +31,7 @@ from ..model import solids
 OPERATIONS = ("union", "intersection", "difference")
 UNARY = ("complement",)
 #: constructions: solids built exactly from a 2-D profile, from other nodes or from a closed mesh
-CONSTRUCTIONS = ("extrude", "revolve", "hull", "minkowski", "mesh")
+CONSTRUCTIONS = ("extrude", "revolve", "hull", "minkowski", "mesh", "surfels")
 TOP_KEYS = ("clcsg", "bound", "defs", "root", "comment", "$schema")
 TRANSFORM_STEPS = ("translate", "rotate", "scale", "matrix")
 FORMAT_VERSION = 1

@@ -70,6 +70,7 @@ from ..model.scene import Scene
 from ..model.colors import ColorError, parse_color
 from .budget import JSON_FACTOR, check_file, check_input
 from .mesh_files import load_mesh, resolve
+from ..model.surfels import Surfels
 from .profile_json import profile_from_json
 from .scene_schema import CONSTRUCTIONS, FORMAT_VERSION, TOP_KEYS, TRANSFORM_STEPS, UNARY, join, jtype, key, scene_schema, suggest
 from .trampoline import run
@@ -304,7 +305,7 @@ class _Loader:
             for i, c in enumerate(arg):
                 operands.append((yield self._node(c, f"{kpath}[{i}]")))
             shape = self.construction(kind, operands, color, kpath)
-        elif kind in ("extrude", "revolve", "mesh"):
+        elif kind in ("extrude", "revolve", "mesh", "surfels"):
             color = self.color(v["color"], key(path, "color")) if "color" in v else None
             shape = self.construction(kind, arg, color, kpath)
         else:
@@ -338,6 +339,8 @@ class _Loader:
                 return minkowski(*arg, color=color)
             if kind == "mesh":
                 return self.mesh(arg, color, path)
+            if kind == "surfels":
+                return self.surfels(arg, color, path)
             prof = profile_from_json(arg["profile"], key(path, "profile"), self.fail)
             if kind == "extrude":
                 return extrude(prof, arg.get("height", 1.0), center=arg.get("center", False),
@@ -354,6 +357,14 @@ class _Loader:
             return load_mesh(resolve(arg["file"], None if self.source.startswith("<") else self.source), color,
                              source=f"{self.source}: {key(path, 'file')}")
         return polyhedron(arg["points"], arg["faces"], color, source=f"{self.source}: {path}")
+
+    def surfels(self, arg, color, path) -> Shape:
+        """A ``surfels`` node: a PLY point cloud relative to the scene file, or points, normals
+        and radii."""
+        if "file" in arg:
+            return load_mesh(resolve(arg["file"], None if self.source.startswith("<") else self.source), color,
+                             source=f"{self.source}: {key(path, 'file')}")
+        return Surfels(arg["points"], arg["normals"], arg["radii"], color, source=f"{self.source}: {path}")
 
     def primitive(self, kind, params, color, path) -> Primitive:
         m = params.get("matrix") if kind == "quadric" else None
@@ -451,6 +462,13 @@ class _Saver:
             return out
         if isinstance(node, Primitive):
             out = {node.kind: {k: _jvalue(v, self.fail) for k, v in node.params.items()}}
+            if tuple(node.color) != tuple(DEFAULT_COLOR):
+                c = [_jnum(x) for x in node.color]
+                out["color"] = c[:3] if c[3] == 1.0 else c
+            return out
+        if isinstance(node, Surfels):
+            out = {"surfels": {"points": node.points.tolist(), "normals": node.normals.tolist(),
+                               "radii": node.radii.tolist()}}
             if tuple(node.color) != tuple(DEFAULT_COLOR):
                 c = [_jnum(x) for x in node.color]
                 out["color"] = c[:3] if c[3] == 1.0 else c

@@ -82,6 +82,8 @@ def eye_inside(tape, eye) -> bool:
     """Is the eye inside (or on) the solid?  Back-face culling is only valid from outside."""
     if tape.empty:
         return False
+    if hasattr(tape, "contains"):  # a tape with point operands classifies by its surfels
+        return bool(tape.contains(np.asarray(eye, dtype=np.float64).reshape(1, 3))[0])
     return bool(contains(tape.ops, tape.quadrics, np.asarray(eye, dtype=np.float64).reshape(1, 3))[0])
 
 

@@ -98,7 +98,7 @@ from ..progress import for_option
 WORK_GROUP = 64
 
 #: counters summed over levels into the stats (the others are per-level positions)
-_SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
+SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
            "prune_evaluations", "pruned_decided", "tapes_written")
 _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
 
@@ -367,7 +367,7 @@ def sample(
     None: 50 million samples / 80% of the device's global memory); past them
     :class:`~clcsg.errors.LimitError` is raised before anything is allocated.
     """
-    radius, floor = _checked(radius, floor)
+    radius, floor = checked_radius(radius, floor)
     timings = {}
     t0 = time.perf_counter()
     sc = as_scene(scene, bound)
@@ -437,7 +437,7 @@ def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, 
     return sub, finisher
 
 
-def _checked(radius, floor) -> tuple:
+def checked_radius(radius, floor) -> tuple:
     """(radius, floor) as floats, or :class:`UsageError` naming the bad one."""
     try:
         radius = float(radius)
