@@ -209,11 +209,8 @@ def test_the_bar_never_goes_back_on_a_terminal(tmp_path):
 
 EXAMPLES = sorted(os.path.relpath(p, ROOT) for pat in ("examples/*.json", "examples/*.csg", "examples/zoo/*.json")
                   for p in __import__("glob").glob(os.path.join(ROOT, pat)) if "menger" not in p)
-#: where the expected count misses 2x (the area bounds of the gear's 80 quadrics are loose, the
-#: spheres' count is raised by their many small trimmed caps)
-EXPECTED_MISSES = {"examples/zoo/gear.json": "3.6x over", "examples/spheres.json": "0.44x",
-                   "examples/drilled_block.json": "0.47x", "examples/rounded_box.csg": "2.02x over",
-                   "examples/pen_stand.csg": "7.95x over (the hull of three spheres: area bounds of its tangent cones)"}
+#: where the expected count misses 2x (none since the expected count uses the measured area)
+EXPECTED_MISSES: dict = {}
 
 
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.xfail(strict=True, reason=EXPECTED_MISSES[p]))

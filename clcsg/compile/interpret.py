@@ -108,6 +108,25 @@ def member(ops, quadrics, points, self_quadric: int = -1):
     return _run(ops, leaf, np.logical_and, np.logical_or, const)
 
 
+def member_per_point(ops, quadrics, points, self_quadrics):
+    """(m-, m+) as :func:`member`, with a substituted quadric per point (``self_quadrics``
+    (N,)): one run of the tape for points of many quadrics."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    own = np.asarray(self_quadrics).reshape(-1)
+    value = _cached(lambda q: _values(quadrics[q], p))
+
+    def leaf(q, sign):
+        mine = own == q
+        v = sign * value(q) <= 0.0
+        return (np.where(mine, sign > 0, v), np.where(mine, sign < 0, v))
+
+    def const(a):
+        v = np.full(len(p), bool(a))
+        return (v, v)
+
+    return _run(ops, leaf, np.logical_and, np.logical_or, const)
+
+
 def contains(ops, quadrics, points) -> np.ndarray:
     return member(ops, quadrics, points)[0]
 
