@@ -62,6 +62,7 @@ from ...errors import LimitError, UsageError
 from ...model.quadric import Quadric
 from .term_boxes import literal_box
 from ..interpret import surface_in_boxes
+from ..root_tapes import box_tapes
 from .regions import quadric_regions
 from .surface_area import surface_areas
 from .surface_boxes import CONVEX, PLANE, SADDLE, quadric_kinds, surface_boxes, surface_meets
@@ -486,24 +487,36 @@ def refine_regions(tape, regions, levels: int = REFINE_LEVELS, max_boxes: int = 
     pruned over the box with u substituted, gives the same constant on u's two sides
     (:func:`clcsg.compile.interpret.surface_in_boxes`).  Kept boxes are split in 8 and tested
     again, ``levels`` times (while the boxes number at most ``max_boxes``), so the regions
-    follow the CSG surface instead of the primitives' boxes."""
+    follow the CSG surface instead of the primitives' boxes.  Neighbouring boxes are tested
+    on their group's tape pruned to the primitives near the group
+    (:func:`clcsg.compile.root_tapes.box_tapes`: exact over the group's boxes and the boxes
+    split from them), not on the whole tape."""
     boxes = [np.asarray(r, dtype=np.float64).reshape(-1, 2, 3) for r in regions]
     q = np.concatenate([np.full(len(b), u) for u, b in enumerate(boxes)]) if boxes else np.zeros(0, int)
     if not len(q):
         return boxes
     lo = np.concatenate([b[:, 0] for b in boxes])
     hi = np.concatenate([b[:, 1] for b in boxes])
+    group, tapes = box_tapes(tape, lo, hi, q)
     corners = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], dtype=np.float64)
     for level in range(levels + 1):
-        keep = surface_in_boxes(tape.ops, tape.quadrics, lo, hi, q)
-        lo, hi, q = lo[keep], hi[keep], q[keep]
+        keep = np.zeros(len(q), dtype=bool)
+        order = np.argsort(group, kind="stable")
+        cuts = np.searchsorted(group[order], np.arange(len(tapes) + 1))
+        for k, ops in enumerate(tapes):
+            sel = order[cuts[k]:cuts[k + 1]]
+            if len(sel):
+                keep[sel] = surface_in_boxes(ops, tape.quadrics, lo[sel], hi[sel], q[sel])
+        lo, hi, q, group = lo[keep], hi[keep], q[keep], group[keep]
         if level == levels or 8 * len(q) > max_boxes:
             break
         half = 0.5 * (hi - lo)
         lo = (lo[:, None, :] + corners[None] * half[:, None, :]).reshape(-1, 3)
         hi = lo + np.repeat(half, 8, axis=0)
-        q = np.repeat(q, 8)
-    return [np.stack([lo[q == u], hi[q == u]], axis=1) for u in range(len(boxes))]
+        q, group = np.repeat(q, 8), np.repeat(group, 8)
+    order = np.argsort(q, kind="stable")
+    cuts = np.cumsum(np.bincount(q, minlength=len(boxes)))[:-1]
+    return [np.stack([a, b], axis=1) for a, b in zip(np.split(lo[order], cuts), np.split(hi[order], cuts))]
 
 
 def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
