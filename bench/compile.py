@@ -11,7 +11,8 @@ primitives:
 Per scene, process CPU time (``time.process_time``, best of the repeats: the machine is
 shared) of ``Scene.compile`` (tape, tree bounds, quadric table), of the tree bounds alone
 (:func:`clcsg.compile.bounds.tree.tree_bounds`), and of the sampler's root tasks with their pruned
-root tapes (:func:`clcsg.sampling.sampler.root_tasks`, radius 1% of the bound's diagonal), the
+root tapes (:func:`clcsg.sampling.sampler.root_tasks`, radius 1% of the bound's diagonal), of the resource
+guard's estimate from the quadrics' regions (:func:`clcsg.compile.bounds.estimates.estimate_regions`), the
 full tape's rows and the root tapes' mean rows.  Microseconds per primitive staying flat as the
 size grows is what linear means.  Writes ``bench/results/compile.json``.
 """
@@ -26,6 +27,8 @@ import numpy as np
 
 import clcsg
 from clcsg.cl.records import pack
+from clcsg.compile.bounds.estimates import estimate_regions
+from clcsg.compile.bounds.regions import quadric_regions
 from clcsg.compile.bounds.tree import tree_bounds
 from clcsg.compile.quadric_frames import principal_frame
 from clcsg.model.csg import Difference, Union
@@ -74,10 +77,13 @@ def measure(shape, repeats: int = 2) -> dict:
     packed = pack(tape, np.float64)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
     roots_s, (tasks, cells, rows) = _cpu(lambda: root_tasks(tape, packed, frames, radius), repeats)
+    regions = quadric_regions(tape.quadrics, tape.instances, tape.bound)
+    est_s, est = _cpu(lambda: estimate_regions(tape.quadrics, regions, radius), repeats)
     n = len(tape.instances)
     return {
         "primitives": n, "quadrics": tape.n_quadrics, "instructions": int(len(tape.ops)),
         "compile_cpu_s": compile_s, "tree_bounds_cpu_s": bounds_s, "root_tasks_cpu_s": roots_s,
+        "estimate_regions_cpu_s": est_s, "estimated_samples": est.samples,
         "compile_us_per_primitive": 1e6 * compile_s / n, "tasks": int(len(tasks)),
         "root_tape_rows_mean": float(np.mean(cells["tape_count"])) if len(cells) else 0.0,
         "root_tape_rows_max": int(cells["tape_count"].max()) if len(cells) else 0,
@@ -97,10 +103,10 @@ def run(quick: bool = False, device=None) -> None:
     env = load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(),
                      "timer": "process CPU time, best of 2"})
     path = write("compile", {"environment": env, "scenes": rows})
-    print("| scene | primitives | compile s | us / primitive | tree bounds s | root tasks s | root tape rows (mean / full) |")
-    print("|---|---|---|---|---|---|---|")
+    print("| scene | primitives | compile s | us / primitive | tree bounds s | root tasks s | estimate s | root tape rows (mean / full) |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['family']} | {r['primitives']:,} | {fmt(r['compile_cpu_s'], '.2f')} | "
               f"{fmt(r['compile_us_per_primitive'], '.0f')} | {fmt(r['tree_bounds_cpu_s'], '.2f')} | "
-              f"{fmt(r['root_tasks_cpu_s'], '.2f')} | {fmt(r['root_tape_rows_mean'], '.0f')} / {r['instructions']:,} |")
+              f"{fmt(r['root_tasks_cpu_s'], '.2f')} | {fmt(r['estimate_regions_cpu_s'], '.3f')} | {fmt(r['root_tape_rows_mean'], '.0f')} / {r['instructions']:,} |")
     print(f"wrote {path}")

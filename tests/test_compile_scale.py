@@ -135,3 +135,40 @@ def test_root_tasks_point_at_pruned_tapes_that_start_the_arena():
         ops = as_ops[c["tape_first"]:c["tape_first"] + c["tape_count"]]
         # every leaf of a task's own quadric survives the pruning
         assert tasks["quadric"][c["task"]] in ops[ops[:, 0] == 0, 2]
+
+
+@pytest.mark.parametrize("scene", ["plate", "union"])
+def test_refined_regions_on_pruned_group_tapes_are_those_of_the_full_tape(scene, monkeypatch):
+    """refine_regions tests each group of neighbouring boxes on a tape pruned to the
+    primitives near the group (root_tapes.box_tapes); with one group (the full tape) the
+    regions are the same, and points of the quadrics' CSG surface (the full tape's two
+    substituted sides differ) lie in the refined regions."""
+    from clcsg.compile import root_tapes
+    from clcsg.compile.bounds import estimates as guard
+    from clcsg.compile.bounds.regions import quadric_regions
+
+    shape = perforated_plate(12) if scene == "plate" else sphere_union(343)
+    tape = Scene(shape).compile()
+    regions = quadric_regions(tape.quadrics, tape.instances, tape.bound)
+    got = guard.refine_regions(tape, regions)
+    full = root_tapes.box_tapes
+    monkeypatch.setattr(guard, "box_tapes", lambda t, lo, hi, q: full(t, lo, hi, q, size=len(q) + 1))
+    want = guard.refine_regions(tape, regions)
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
+    rng = np.random.default_rng(4)
+    checked = 0
+    for u in rng.choice(len(regions), 20, replace=False):
+        q = Quadric(tape.quadrics[u])
+        p = rng.uniform(tape.bound[0], tape.bound[1], (3000, 3))
+        v = rng.normal(size=(3000, 3))
+        t1, _ = q.intersect_line(p, v)
+        x = (p + t1[:, None] * v)[np.isfinite(t1)]
+        x = x[np.all((x >= tape.bound[0]) & (x <= tape.bound[1]), axis=1)]
+        minus, plus = member(tape.ops, tape.quadrics, x, int(u))
+        on = x[minus != plus]
+        r = got[u]
+        inside = np.any(np.all((on[:, None] >= r[None, :, 0] - 1e-9) & (on[:, None] <= r[None, :, 1] + 1e-9), axis=2), axis=1)
+        assert inside.all()
+        checked += len(on)
+    assert checked > 100

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cl.constants import ROUNDING_ULPS
-from ..model.quadric import Quadric
+from ..model.quadric import Quadric, ray_distance
 from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
 
 #: pruning's rounding margin, relative to the region's size and distance from the origin
@@ -103,6 +103,25 @@ def member(ops, quadrics, points, self_quadric: int = -1):
 
     def const(a):
         v = np.full(n, bool(a))
+        return (v, v)
+
+    return _run(ops, leaf, np.logical_and, np.logical_or, const)
+
+
+def member_per_point(ops, quadrics, points, self_quadrics):
+    """(m-, m+) as :func:`member`, with a substituted quadric per point (``self_quadrics``
+    (N,)): one run of the tape for points of many quadrics."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    own = np.asarray(self_quadrics).reshape(-1)
+    value = _cached(lambda q: _values(quadrics[q], p))
+
+    def leaf(q, sign):
+        mine = own == q
+        v = sign * value(q) <= 0.0
+        return (np.where(mine, sign > 0, v), np.where(mine, sign < 0, v))
+
+    def const(a):
+        v = np.full(len(p), bool(a))
         return (v, v)
 
     return _run(ops, leaf, np.logical_and, np.logical_or, const)
@@ -239,6 +258,37 @@ def leaf_states_over_boxes(matrix, sign: int, lo, hi) -> np.ndarray:
     return np.where(v > spread, _F, np.where(v < -spread, _T, _LIVE))
 
 
+def _signed_leaf_values(quadrics, used, lo, hi):
+    """Per quadric of ``used`` and box [lo, hi] (N, 3): (v, spread) with the literal (q, sign)
+    FALSE over the box where sign v > spread, TRUE where sign v < -spread (the tests of
+    :func:`leaf_states_over_boxes`, for all quadrics at once: a sign only negates v)."""
+    c, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    slack = PRUNE_SLACK * (np.linalg.norm(c, axis=1) + half.sum(axis=1))
+    M = np.asarray(quadrics, dtype=np.float64)[np.asarray(used, dtype=np.int64)].reshape(-1, 4, 4)
+    v = np.zeros((len(M), len(c)))
+    spread = np.zeros((len(M), len(c)))
+    flat = ~np.any(M[:, :3, :3] != 0, axis=(1, 2))
+    if flat.any():
+        g = 2.0 * M[flat, :3, 3]
+        v[flat] = g @ c.T + M[flat, 3, 3][:, None]
+        spread[flat] = np.abs(g) @ half.T + np.linalg.norm(g, axis=1)[:, None] * slack[None]
+    k = np.flatnonzero(~flat)
+    if len(k):
+        A, b = M[k, :3, :3], -M[k, :3, 3]
+        lam = np.linalg.eigvalsh(A)
+        Ac = np.einsum("kij,nj->kni", A, c)
+        f = np.einsum("kni,ni->kn", Ac, c) - 2.0 * (b @ c.T) + M[k, 3, 3][:, None]
+        grad = 2.0 * np.linalg.norm(Ac - b[:, None, :], axis=2)
+        v[k] = ray_distance(f, grad, lam[:, :1], lam[:, 2:])
+        spread[k] = np.linalg.norm(half, axis=1)[None] + slack[None]
+    return v, spread
+
+
+#: three-valued AND / OR of states (_F, _T, _LIVE) as tables indexed by 3 x + y
+_AND3 = np.array([_F, _F, _F, _F, _T, _LIVE, _F, _LIVE, _LIVE], dtype=np.int8)
+_OR3 = np.array([_F, _T, _LIVE, _T, _T, _T, _LIVE, _T, _LIVE], dtype=np.int8)
+
+
 def surface_in_boxes(ops, quadrics, lo, hi, box_quadric) -> np.ndarray:
     """Mask of the boxes [lo, hi] (N, 3) in which quadric ``box_quadric[i]`` may carry CSG
     surface: False where pruning over the box decides that the two substituted sides of the
@@ -246,23 +296,31 @@ def surface_in_boxes(ops, quadrics, lo, hi, box_quadric) -> np.ndarray:
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     own = np.asarray(box_quadric)
     n = len(lo)
+    ops = np.asarray(ops)
+    leaves = ops[ops[:, 0] == OP_LEAF]
+    used = np.unique(leaves[:, 2])
+    row = {int(u): k for k, u in enumerate(used)}
+    v, spread = _signed_leaf_values(quadrics, used, lo, hi)
     leaf_state: dict = {}
     sides: dict = {}
-    for op, out, a, b in np.asarray(ops):
+    for op, out, a, b in ops:
         if op == OP_LEAF:
             key = (a, b)
             if key not in leaf_state:
-                leaf_state[key] = leaf_states_over_boxes(quadrics[a], b, lo, hi)
+                sv = b * v[row[int(a)]]
+                leaf_state[key] = np.where(sv > spread[row[int(a)]], _F,
+                                           np.where(sv < -spread[row[int(a)]], _T, _LIVE)).astype(np.int8)
             st = leaf_state[key]
             mine = own == a
             sides[out] = (np.where(mine, _T if b > 0 else _F, st), np.where(mine, _F if b > 0 else _T, st))
         elif op in (OP_AND, OP_OR):
             sa, sb = sides[a], sides[b]
-            sides[out] = (_combine3(op, sa[0], sb[0]), _combine3(op, sa[1], sb[1]))
+            table = _AND3 if op == OP_AND else _OR3
+            sides[out] = (table[3 * sa[0] + sb[0]], table[3 * sa[1] + sb[1]])
         elif op == OP_COPY:
             sides[out] = sides[a]
         elif op == OP_CONST:
-            v = np.full(n, _T if a else _F)
-            sides[out] = (v, v)
+            v0 = np.full(n, _T if a else _F, dtype=np.int8)
+            sides[out] = (v0, v0)
     neg, pos = sides[int(np.asarray(ops)[-1][1])]
     return ~((neg != _LIVE) & (neg == pos))

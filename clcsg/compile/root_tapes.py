@@ -190,3 +190,52 @@ def _near_sets(tape, qs, regions) -> list:
     bounds = np.searchsorted(region_of, np.arange(len(qs) + 1))
     owners = tape.owners()
     return [set(inst[bounds[k]:bounds[k + 1]].tolist()) | set(owners[q]) for k, q in enumerate(qs)]
+
+
+#: boxes per shared tape of :func:`box_tapes` (a few dozen: the tape interpreter's cost per
+#: row is mostly fixed, so fewer, longer tapes cost less than one per box)
+CLUSTER = 64
+
+
+def box_tapes(tape, lo, hi, box_quadric, size: int = CLUSTER) -> tuple[np.ndarray, list]:
+    """(group per box, [ops per group]): the boxes [lo, hi] (N, 3), each of a quadric
+    ``box_quadric``, in groups of ``size`` neighbours along a Morton curve of their centers
+    (among boxes of the same size to within 2x),
+    each group with the tape pruned to the primitives whose boxes meet the group's bounding
+    box G.  The others are FALSE on a neighbourhood of G (their solids miss it), so the pruned
+    tape is the solid near G, and its sides with a quadric substituted decide the surface on
+    that quadric in G at least as tightly as the full tape's.  A primitive that holds a
+    quadric but misses G is pruned too (the full tape would switch its leaf of the quadric,
+    though the primitive is nowhere near): that is what keeps the tapes short when one plane
+    is shared by thousands of primitives.  A region box of a quadric lies in the box of a
+    primitive holding it (:func:`clcsg.compile.bounds.regions.quadric_regions`), so that
+    primitive meets G and stays.  The full tape where there is no DAG or pruning saves
+    nothing."""
+    full = np.asarray(tape.ops, dtype=np.int32)
+    lo, hi = np.asarray(lo, dtype=np.float64).reshape(-1, 3), np.asarray(hi, dtype=np.float64).reshape(-1, 3)
+    q = np.asarray(box_quadric, dtype=np.int64)
+    dag = primitive_dag(tape)
+    if dag is None or len(q) <= size:
+        return np.zeros(len(q), dtype=np.int64), ([full] if len(q) else [])
+    # boxes of one size class together (a face of the whole scene next to a small hole's
+    # would give the hole's group the full tape), then along the Morton curve
+    rank = np.empty(len(q), dtype=np.int64)
+    rank[morton_order(0.5 * (lo + hi))] = np.arange(len(q))
+    size_class = np.floor(np.log2(np.maximum((hi - lo).max(axis=1), 1e-300)))
+    order = np.lexsort((rank, size_class))
+    group = np.empty(len(q), dtype=np.int64)
+    group[order] = np.arange(len(q)) // size
+    starts = np.arange(0, len(q), size)
+    glo = np.minimum.reduceat(lo[order], starts, axis=0)
+    ghi = np.maximum.reduceat(hi[order], starts, axis=0)
+    ilo = np.array([i.box[0] if i.box is not None else np.full(3, np.inf) for i in tape.instances]).reshape(-1, 3)
+    ihi = np.array([i.box[1] if i.box is not None else np.full(3, -np.inf) for i in tape.instances]).reshape(-1, 3)
+    g_of, inst = BoxTree(ilo, ihi).query(glo, ghi)
+    near = [set() for _ in starts]
+    for g, k in zip(g_of.tolist(), inst.tolist()):
+        near[g].add(k)
+    tapes = []
+    for nr in near:
+        ops, regs = dag.pruned(frozenset(nr))
+        tapes.append(full if regs > tape.n_regs or len(ops) >= len(full) else ops)
+    return group, tapes

@@ -250,6 +250,10 @@ SPLIT_AT = 0.4871
 SPLIT_LARGER = 1 - SPLIT_AT
 
 
+#: the largest fraction of the run the bar takes from the samples emitted / the expected count
+SAMPLES_SHARE = 0.9
+
+
 class _Progress:
     """Progress of the level loop on the current reporter (:mod:`clcsg.progress`: a bar on
     a terminal, JSON lines with ``--progress json``, nothing in a pipe or with ``progress=False``).
@@ -262,8 +266,12 @@ class _Progress:
     levels below the largest root cell), and 1/2 past it (the cells left are those along
     trimming curves, resolved within a few levels).  Time: a level costs a + b cells, with a
     the cheapest level so far (launches, the counter read, the level's finish pass) and b the
-    rest of the time so far per cell.  The fraction shown, elapsed / (elapsed + forecast), is
-    the largest seen so far: it never goes back, and reaches 100% when the last level is done;
+    rest of the time so far per cell.  The total work is also estimated before the run, as the
+    expected sample count (:func:`clcsg.compile.bounds.estimates.expected_samples`, from the
+    measured surface area); the samples emitted so far over it is a second forecast of the
+    fraction done (up to :data:`SAMPLES_SHARE`).  The fraction shown, the larger of the two
+    (for the cells, elapsed / (elapsed + forecast)), is the largest seen so far: it never goes
+    back, and reaches 100% when the last level is done;
     the bar counts cells, its total is done / fraction, so its ETA (rate so far times the cells
     left) is the forecast.  The samples so far and the expected count
     (:func:`clcsg.compile.bounds.estimates.expected_samples`) are shown next to the bar.
@@ -302,6 +310,12 @@ class _Progress:
             lv += 1
         return out
 
+    def by_samples(self, samples) -> float:
+        """The fraction of the expected samples emitted so far, at most :data:`SAMPLES_SHARE`
+        (the last levels are left to the cell forecast: the expected count is within about
+        1.3x, not exact)."""
+        return min(samples / self.estimate, SAMPLES_SHARE) if self.estimate > 0 else 0.0
+
     def seconds_ahead(self, cells) -> float:
         """Forecast seconds of levels of ``cells`` each: a + b n per level."""
         a = min(self.times)
@@ -322,7 +336,8 @@ class _Progress:
         if not children:
             self.fraction = 1.0
         elif elapsed + left > 0:
-            self.fraction = max(self.fraction, min(elapsed / (elapsed + left), 0.999))
+            by_cells = elapsed / (elapsed + left)
+            self.fraction = max(self.fraction, min(max(by_cells, self.by_samples(samples)), 0.999))
         total = max(self.cells, math.ceil(self.cells / max(self.fraction, 1e-9)))
         if self.cells / total < self.shown:  # rounding must not take the bar back either
             total = max(self.cells, math.floor(self.cells / self.shown))

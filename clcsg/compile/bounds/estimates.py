@@ -62,7 +62,10 @@ from ...errors import LimitError, UsageError
 from ...model.quadric import Quadric
 from .term_boxes import literal_box
 from ..interpret import surface_in_boxes
+from ..root_tapes import box_tapes
 from .regions import quadric_regions
+from .surface_area import surface_areas
+from .surface_boxes import CONVEX, PLANE, SADDLE, quadric_kinds, surface_boxes, surface_meets
 
 __all__ = [
     "DEFAULT_MAX_SAMPLES",
@@ -277,25 +280,6 @@ def estimate(dnf, radius: float, real_itemsize: int = 8) -> Estimate:
     return _make_estimate(r, area, edges, tasks, real_itemsize, per_quadric)
 
 
-def _surface_meets(matrix, lo, hi) -> np.ndarray:
-    """Mask of the boxes (lo, hi: (N, 3)) that the surface Q = 0 may meet: exact for planes
-    (the range of the linear function over the box holds 0), for other quadrics the
-    conservative distance at the box center against the half-diagonal (|d| never exceeds the
-    distance to the surface, so a surface farther than the half-diagonal misses the box)."""
-    m = np.asarray(matrix, dtype=np.float64)
-    c = 0.5 * (lo + hi)
-    half = 0.5 * (hi - lo)
-    scale = np.abs(m).max()
-    if np.abs(m[:3, :3]).max() <= 1e-14 * scale:
-        g = 2.0 * m[:3, 3]
-        mid = c @ g + m[3, 3]
-        spread = half @ np.abs(g)
-        return np.abs(mid) <= spread + 1e-12 * (scale + np.abs(mid))
-    d = Quadric(m).distance(c)
-    r = np.linalg.norm(half, axis=1)
-    return ~(np.abs(d) > r * (1 + 1e-9) + 1e-12)
-
-
 def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: int = 8, tasks=None) -> Estimate:
     """The :class:`Estimate` of sampling the surface at ``radius`` from per-quadric regions.
 
@@ -306,7 +290,8 @@ def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: in
     of u's surface, dropped where the surface misses it) by the plane / convex / saddle rules,
     summed over the boxes or taken once for the box around all of them, whichever is smaller.
     ``tasks``: the number of sampling tasks; None for 6 per quadric that carries surface
-    (3 sampling planes x 2 sheets).
+    (3 sampling planes x 2 sheets).  All quadrics and boxes are treated in one pass
+    (:mod:`clcsg.compile.bounds.surface_boxes`).
     """
     r = float(radius)
     if not (math.isfinite(r) and r > 0):
@@ -314,39 +299,51 @@ def estimate_regions(quadric_matrices, regions, radius: float, real_itemsize: in
     mats = np.asarray(quadric_matrices, dtype=np.float64).reshape(-1, 4, 4)
     if len(regions) != len(mats):
         raise ValueError(f"{len(regions)} region lists for {len(mats)} quadrics")
-    area = 0.0
-    edges = 0.0
+    reg = [np.asarray(g, dtype=np.float64).reshape(-1, 2, 3) for g in regions]
+    q = np.repeat(np.arange(len(reg)), [len(g) for g in reg])
+    boxes = np.concatenate(reg) if len(q) else np.zeros((0, 2, 3))
+    slo, shi, empty = surface_boxes(mats)
+    live = ~empty[q]
+    q, boxes = q[live], boxes[live]
+    lo, hi = np.maximum(boxes[:, 0], slo[q]), np.minimum(boxes[:, 1], shi[q])
+    ok = np.all(hi >= lo, axis=1)
+    q, lo, hi = q[ok], lo[ok], hi[ok]
+    ok = surface_meets(mats, q, lo, hi)
+    q, lo, hi = q[ok], lo[ok], hi[ok]
+    per_quadric = np.zeros(len(mats))
     n_tasks = 0
-    per_quadric = []
-    for m, reg in zip(mats, regions):
-        reg = np.asarray(reg, dtype=np.float64).reshape(-1, 2, 3)
-        if not len(reg):
-            per_quadric.append(0.0)
-            continue
-        sb = _surface_box(Quadric(m), literal_box)
-        if sb is None:
-            per_quadric.append(0.0)
-            continue
-        lo = np.maximum(reg[:, 0], sb[0])
-        hi = np.minimum(reg[:, 1], sb[1])
-        ok = np.all(hi >= lo, axis=1)
-        lo, hi = lo[ok], hi[ok]
-        if len(lo):
-            ok = _surface_meets(m, lo, hi)
-            lo, hi = lo[ok], hi[ok]
-        if not len(lo):
-            per_quadric.append(0.0)
-            continue
-        kind = _kind(m)
-        ulo, uhi = lo.min(axis=0, keepdims=True), hi.max(axis=0, keepdims=True)
-        a = min(float(_area_bounds(kind, lo, hi).sum()), float(_area_bounds(kind, ulo, uhi)[0]))
-        per_quadric.append(a)
-        area += a
-        edges += min(4.0 * float(np.sum(hi - lo)), 4.0 * float(np.sum(uhi - ulo)))
-        n_tasks += 6
+    edges = 0.0
+    if len(q):
+        kind, normal = quadric_kinds(mats)
+        starts = np.flatnonzero(np.r_[True, q[1:] != q[:-1]])
+        held = q[starts]
+        ulo, uhi = np.minimum.reduceat(lo, starts, axis=0), np.maximum.reduceat(hi, starts, axis=0)
+        separate = np.add.reduceat(_area_bounds_by_kind(kind[q], normal[q], lo, hi), starts)
+        together = _area_bounds_by_kind(kind[held], normal[held], ulo, uhi)
+        per_quadric[held] = np.minimum(separate, together)
+        edge_sep = np.add.reduceat(np.sum(hi - lo, axis=1), starts)
+        edges = float(np.sum(np.minimum(4.0 * edge_sep, 4.0 * np.sum(uhi - ulo, axis=1))))
+        n_tasks = 6 * len(held)
     if tasks is not None:
         n_tasks = int(tasks)
-    return _make_estimate(r, area, edges, n_tasks, real_itemsize, per_quadric)
+    return _make_estimate(r, float(per_quadric.sum()), edges, n_tasks, real_itemsize, per_quadric.tolist())
+
+
+def _area_bounds_by_kind(kind, normal, lo, hi) -> np.ndarray:
+    """:func:`_area_bounds` per box for boxes of mixed kinds (``kind`` and ``normal`` per box,
+    from :func:`~clcsg.compile.bounds.surface_boxes.quadric_kinds`)."""
+    e = np.maximum(hi - lo, 0.0)
+    F = np.stack([e[:, 1] * e[:, 2], e[:, 0] * e[:, 2], e[:, 0] * e[:, 1]], axis=1)
+    S = 2.0 * F.sum(axis=1)
+    out = np.where(kind == SADDLE, SQRT3 * S, S)
+    p = kind == PLANE
+    if p.any():
+        best = np.sqrt((F[p] * F[p]).sum(axis=1))
+        n = normal[p]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            best = np.minimum(best, np.where(n > 1e-12, F[p] / np.where(n > 1e-12, n, 1.0), np.inf).min(axis=1))
+        out[p] = np.where(np.isnan(n[:, 0]), 0.0, best)
+    return out
 
 
 # -- the check ------------------------------------------------------------------------------------
@@ -490,24 +487,36 @@ def refine_regions(tape, regions, levels: int = REFINE_LEVELS, max_boxes: int = 
     pruned over the box with u substituted, gives the same constant on u's two sides
     (:func:`clcsg.compile.interpret.surface_in_boxes`).  Kept boxes are split in 8 and tested
     again, ``levels`` times (while the boxes number at most ``max_boxes``), so the regions
-    follow the CSG surface instead of the primitives' boxes."""
+    follow the CSG surface instead of the primitives' boxes.  Neighbouring boxes are tested
+    on their group's tape pruned to the primitives near the group
+    (:func:`clcsg.compile.root_tapes.box_tapes`: exact over the group's boxes and the boxes
+    split from them), not on the whole tape."""
     boxes = [np.asarray(r, dtype=np.float64).reshape(-1, 2, 3) for r in regions]
     q = np.concatenate([np.full(len(b), u) for u, b in enumerate(boxes)]) if boxes else np.zeros(0, int)
     if not len(q):
         return boxes
     lo = np.concatenate([b[:, 0] for b in boxes])
     hi = np.concatenate([b[:, 1] for b in boxes])
+    group, tapes = box_tapes(tape, lo, hi, q)
     corners = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], dtype=np.float64)
     for level in range(levels + 1):
-        keep = surface_in_boxes(tape.ops, tape.quadrics, lo, hi, q)
-        lo, hi, q = lo[keep], hi[keep], q[keep]
+        keep = np.zeros(len(q), dtype=bool)
+        order = np.argsort(group, kind="stable")
+        cuts = np.searchsorted(group[order], np.arange(len(tapes) + 1))
+        for k, ops in enumerate(tapes):
+            sel = order[cuts[k]:cuts[k + 1]]
+            if len(sel):
+                keep[sel] = surface_in_boxes(ops, tape.quadrics, lo[sel], hi[sel], q[sel])
+        lo, hi, q, group = lo[keep], hi[keep], q[keep], group[keep]
         if level == levels or 8 * len(q) > max_boxes:
             break
         half = 0.5 * (hi - lo)
         lo = (lo[:, None, :] + corners[None] * half[:, None, :]).reshape(-1, 3)
         hi = lo + np.repeat(half, 8, axis=0)
-        q = np.repeat(q, 8)
-    return [np.stack([lo[q == u], hi[q == u]], axis=1) for u in range(len(boxes))]
+        q, group = np.repeat(q, 8), np.repeat(group, 8)
+    order = np.argsort(q, kind="stable")
+    cuts = np.cumsum(np.bincount(q, minlength=len(boxes)))[:-1]
+    return [np.stack([a, b], axis=1) for a, b in zip(np.split(lo[order], cuts), np.split(hi[order], cuts))]
 
 
 def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
@@ -543,25 +552,53 @@ def _tape_estimate(tape, which: str, radius: float, real_itemsize: int) -> Estim
 
 #: the expected sample count's weights, per (area bound of the kind) / (pi r^2) and per
 #: (patch border bound) / r: the ratios of the real counts to those bounds, fitted (least squares
-#: on the log ratio) on the examples and the zoo at r = 1% of the diagonal
+#: on the log ratio) on the examples and the zoo at r = 1% of the diagonal; used for scenes too
+#: large for a measured area
 EXPECTED_WEIGHTS = {"plane": 0.7, "convex": 0.58, "saddle": 0.27, "edge": 0.7}
+#: with the measured area (:mod:`clcsg.compile.bounds.surface_area`): samples per
+#: (area / (pi r^2)) and per (sum over quadrics of sqrt(area) / r), fitted (least squares on the
+#: log ratio) on the examples and the zoo at r = 2% of the diagonal and five of them at 1%
+#: (24 runs; the fit is within 0.67-1.3x of every one)
+EXPECTED_AREA = 2.5
+EXPECTED_PERIMETER = 10.4
+
+
+def measured_areas(tape):
+    """Per quadric the measured CSG surface area (:func:`~clcsg.compile.bounds.surface_area.surface_areas`),
+    or None for a scene too large to measure; computed once per tape and kept on it."""
+    cache = tape.__dict__.setdefault("_guard_estimates", {})
+    if "measured_areas" not in cache:
+        regions = cache.get("regions")
+        if regions is None:
+            regions = cache["regions"] = quadric_regions(tape.quadrics, tape.instances, tape.bound)
+        cache["measured_areas"] = surface_areas(tape, regions)
+    return cache["measured_areas"]
 
 
 def expected_samples(tape, est: Estimate) -> float:
     """The sample count to expect (not a bound: the guard keeps :attr:`Estimate.samples` for
-    its limits).  The area bounds overshoot by a factor that depends on the kind of quadric (a
-    sphere in its box gets 6 / pi = 1.9 times its area, a saddle sqrt 3 times more), so each
-    kind's bound is weighted by :data:`EXPECTED_WEIGHTS`, fitted on the examples:
+    its limits).  With the CSG surface area A_u measured on each quadric u
+    (:func:`measured_areas`): fill samples grow with the area and partial cells with the
+    length of the patches' borders, taken as sqrt(A_u) per quadric:
+
+        expected = EXPECTED_AREA sum_u A_u / (pi r^2) + EXPECTED_PERIMETER sum_u sqrt(A_u) / r
+
+    For scenes too large to measure, the area bounds (which overshoot by a factor that depends
+    on the kind of quadric: a sphere in its box gets 6 / pi = 1.9 times its area, a saddle
+    sqrt 3 times more) are weighted per kind by :data:`EXPECTED_WEIGHTS`:
 
         expected = sum_kind w_kind area_kind / (pi r^2) + w_edge edges / r
     """
     if not est.finite or not est.quadric_areas or est.measured_at is not None:
         return est.samples
     r = est.radius
-    by_kind = {"plane": 0.0, "convex": 0.0, "saddle": 0.0}
-    for m, a in zip(tape.quadrics, est.quadric_areas):
-        if a:
-            by_kind[_kind(m)[0]] += a
+    areas = None if tape.empty else measured_areas(tape)
+    if areas is not None:
+        n = EXPECTED_AREA * float(areas.sum()) / (math.pi * r * r) + EXPECTED_PERIMETER * float(np.sqrt(areas).sum()) / r
+        return max(1.0, n)
+    kind, _ = quadric_kinds(tape.quadrics)
+    areas = np.asarray(est.quadric_areas, dtype=np.float64)
+    by_kind = {name: float(areas[kind == k].sum()) for name, k in (("plane", PLANE), ("convex", CONVEX), ("saddle", SADDLE))}
     w = EXPECTED_WEIGHTS
     n = sum(w[k] * a for k, a in by_kind.items()) / (math.pi * r * r) + w["edge"] * est.edges / r
     return max(1.0, n)

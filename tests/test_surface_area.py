@@ -1,0 +1,50 @@
+"""The measured CSG surface area (Crofton's formula over random lines, clcsg.compile.bounds.
+surface_area) against areas known in closed form."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import clcsg
+from clcsg.compile.bounds.regions import quadric_regions
+from clcsg.compile.bounds.surface_area import surface_areas
+from clcsg.model.csg import Union
+from clcsg.model.scene import Scene
+
+
+def _area(shape, lines=1024, seed=0):
+    tape = Scene(shape).compile()
+    return surface_areas(tape, quadric_regions(tape.quadrics, tape.instances, tape.bound), lines=lines, seed=seed)
+
+
+def _box_minus_sphere(h, R):
+    """Area of the cube [-h, h]^3 minus the ball of radius R (h < R < h sqrt 2: the ball
+    pokes through each face in a disc and its caps beyond the faces do not meet)."""
+    faces = 6 * (4 * h * h - math.pi * (R * R - h * h))
+    inner = 4 * math.pi * R * R - 6 * 2 * math.pi * R * (R - h)
+    return faces + inner
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_sphere_cylinder_and_box_minus_sphere(seed):
+    a = _area(clcsg.sphere(1.0), seed=seed)
+    assert abs(a.sum() / (4 * math.pi) - 1) < 0.08
+    a = _area(clcsg.cylinder(2.0, 0.5), seed=seed)  # two discs and the side
+    assert abs(a.sum() / (2 * math.pi * 0.25 + 2 * math.pi * 0.5 * 2.0) - 1) < 0.08
+    a = _area(clcsg.box(2) - clcsg.sphere(1.3), seed=seed)
+    assert abs(a.sum() / _box_minus_sphere(1.0, 1.3) - 1) < 0.08
+    assert np.all(a >= 0)
+
+
+def test_a_quadric_with_no_csg_surface_measures_zero():
+    """A sphere inside a bigger sphere's union carries no CSG surface."""
+    a = _area(Union([clcsg.sphere(2.0), clcsg.sphere(0.5)]))
+    assert abs(a.sum() / (4 * math.pi * 4) - 1) < 0.08
+    assert (a > 0).sum() == 1
+
+
+def test_the_measurement_is_the_same_every_run():
+    np.testing.assert_array_equal(_area(clcsg.box(2) - clcsg.sphere(1.3)), _area(clcsg.box(2) - clcsg.sphere(1.3)))
