@@ -16,6 +16,16 @@
  * point (accurate in float as well).  Outputs depth (+inf on background), quadric and
  * primitive ids and RGBA8 shaded with shade.h, in the hit primitive's colour.
  *
+ * Culling (ray_culling.py): quadric q has a box B_q (the hull of the boxes of the primitive
+ * instances that have q as a literal) and, where all those literals have one sign s_q, that
+ * sign.  A primitive is the AND of its literals, so outside its box it is FALSE, and it stays
+ * FALSE with its literal on q replaced by FALSE, i.e. with K_q taken as s_q; a negated
+ * instance (an OR of the complements) stays TRUE the same way.  So where the ray's stretch in
+ * the slab misses B_q, every primitive on q has the value it has with q's sign taken as s_q
+ * all along the stretch: q is not solved (no roots, constant sign s_q), and every membership
+ * and substitution test on the stretch is unchanged.  The per-ray work is a box test per
+ * listed quadric, a solve per quadric whose box the ray meets, and the root walk over those.
+ *
  * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
  */
 #include "tiles.h"
@@ -30,6 +40,8 @@
 typedef struct {
     real r1[LOCAL_QUADRICS], r2[LOCAL_QUADRICS];
     uchar kind[LOCAL_QUADRICS];
+    /* the listed quadrics solved against the ray with a root before the stretch's end */
+    short solved[LOCAL_QUADRICS];
 } ray_roots;
 
 inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
@@ -78,24 +90,50 @@ inline uint slab_member(__global const tape_op *t, int n, const ray_roots *rr, r
     return r[t[n - 1].out];
 }
 
+/* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses), inv = 1 / v (+-inf
+ * for zero components: the slab test still works) */
+inline real2 ray_box_inv(real3 e, real3 inv, real3 lo, real3 hi)
+{
+    real3 a = (lo - e) * inv, b = (hi - e) * inv;
+    real3 tn = fmin(a, b), tf = fmax(a, b);
+    return (real2)(fmax(fmax(tn.x, tn.y), tn.z), fmin(fmin(tf.x, tf.y), tf.z));
+}
+
+
 /* The first root in [ta, tb] on the CSG surface of slab tape t (quadrics ql, nq of them):
  * returns the listed index of its quadric (-1: none) and writes its depth. */
 inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, int n, __global const int *ql,
-                    int nq, real3 e, real3 v, real ta, real tb, ray_roots *rr, real *depth)
+                    int nq, __global const real *cull, real3 e, real3 v, real3 inv, real slack, real ta, real tb,
+                    ray_roots *rr, real *depth)
 {
-    for (int m = 0; m < nq; ++m)
-        rr->kind[m] = ray_classify(quadric_load(qs, ql[m]), e, v, &rr->r1[m], &rr->r2[m]);
+    int ns = 0; /* the solved quadrics, listed first in rr->solved */
+    for (int m = 0; m < nq; ++m) {
+        int q = ql[m];
+        real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
+        if (lo.w != 0) {
+            real2 tt = ray_box_inv(e, inv, lo.xyz - slack, hi.xyz + slack);
+            if (!(fmax(tt.x, ta) <= fmin(tt.y, tb))) {
+                rr->r1[m] = rr->r2[m] = INFINITY;
+                rr->kind[m] = lo.w < 0 ? 4 : 0;
+                continue;
+            }
+        }
+        rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
+        if (rr->r1[m] <= tb) rr->solved[ns++] = m;
+    }
     real t_cur = ta;
     bool first = ta > 0; /* a root exactly at ta is visited (not one at the eye) */
     for (;;) {
         real t_next = INFINITY;
-        for (int m = 0; m < nq; ++m) {
+        for (int k = 0; k < ns; ++k) {
+            int m = rr->solved[k];
             real a = rr->r1[m], b = rr->r2[m];
             if ((a > t_cur || (first && a == t_cur)) && a < t_next) t_next = a;
             if ((b > t_cur || (first && b == t_cur)) && b < t_next) t_next = b;
         }
         if (!(t_next <= tb)) return -1;
-        for (int m = 0; m < nq; ++m) {
+        for (int k = 0; k < ns; ++k) {
+            int m = rr->solved[k];
             if (rr->r1[m] != t_next && rr->r2[m] != t_next) continue;
             uint bits = slab_member(t, n, rr, t_next, m);
             if (bits == 1 || bits == 2) {
@@ -108,14 +146,6 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
     }
 }
 
-/* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses) */
-inline real2 ray_box(real3 e, real3 v, real3 lo, real3 hi)
-{
-    real3 inv = 1 / v; /* +-inf for zero components: the slab test still works */
-    real3 a = (lo - e) * inv, b = (hi - e) * inv;
-    real3 tn = fmin(a, b), tf = fmax(a, b);
-    return (real2)(fmax(fmax(tn.x, tn.y), tn.z), fmin(fmin(tf.x, tf.y), tf.z));
-}
 
 /* The refined depth: solve again from the hit, Q(p0 + tau v) = 0 with p0 = e + t v, and take
  * the root nearest 0 (Q(p0) is tiny there: as accurate as the splats' near-sample solve). */
@@ -131,7 +161,7 @@ inline real refine_depth(quadric q, real3 e, real3 v, real t)
 }
 
 __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
-                       real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
+                       __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
                        PRIMITIVE_TABLE, __global const view_rec *view, PIXEL_OUTPUTS)
 {
     int i, j;
@@ -141,7 +171,8 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     real3 e = view_eye(view), v = view_ray(view, i, j);
     real c = dot(v, vload3(0, view->forward));
     real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
-    real2 seg = ray_box(e, v, blo - slack, bhi + slack);
+    real3 inv = 1 / v;
+    real2 seg = ray_box_inv(e, inv, blo - slack, bhi + slack);
     seg.x = fmax(seg.x, (real)0);
     ray_roots rr;
     real best = INFINITY;
@@ -154,7 +185,7 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         if (s == 0) ta = seg.x; /* the end slabs reach the eye or the bound's entry and exit */
         if (s == SLABS - 1) tb = seg.y;
         if (ta > tb) continue;
-        int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, e, v, ta, tb, &rr, &best);
+        int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, v, inv, slack, ta, tb, &rr, &best);
         if (m >= 0) best_q = qlist[sl.z + m];
     }
     pixel_out out = PIXEL_OUT;

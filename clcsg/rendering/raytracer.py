@@ -27,6 +27,7 @@ from ..cl.records import TAPE_OP_DTYPE, SceneBuffers, pack
 from ..errors import UsageError
 from .camera import Camera
 from .image import Image
+from .ray_culling import cull_boxes
 from .shading import Shading, pack_view
 from .supersample import supersample
 
@@ -165,8 +166,10 @@ def local_quadrics(n: int) -> int:
     return max(64, 1 << max(0, int(n) - 1).bit_length())
 
 
-def trace(context, tape, camera, shading: Shading | None = None, precision="auto", origin=None) -> Image:
-    """Ray trace ``tape`` from ``camera`` on ``context``."""
+def trace(context, tape, camera, shading: Shading | None = None, precision="auto", origin=None,
+          cull: bool = True) -> Image:
+    """Ray trace ``tape`` from ``camera`` on ``context`` (``cull``: skip the quadrics whose culling
+    box a ray misses, :mod:`~clcsg.rendering.ray_culling`; the same image either way)."""
     import pyopencl as cl
 
     t_start = time.perf_counter()
@@ -182,13 +185,14 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     rgba = np.empty((H, W, 4), dtype=np.uint8)
     outs = [device_buffer(context, a.nbytes, "image", False, "render a smaller image") for a in (depth, ids, prims, rgba)]
     bound = _bound_args(tape, packed, real)
+    cull_buf = upload(context, cull_boxes(packed, cull))
     t_build = time.perf_counter()
     bufs, nq_max, prune_events, prune_stats = prune_tiles(context, scene, view_buf, bound, W, H, real)
     defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "LOCAL_QUADRICS": local_quadrics(nq_max)}
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()
     arena, qlist, tile_z, slabs = bufs
-    ev = kernel(prg, "raytrace")(q, *pixel_range(W, H), scene.quadrics, arena, qlist, *bound, tile_z, slabs,
+    ev = kernel(prg, "raytrace")(q, *pixel_range(W, H), scene.quadrics, arena, qlist, cull_buf, *bound, tile_z, slabs,
                                  *scene.colour_args(), view_buf, *outs)
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev])
@@ -205,6 +209,7 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
         "quadrics": tape.n_quadrics,
         "tape_instructions": int(len(packed.tape)),
         "slabs": SLABS,
+        "culling": bool(cull),
         **prune_stats,
         "covered_pixels": int((ids >= 0).sum()),
         "prune_s": prune_s,
