@@ -23,13 +23,19 @@
  * instance (an OR of the complements) stays TRUE the same way.  So where the ray's stretch in
  * the slab misses B_q, every primitive on q has the value it has with q's sign taken as s_q
  * all along the stretch: q is not solved (no roots, constant sign s_q), and every membership
- * and substitution test on the stretch is unchanged.  The per-ray work is a box test per
- * listed quadric, a solve per quadric whose box the ray meets, and the root walk over those.
+ * and substitution test on the stretch is unchanged.  Then the slab tape is pruned over the
+ * stretch (ray_prune: a quadric without a root in it keeps one sign on it); a tape that
+ * becomes constant has no surface there, else the roots are tested on the pruned rows.  The
+ * per-ray work is a box test per listed quadric, a solve per quadric whose box the ray meets,
+ * one pass over the slab tape, and per visited root a pass over the rows the stretch leaves.
  *
  * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
  */
 #include "tiles.h"
 #include "pixel.h"
+
+/* rows of a slab tape pruned over one ray's stretch (longer ones: the slab's tape is used) */
+#define RAY_ROWS 64
 
 #ifndef LOCAL_QUADRICS
 #error "LOCAL_QUADRICS is set by the driver, clcsg/rendering/raytracer.py"
@@ -73,21 +79,100 @@ inline int ray_sign(const ray_roots *rr, int m, real t)
 }
 
 /* Membership bits of a slab tape (leaves renumbered: a = listed quadric) at ray depth t with
- * listed quadric self substituted (tape_member's convention). */
+ * listed quadric self substituted (tape_member's convention); for a tape in global memory
+ * (slab_member) or in the ray's own rows (ray_member). */
+#define SLAB_MEMBER_BODY                                                     \
+    uchar r[TAPE_REGS];                                                     \
+    for (int k = 0; k < n; ++k) {                                           \
+        tape_op o = t[k];                                                   \
+        if (o.op == OP_LEAF) {                                              \
+            if (o.a == self)                                                \
+                r[o.out] = o.b > 0 ? 1 : 2;                                 \
+            else                                                            \
+                r[o.out] = o.b * ray_sign(rr, o.a, tt) <= 0 ? 3 : 0;        \
+        } else                                                              \
+            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, 3, 0);                \
+    }                                                                       \
+    return r[t[n - 1].out];
+
 inline uint slab_member(__global const tape_op *t, int n, const ray_roots *rr, real tt, int self)
 {
-    uchar r[TAPE_REGS];
+    SLAB_MEMBER_BODY
+}
+
+inline uint ray_member(const tape_op *t, int n, const ray_roots *rr, real tt, int self) { SLAB_MEMBER_BODY }
+
+/* The slab tape t (n rows) pruned over the ray's stretch [a, b]: a listed quadric without a
+ * root in [a, b] has one sign all along it, so its leaves become constants and are folded
+ * (tape.h's pruning rules, then the rows whose result is not read are dropped).  Writes the
+ * rows to out (at most RAY_ROWS) and returns their count and first row; returns 0 if the
+ * stretch has no surface (the tape is one constant on it) and -1 if the rows do not fit. */
+inline int ray_prune(__global const tape_op *t, int n, const ray_roots *rr, real a, real b, tape_op *out,
+                     int *first)
+{
+    uchar st[TAPE_REGS]; /* ST_F, ST_T or ST_LIVE */
+    int m = 0, last = -1;
     for (int k = 0; k < n; ++k) {
         tape_op o = t[k];
+        tape_op keep = o;
+        bool kept = false;
         if (o.op == OP_LEAF) {
-            if (o.a == self)
-                r[o.out] = o.b > 0 ? 1 : 2;
-            else
-                r[o.out] = o.b * ray_sign(rr, o.a, tt) <= 0 ? 3 : 0;
-        } else
-            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, 3, 0);
+            real r1 = rr->r1[o.a], r2 = rr->r2[o.a];
+            if ((r1 >= a && r1 <= b) || (r2 >= a && r2 <= b)) {
+                st[o.out] = ST_LIVE;
+                kept = true;
+            } else
+                st[o.out] = o.b * ray_sign(rr, o.a, a) <= 0 ? ST_T : ST_F;
+        } else if (o.op == OP_AND || o.op == OP_OR) {
+            int sa = st[o.a], sb = st[o.b];
+            int absorb = o.op == OP_AND ? ST_F : ST_T, neutral = o.op == OP_AND ? ST_T : ST_F;
+            if (sa == absorb || sb == absorb) {
+                st[o.out] = absorb;
+            } else if (sa == neutral || sb == neutral) {
+                int src = sa == neutral ? o.b : o.a;
+                st[o.out] = st[src];
+                kept = st[src] == ST_LIVE && src != o.out;
+                keep = (tape_op){OP_COPY, o.out, src, 0};
+            } else {
+                st[o.out] = ST_LIVE;
+                kept = true;
+            }
+        } else if (o.op == OP_COPY) {
+            st[o.out] = st[o.a];
+            kept = st[o.a] == ST_LIVE && o.a != o.out;
+        } else {
+            st[o.out] = o.a ? ST_T : ST_F;
+        }
+        if (kept) {
+            if (m == RAY_ROWS) return -1;
+            out[m++] = keep;
+            last = o.out;
+        }
     }
-    return r[t[n - 1].out];
+    int root = t[n - 1].out;
+    if (st[root] != ST_LIVE) return 0;
+    if (last != root) {
+        if (m == RAY_ROWS) return -1;
+        out[m++] = (tape_op){OP_COPY, root, root, 0};
+    }
+    uchar needed[TAPE_REGS];
+    for (int r = 0; r < TAPE_REGS; ++r) needed[r] = 0;
+    needed[root] = 1;
+    int w = m;
+    for (int k = m - 1; k >= 0; --k) {
+        tape_op o = out[k];
+        if (!needed[o.out]) continue;
+        if (!(o.op == OP_COPY && o.a == o.out)) needed[o.out] = 0;
+        if (o.op == OP_AND || o.op == OP_OR) {
+            needed[o.a] = 1;
+            needed[o.b] = 1;
+        } else if (o.op == OP_COPY) {
+            needed[o.a] = 1;
+        }
+        out[--w] = o;
+    }
+    *first = w;
+    return m - w;
 }
 
 /* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses), inv = 1 / v (+-inf
@@ -121,6 +206,11 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
         rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
         if (rr->r1[m] <= tb) rr->solved[ns++] = m;
     }
+    if (ns == 0) return -1;
+    /* the tape pruned over the stretch (none: the slab's own) */
+    tape_op rows[RAY_ROWS];
+    int r0 = 0, nrows = ray_prune(t, n, rr, ta, tb, rows, &r0);
+    if (nrows == 0) return -1;
     real t_cur = ta;
     bool first = ta > 0; /* a root exactly at ta is visited (not one at the eye) */
     for (;;) {
@@ -135,7 +225,7 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
         for (int k = 0; k < ns; ++k) {
             int m = rr->solved[k];
             if (rr->r1[m] != t_next && rr->r2[m] != t_next) continue;
-            uint bits = slab_member(t, n, rr, t_next, m);
+            uint bits = nrows > 0 ? ray_member(rows + r0, nrows, rr, t_next, m) : slab_member(t, n, rr, t_next, m);
             if (bits == 1 || bits == 2) {
                 *depth = t_next;
                 return m;
