@@ -107,6 +107,17 @@ def _bound_args(tape, packed, real):
     return (np.array([(lo[0], lo[1], lo[2], 0)], dtype=real3)[0], np.array([(hi[0], hi[1], hi[2], 0)], dtype=real3)[0])
 
 
+def _rows_buffer(context, n: int, dtype, what: str):
+    """An arena of ``n`` rows of ``dtype``: on Oclgrind zeroed from host memory (its
+    uninitialized-value checker loses rows written into a fresh buffer and read back by the
+    same work-item), elsewhere uninitialized (zeroing a large arena only costs time: a grazing
+    view of a 2,500-hole plate has 0.9 GiB of tile tapes)."""
+    nbytes = max(int(n), 1) * np.dtype(dtype).itemsize
+    if context.info.is_oclgrind:
+        return upload(context, np.zeros(max(int(n), 1), dtype=dtype), writable=True, what=what)
+    return device_buffer(context, nbytes, what, hint="render a smaller image")
+
+
 def prune_tiles(context, scene, view_buf, bound, width, height, real):
     """The tile tapes, then the depth-slab tapes of every tile (tiles.cl).  Returns the buffers
     of the ray kernel (slab arena, quadric lists, tile depth ranges, slab records), the largest
@@ -126,9 +137,7 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     counters = np.zeros(6, dtype=np.uint32)
 
     def run_tiles(caps):
-        # from host memory: Oclgrind's uninitialized-value checker loses rows written into a
-        # fresh buffer and read back by the same work-item
-        arena = upload(context, np.zeros(caps[0], dtype=TAPE_OP_DTYPE), writable=True)
+        arena = _rows_buffer(context, caps[0], TAPE_OP_DTYPE, "tile tapes")
         cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
         rng = ((-(-ntx // 4) * 4, -(-nty // 4) * 4), (4, 4))  # a fixed group shape, as PIXEL_GROUP
         ev = kernel(prg, "prune_tiles")(q, *rng, scene.quadrics, scene.tape, np.int32(n), view_buf, *bound, arena,
@@ -141,11 +150,11 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     stats = {"tile_tape_mean": tile_rows / nt, "tile_leaves_max": int(counters[3]),
              "prune_evaluations": int(counters[1])}
     work = -(-nt // 64) * 64
-    scratch = upload(context, np.zeros(tile_rows + nt + 1, dtype=TAPE_OP_DTYPE), writable=True)
+    scratch = _rows_buffer(context, tile_rows + nt + 1, TAPE_OP_DTYPE, "slab scratch")
 
     def run_slabs(caps):
-        arena = upload(context, np.zeros(caps[0], dtype=TAPE_OP_DTYPE), writable=True)
-        qlist = upload(context, np.zeros(caps[1], dtype=np.int32), writable=True)
+        arena = _rows_buffer(context, caps[0], TAPE_OP_DTYPE, "slab tapes")
+        qlist = _rows_buffer(context, caps[1], np.int32, "slab quadric lists")
         cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
         ev = kernel(prg, "prune_slabs")(q, (work,), (64,), scene.quadrics, tile_arena, tiles, tile_z, view_buf,
                                         *bound, np.int32(nt), scratch, np.uint32(tile_rows + nt + 1), arena,
