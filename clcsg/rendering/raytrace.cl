@@ -36,6 +36,10 @@
 
 /* rows of a slab tape pruned over one ray's stretch (longer ones: the slab's tape is used) */
 #define RAY_ROWS 64
+/* 0: no per-ray pruning (the driver's comparison run) */
+#ifndef RAY_PRUNE
+#define RAY_PRUNE 1
+#endif
 
 #ifndef LOCAL_QUADRICS
 #error "LOCAL_QUADRICS is set by the driver, clcsg/rendering/raytracer.py"
@@ -209,7 +213,7 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
     if (ns == 0) return -1;
     /* the tape pruned over the stretch (none: the slab's own) */
     tape_op rows[RAY_ROWS];
-    int r0 = 0, nrows = ray_prune(t, n, rr, ta, tb, rows, &r0);
+    int r0 = 0, nrows = RAY_PRUNE ? ray_prune(t, n, rr, ta, tb, rows, &r0) : -1;
     if (nrows == 0) return -1;
     real t_cur = ta;
     bool first = ta > 0; /* a root exactly at ta is visited (not one at the eye) */

@@ -5,11 +5,14 @@ and traces one ray per pixel.  The tape is first pruned per 16 x 16 tile over th
 tile's frustum inside the scene bound, then per depth slab of the tile (:data:`SLABS` equal
 slabs, each pruned from its tile's tape, its leaves renumbered to its own quadric list), so a
 ray meets only the leaves near the stretch it walks.  Per ray and slab, front to back, each
-listed quadric is solved once; its roots classify its sign along the whole ray, and the roots
-in the slab are visited in depth order until one is on the CSG surface (the membership with
-the root's quadric substituted differs between its two sides, the other leaves taken from the
-classification).  Exact from any eye position, inside the solid included; the cost per ray is
-the slab's quadrics plus one tape pass per visited root, not roots x leaves.
+listed quadric whose culling box (:mod:`~clcsg.rendering.ray_culling`) the ray's stretch meets
+is solved once (the others keep one known sign along it); its roots classify its sign along the
+whole ray.  The slab tape is pruned over the stretch (quadrics without a root in it become
+constants), and the roots in the slab are visited in depth order until one is on the CSG
+surface (the membership with the root's quadric substituted differs between its two sides, the
+other leaves taken from the classification).  Exact from any eye position, inside the solid
+included; the cost per ray is a box test per listed quadric, a solve per quadric whose box it
+meets, and one pass over the pruned rows per visited root, not roots x leaves.
 """
 
 from __future__ import annotations
@@ -176,9 +179,10 @@ def local_quadrics(n: int) -> int:
 
 
 def trace(context, tape, camera, shading: Shading | None = None, precision="auto", origin=None,
-          cull: bool = True) -> Image:
-    """Ray trace ``tape`` from ``camera`` on ``context`` (``cull``: skip the quadrics whose culling
-    box a ray misses, :mod:`~clcsg.rendering.ray_culling`; the same image either way)."""
+          accelerate: bool = True) -> Image:
+    """Ray trace ``tape`` from ``camera`` on ``context``.  ``accelerate``: skip the quadrics whose
+    culling box a ray misses (:mod:`~clcsg.rendering.ray_culling`) and prune each slab tape per
+    ray (``raytrace.cl``); False only to measure what they buy (the same image either way)."""
     import pyopencl as cl
 
     t_start = time.perf_counter()
@@ -194,10 +198,11 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     rgba = np.empty((H, W, 4), dtype=np.uint8)
     outs = [device_buffer(context, a.nbytes, "image", False, "render a smaller image") for a in (depth, ids, prims, rgba)]
     bound = _bound_args(tape, packed, real)
-    cull_buf = upload(context, cull_boxes(packed, cull))
+    cull_buf = upload(context, cull_boxes(packed, accelerate))
     t_build = time.perf_counter()
     bufs, nq_max, prune_events, prune_stats = prune_tiles(context, scene, view_buf, bound, W, H, real)
-    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "LOCAL_QUADRICS": local_quadrics(nq_max)}
+    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "LOCAL_QUADRICS": local_quadrics(nq_max),
+               "RAY_PRUNE": int(bool(accelerate))}
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()
     arena, qlist, tile_z, slabs = bufs
@@ -218,7 +223,7 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
         "quadrics": tape.n_quadrics,
         "tape_instructions": int(len(packed.tape)),
         "slabs": SLABS,
-        "culling": bool(cull),
+        "accelerated": bool(accelerate),
         **prune_stats,
         "covered_pixels": int((ids >= 0).sum()),
         "prune_s": prune_s,
