@@ -7,7 +7,8 @@ boxes of the instances that have q as a literal: if all those literals have one 
 then at every point outside B_q each instance has the value it has with K_q's sign taken as
 s_q, and so has the tape (a Boolean function of the instances' values, pruned or not).  A ray
 whose stretch misses B_q needs no solve of q: its sign is s_q all along it.  Quadrics whose
-literals disagree in sign (a face shared by two touching solids) are always solved.
+literals disagree in sign (a face shared by two touching solids) are always solved, and so are
+planes (their solve costs what a box test does).
 
 The instance boxes are :func:`~clcsg.cl.records.instance_boxes` (device coordinates, padded by
 the rounding margin; an empty instance has lo > hi and adds nothing to the hull).
@@ -37,6 +38,8 @@ def cull_boxes(packed, enabled: bool = True) -> np.ndarray:
     smax = np.full(n_q, -2)
     np.minimum.at(smin, q, s)
     np.maximum.at(smax, q, s)
-    sign = np.where(smin == smax, smin, 0)
+    # a plane is solved as fast as its box is tested: never culled
+    plane = ~np.any(packed.local_matrices[:, :3, :3] != 0, axis=(1, 2))
+    sign = np.where((smin == smax) & ~plane, smin, 0)
     out[:, :3], out[:, 3], out[:, 4:7] = lo, sign, hi
     return out

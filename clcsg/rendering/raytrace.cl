@@ -23,11 +23,12 @@
  * instance (an OR of the complements) stays TRUE the same way.  So where the ray's stretch in
  * the slab misses B_q, every primitive on q has the value it has with q's sign taken as s_q
  * all along the stretch: q is not solved (no roots, constant sign s_q), and every membership
- * and substitution test on the stretch is unchanged.  Then the slab tape is pruned over the
- * stretch (ray_prune: a quadric without a root in it keeps one sign on it); a tape that
- * becomes constant has no surface there, else the roots are tested on the pruned rows.  The
- * per-ray work is a box test per listed quadric, a solve per quadric whose box the ray meets,
- * one pass over the slab tape, and per visited root a pass over the rows the stretch leaves.
+ * and substitution test on the stretch is unchanged.  A ray that walks past a few roots
+ * prunes the slab tape over the rest of its stretch (ray_prune: a quadric without a root
+ * there keeps one sign on it); a tape that becomes constant has no surface there, else the
+ * remaining roots are tested on the pruned rows.  The per-ray work is a box test per listed
+ * quadric, a solve per quadric whose box the ray meets, and per visited root a pass over the
+ * slab tape or, past the first few, over the rows the rest of the stretch leaves.
  *
  * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
  */
@@ -40,6 +41,7 @@
 #ifndef RAY_PRUNE
 #define RAY_PRUNE 1
 #endif
+#define RAY_PRUNE_AFTER 2
 
 #ifndef LOCAL_QUADRICS
 #error "LOCAL_QUADRICS is set by the driver, clcsg/rendering/raytracer.py"
@@ -211,13 +213,18 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
         if (rr->r1[m] <= tb) rr->solved[ns++] = m;
     }
     if (ns == 0) return -1;
-    /* the tape pruned over the stretch (none: the slab's own) */
+    /* after RAY_PRUNE_AFTER roots without a hit, the tape pruned over the rest of the stretch
+     * (nrows -1: the slab's own; most rays hit at their first root and never prune) */
     tape_op rows[RAY_ROWS];
-    int r0 = 0, nrows = RAY_PRUNE ? ray_prune(t, n, rr, ta, tb, rows, &r0) : -1;
-    if (nrows == 0) return -1;
+    int r0 = 0, nrows = -1, visited = 0;
     real t_cur = ta;
     bool first = ta > 0; /* a root exactly at ta is visited (not one at the eye) */
     for (;;) {
+        if (RAY_PRUNE && visited == RAY_PRUNE_AFTER) {
+            nrows = ray_prune(t, n, rr, t_cur, tb, rows, &r0);
+            if (nrows == 0) return -1;
+        }
+        ++visited;
         real t_next = INFINITY;
         for (int k = 0; k < ns; ++k) {
             int m = rr->solved[k];
