@@ -168,3 +168,15 @@ def test_render_row_pieces(cl_context):
     rec = render.raytrace_record(t, st)
     assert rec["seconds"] > 0 and rec["tile_tape_mean"] > 0 and rec["prune_s"] >= 0
     assert rec["covered_pixels"] > 0
+
+
+def test_render_many_leaves(cl_context):
+    """The many-leaf part on a tiny image: hundreds of leaves per tile on the plate, the same
+    image with and without the ray tracer's acceleration."""
+    from bench import render
+
+    rows = render.many_leaves(cl_context, 64, 36, 1, quick=True)
+    assert [r["scene"] for r in rows] == ["plate_256_holes_oblique", "sphere_column_inside"]
+    assert rows[0]["after"]["tile_leaves_max"] >= 200
+    for r in rows:
+        assert r["same_image"] and r["after"]["covered_pixels"] > 0 and r["after"]["cpu_seconds"] > 0

@@ -16,10 +16,32 @@
  * point (accurate in float as well).  Outputs depth (+inf on background), quadric and
  * primitive ids and RGBA8 shaded with shade.h, in the hit primitive's colour.
  *
+ * Culling (ray_culling.py): quadric q has a box B_q (the hull of the boxes of the primitive
+ * instances that have q as a literal) and, where all those literals have one sign s_q, that
+ * sign.  A primitive is the AND of its literals, so outside its box it is FALSE, and it stays
+ * FALSE with its literal on q replaced by FALSE, i.e. with K_q taken as s_q; a negated
+ * instance (an OR of the complements) stays TRUE the same way.  So where the ray's stretch in
+ * the slab misses B_q, every primitive on q has the value it has with q's sign taken as s_q
+ * all along the stretch: q is not solved (no roots, constant sign s_q), and every membership
+ * and substitution test on the stretch is unchanged.  A ray that walks past a few roots
+ * prunes the slab tape over the rest of its stretch (ray_prune: a quadric without a root
+ * there keeps one sign on it); a tape that becomes constant has no surface there, else the
+ * remaining roots are tested on the pruned rows.  The per-ray work is a box test per listed
+ * quadric, a solve per quadric whose box the ray meets, and per visited root a pass over the
+ * slab tape or, past the first few, over the rows the rest of the stretch leaves.
+ *
  * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
  */
 #include "tiles.h"
 #include "pixel.h"
+
+/* rows of a slab tape pruned over one ray's stretch (longer ones: the slab's tape is used) */
+#define RAY_ROWS 64
+/* 0: no per-ray pruning (the driver's comparison run) */
+#ifndef RAY_PRUNE
+#define RAY_PRUNE 1
+#endif
+#define RAY_PRUNE_AFTER 2
 
 #ifndef LOCAL_QUADRICS
 #error "LOCAL_QUADRICS is set by the driver, clcsg/rendering/raytracer.py"
@@ -30,6 +52,8 @@
 typedef struct {
     real r1[LOCAL_QUADRICS], r2[LOCAL_QUADRICS];
     uchar kind[LOCAL_QUADRICS];
+    /* the listed quadrics solved against the ray with a root before the stretch's end */
+    short solved[LOCAL_QUADRICS];
 } ray_roots;
 
 inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
@@ -61,43 +85,158 @@ inline int ray_sign(const ray_roots *rr, int m, real t)
 }
 
 /* Membership bits of a slab tape (leaves renumbered: a = listed quadric) at ray depth t with
- * listed quadric self substituted (tape_member's convention). */
+ * listed quadric self substituted (tape_member's convention); for a tape in global memory
+ * (slab_member) or in the ray's own rows (ray_member). */
+#define SLAB_MEMBER_BODY                                                     \
+    uchar r[TAPE_REGS];                                                     \
+    for (int k = 0; k < n; ++k) {                                           \
+        tape_op o = t[k];                                                   \
+        if (o.op == OP_LEAF) {                                              \
+            if (o.a == self)                                                \
+                r[o.out] = o.b > 0 ? 1 : 2;                                 \
+            else                                                            \
+                r[o.out] = o.b * ray_sign(rr, o.a, tt) <= 0 ? 3 : 0;        \
+        } else                                                              \
+            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, 3, 0);                \
+    }                                                                       \
+    return r[t[n - 1].out];
+
 inline uint slab_member(__global const tape_op *t, int n, const ray_roots *rr, real tt, int self)
 {
-    uchar r[TAPE_REGS];
+    SLAB_MEMBER_BODY
+}
+
+inline uint ray_member(const tape_op *t, int n, const ray_roots *rr, real tt, int self) { SLAB_MEMBER_BODY }
+
+/* The slab tape t (n rows) pruned over the ray's stretch [a, b]: a listed quadric without a
+ * root in [a, b] has one sign all along it, so its leaves become constants and are folded
+ * (tape.h's pruning rules, then the rows whose result is not read are dropped).  Writes the
+ * rows to out (at most RAY_ROWS) and returns their count and first row; returns 0 if the
+ * stretch has no surface (the tape is one constant on it) and -1 if the rows do not fit. */
+inline int ray_prune(__global const tape_op *t, int n, const ray_roots *rr, real a, real b, tape_op *out,
+                     int *first)
+{
+    uchar st[TAPE_REGS]; /* ST_F, ST_T or ST_LIVE */
+    int m = 0, last = -1;
     for (int k = 0; k < n; ++k) {
         tape_op o = t[k];
+        tape_op keep = o;
+        bool kept = false;
         if (o.op == OP_LEAF) {
-            if (o.a == self)
-                r[o.out] = o.b > 0 ? 1 : 2;
-            else
-                r[o.out] = o.b * ray_sign(rr, o.a, tt) <= 0 ? 3 : 0;
-        } else
-            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, 3, 0);
+            real r1 = rr->r1[o.a], r2 = rr->r2[o.a];
+            if ((r1 >= a && r1 <= b) || (r2 >= a && r2 <= b)) {
+                st[o.out] = ST_LIVE;
+                kept = true;
+            } else
+                st[o.out] = o.b * ray_sign(rr, o.a, a) <= 0 ? ST_T : ST_F;
+        } else if (o.op == OP_AND || o.op == OP_OR) {
+            int sa = st[o.a], sb = st[o.b];
+            int absorb = o.op == OP_AND ? ST_F : ST_T, neutral = o.op == OP_AND ? ST_T : ST_F;
+            if (sa == absorb || sb == absorb) {
+                st[o.out] = absorb;
+            } else if (sa == neutral || sb == neutral) {
+                int src = sa == neutral ? o.b : o.a;
+                st[o.out] = st[src];
+                kept = st[src] == ST_LIVE && src != o.out;
+                keep = (tape_op){OP_COPY, o.out, src, 0};
+            } else {
+                st[o.out] = ST_LIVE;
+                kept = true;
+            }
+        } else if (o.op == OP_COPY) {
+            st[o.out] = st[o.a];
+            kept = st[o.a] == ST_LIVE && o.a != o.out;
+        } else {
+            st[o.out] = o.a ? ST_T : ST_F;
+        }
+        if (kept) {
+            if (m == RAY_ROWS) return -1;
+            out[m++] = keep;
+            last = o.out;
+        }
     }
-    return r[t[n - 1].out];
+    int root = t[n - 1].out;
+    if (st[root] != ST_LIVE) return 0;
+    if (last != root) {
+        if (m == RAY_ROWS) return -1;
+        out[m++] = (tape_op){OP_COPY, root, root, 0};
+    }
+    uchar needed[TAPE_REGS];
+    for (int r = 0; r < TAPE_REGS; ++r) needed[r] = 0;
+    needed[root] = 1;
+    int w = m;
+    for (int k = m - 1; k >= 0; --k) {
+        tape_op o = out[k];
+        if (!needed[o.out]) continue;
+        if (!(o.op == OP_COPY && o.a == o.out)) needed[o.out] = 0;
+        if (o.op == OP_AND || o.op == OP_OR) {
+            needed[o.a] = 1;
+            needed[o.b] = 1;
+        } else if (o.op == OP_COPY) {
+            needed[o.a] = 1;
+        }
+        out[--w] = o;
+    }
+    *first = w;
+    return m - w;
 }
+
+/* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses), inv = 1 / v (+-inf
+ * for zero components: the slab test still works) */
+inline real2 ray_box_inv(real3 e, real3 inv, real3 lo, real3 hi)
+{
+    real3 a = (lo - e) * inv, b = (hi - e) * inv;
+    real3 tn = fmin(a, b), tf = fmax(a, b);
+    return (real2)(fmax(fmax(tn.x, tn.y), tn.z), fmin(fmin(tf.x, tf.y), tf.z));
+}
+
 
 /* The first root in [ta, tb] on the CSG surface of slab tape t (quadrics ql, nq of them):
  * returns the listed index of its quadric (-1: none) and writes its depth. */
 inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, int n, __global const int *ql,
-                    int nq, real3 e, real3 v, real ta, real tb, ray_roots *rr, real *depth)
+                    int nq, __global const real *cull, real3 e, real3 v, real3 inv, real slack, real ta, real tb,
+                    ray_roots *rr, real *depth)
 {
-    for (int m = 0; m < nq; ++m)
-        rr->kind[m] = ray_classify(quadric_load(qs, ql[m]), e, v, &rr->r1[m], &rr->r2[m]);
+    int ns = 0; /* the solved quadrics, listed first in rr->solved */
+    for (int m = 0; m < nq; ++m) {
+        int q = ql[m];
+        real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
+        if (lo.w != 0) {
+            real2 tt = ray_box_inv(e, inv, lo.xyz - slack, hi.xyz + slack);
+            if (!(fmax(tt.x, ta) <= fmin(tt.y, tb))) {
+                rr->r1[m] = rr->r2[m] = INFINITY;
+                rr->kind[m] = lo.w < 0 ? 4 : 0;
+                continue;
+            }
+        }
+        rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
+        if (rr->r1[m] <= tb) rr->solved[ns++] = m;
+    }
+    if (ns == 0) return -1;
+    /* after RAY_PRUNE_AFTER roots without a hit, the tape pruned over the rest of the stretch
+     * (nrows -1: the slab's own; most rays hit at their first root and never prune) */
+    tape_op rows[RAY_ROWS];
+    int r0 = 0, nrows = -1, visited = 0;
     real t_cur = ta;
     bool first = ta > 0; /* a root exactly at ta is visited (not one at the eye) */
     for (;;) {
+        if (RAY_PRUNE && visited == RAY_PRUNE_AFTER) {
+            nrows = ray_prune(t, n, rr, t_cur, tb, rows, &r0);
+            if (nrows == 0) return -1;
+        }
+        ++visited;
         real t_next = INFINITY;
-        for (int m = 0; m < nq; ++m) {
+        for (int k = 0; k < ns; ++k) {
+            int m = rr->solved[k];
             real a = rr->r1[m], b = rr->r2[m];
             if ((a > t_cur || (first && a == t_cur)) && a < t_next) t_next = a;
             if ((b > t_cur || (first && b == t_cur)) && b < t_next) t_next = b;
         }
         if (!(t_next <= tb)) return -1;
-        for (int m = 0; m < nq; ++m) {
+        for (int k = 0; k < ns; ++k) {
+            int m = rr->solved[k];
             if (rr->r1[m] != t_next && rr->r2[m] != t_next) continue;
-            uint bits = slab_member(t, n, rr, t_next, m);
+            uint bits = nrows > 0 ? ray_member(rows + r0, nrows, rr, t_next, m) : slab_member(t, n, rr, t_next, m);
             if (bits == 1 || bits == 2) {
                 *depth = t_next;
                 return m;
@@ -108,14 +247,6 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
     }
 }
 
-/* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses) */
-inline real2 ray_box(real3 e, real3 v, real3 lo, real3 hi)
-{
-    real3 inv = 1 / v; /* +-inf for zero components: the slab test still works */
-    real3 a = (lo - e) * inv, b = (hi - e) * inv;
-    real3 tn = fmin(a, b), tf = fmax(a, b);
-    return (real2)(fmax(fmax(tn.x, tn.y), tn.z), fmin(fmin(tf.x, tf.y), tf.z));
-}
 
 /* The refined depth: solve again from the hit, Q(p0 + tau v) = 0 with p0 = e + t v, and take
  * the root nearest 0 (Q(p0) is tiny there: as accurate as the splats' near-sample solve). */
@@ -131,7 +262,7 @@ inline real refine_depth(quadric q, real3 e, real3 v, real t)
 }
 
 __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
-                       real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
+                       __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
                        PRIMITIVE_TABLE, __global const view_rec *view, PIXEL_OUTPUTS)
 {
     int i, j;
@@ -141,7 +272,8 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     real3 e = view_eye(view), v = view_ray(view, i, j);
     real c = dot(v, vload3(0, view->forward));
     real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
-    real2 seg = ray_box(e, v, blo - slack, bhi + slack);
+    real3 inv = 1 / v;
+    real2 seg = ray_box_inv(e, inv, blo - slack, bhi + slack);
     seg.x = fmax(seg.x, (real)0);
     ray_roots rr;
     real best = INFINITY;
@@ -154,7 +286,7 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         if (s == 0) ta = seg.x; /* the end slabs reach the eye or the bound's entry and exit */
         if (s == SLABS - 1) tb = seg.y;
         if (ta > tb) continue;
-        int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, e, v, ta, tb, &rr, &best);
+        int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, v, inv, slack, ta, tb, &rr, &best);
         if (m >= 0) best_q = qlist[sl.z + m];
     }
     pixel_out out = PIXEL_OUT;
