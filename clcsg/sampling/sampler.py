@@ -80,7 +80,7 @@ import numpy as np
 
 from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
-from ..cl.programs import build, kernel as program_kernel
+from ..cl.programs import build, kernel as program_kernel, launch
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
@@ -599,7 +599,7 @@ class _Subdivision:
             # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
             # checker does not see host writes into an existing buffer)
             counters_buf = upload(self.ctx, counters, writable=True)
-            kernel(self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
+            launch(kernel, self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
                    self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
                    self.cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
                    self.arena_in, self.arena_out, np.uint32(self.cap_out), counters_buf,
@@ -774,9 +774,9 @@ class _Finisher:
         self.grown += 1
 
     def _launch(self, samples, first, n, arena):
-        self.kernel(self.ctx.queue, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames, self.tasks,
-                    samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
-                    self.counters, *self.scene.colour_args(), *(self.out[name] for name, _, _ in _FINISH_OUTPUTS))
+        launch(self.kernel, self.ctx.queue, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames,
+               self.tasks, samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
+               self.counters, *self.scene.colour_args(), *(self.out[name] for name, _, _ in _FINISH_OUTPUTS))
 
     def run(self, samples, first, n, arena, tape_max, cap_samples):
         """Finish raw samples [first, first + n) whose cells' tapes (at most ``tape_max`` rows)
