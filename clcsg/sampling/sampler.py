@@ -381,7 +381,7 @@ def sample(
     est = _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, max_samples, max_memory)
     t1 = time.perf_counter()
     packed, frames, frames_rec = _packed(tape, real)
-    tasks, roots, root_rows = root_tasks(tape, packed, frames, radius)
+    tasks, roots, root_rows = _root_tasks(tape, packed, frames, radius)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
              "estimated_samples": est.samples,
@@ -421,6 +421,26 @@ def _packed(tape, real):
         frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
         cache[key] = (packed, frames, frame_records(frames, real))
     return cache[key]
+
+
+#: radii whose root tasks are kept per tape and precision
+_ROOT_TASKS_KEPT = 4
+
+
+def _root_tasks(tape, packed, frames, radius):
+    """:func:`root_tasks`, kept per tape, precision and radius for the last few radii (a
+    viewer or a benchmark samples one scene at one radius again and again; the tasks, their
+    root cells and root tapes depend on nothing else).  Copies are returned: the driver
+    uploads them and must not see a caller's edits."""
+    cache = tape.__dict__.setdefault("_sampler_roots", {})
+    key = (np.dtype(packed.real).str, float(radius))
+    hit = cache.get(key)
+    if hit is None:
+        hit = root_tasks(tape, packed, frames, radius)
+        if len(cache) >= _ROOT_TASKS_KEPT:
+            cache.pop(next(iter(cache)))
+        cache[key] = hit
+    return tuple(a.copy() for a in hit)
 
 
 def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
