@@ -333,28 +333,55 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     return OUT_SPLIT;
 }
 
-__kernel void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
-                       __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
-                       __global cell_rec *cells_out, uint cap_cells,
-                       __global raw_sample_rec *samples, uint cap_samples,
-                       __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
-                       __global volatile uint *counters, real radius, real floor_size)
+#ifndef WORK_GROUP
+#error "WORK_GROUP: the work-group size comes from the driver (sampler.py)"
+#endif
+
+/* the per-cell statistics summed over a work-group before one atomic per counter (an atomic
+ * per cell and counter contends between the compute units) */
+#define WG_SUMS 11
+constant int WG_SLOT[WG_SUMS] = {SC_DISCARDED, SC_FILLED, SC_SINGLE, SC_SPLIT, SC_UNRESOLVED, SC_PRUNED_DECIDED,
+                                 SC_DISTANCE_QUERIES, SC_LEAF_DISTANCES, SC_PRUNE_EVALUATIONS, SC_TAPES_WRITTEN,
+                                 SC_TAPE_ROWS};
+
+__kernel __attribute__((reqd_work_group_size(WORK_GROUP, 1, 1)))
+void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
+              __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
+              __global cell_rec *cells_out, uint cap_cells,
+              __global raw_sample_rec *samples, uint cap_samples,
+              __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
+              __global volatile uint *counters, real radius, real floor_size)
 {
-    int gid = get_global_id(0);
-    if (gid >= n_cells) return;
-    cell_work w = {0, 0, 0, 0};
-    int out = classify_cell(cells_in[gid], qs, frames, tasks, cells_out, cap_cells, samples, cap_samples, arena_in,
-                            arena_out, cap_arena, counters, radius, floor_size, &w);
-    int slot = out == OUT_DISCARDED || out == OUT_DECIDED_DISCARD ? SC_DISCARDED
-             : out == OUT_FILLED || out == OUT_DECIDED_FILL ? SC_FILLED
-             : out == OUT_SINGLE ? SC_SINGLE
-             : out == OUT_SPLIT ? SC_SPLIT : SC_UNRESOLVED;
-    atomic_inc(&counters[slot]);
-    if (out == OUT_DECIDED_DISCARD || out == OUT_DECIDED_FILL) atomic_inc(&counters[SC_PRUNED_DECIDED]);
-    if (w.queries) atomic_add(&counters[SC_DISTANCE_QUERIES], w.queries);
-    if (w.leaves) atomic_add(&counters[SC_LEAF_DISTANCES], w.leaves);
-    if (w.evals) atomic_add(&counters[SC_PRUNE_EVALUATIONS], w.evals);
-    if (w.tapes_written) atomic_inc(&counters[SC_TAPES_WRITTEN]);
-    atomic_add(&counters[SC_TAPE_ROWS], (uint)cells_in[gid].tape_count);
-    atomic_max(&counters[SC_TAPE_MAX], (uint)cells_in[gid].tape_count);
+    __local uint sums[WG_SUMS][WORK_GROUP];
+    __local uint tape_max[WORK_GROUP];
+    int gid = get_global_id(0), lid = get_local_id(0);
+    for (int k = 0; k < WG_SUMS; ++k) sums[k][lid] = 0;
+    tape_max[lid] = 0;
+    if (gid < n_cells) {
+        cell_work w = {0, 0, 0, 0};
+        cell_rec c = cells_in[gid];
+        int out = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, samples, cap_samples, arena_in,
+                                arena_out, cap_arena, counters, radius, floor_size, &w);
+        int k = out == OUT_DISCARDED || out == OUT_DECIDED_DISCARD ? 0
+              : out == OUT_FILLED || out == OUT_DECIDED_FILL ? 1
+              : out == OUT_SINGLE ? 2 : out == OUT_SPLIT ? 3 : 4;
+        sums[k][lid] = 1;
+        sums[5][lid] = out == OUT_DECIDED_DISCARD || out == OUT_DECIDED_FILL;
+        sums[6][lid] = w.queries;
+        sums[7][lid] = w.leaves;
+        sums[8][lid] = w.evals;
+        sums[9][lid] = w.tapes_written;
+        sums[10][lid] = (uint)c.tape_count;
+        tape_max[lid] = (uint)c.tape_count;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (lid < WG_SUMS) {
+        uint t = 0;
+        for (int m = 0; m < WORK_GROUP; ++m) t += sums[lid][m];
+        if (t) atomic_add(&counters[WG_SLOT[lid]], t);
+    } else if (lid == WG_SUMS) {
+        uint t = 0;
+        for (int m = 0; m < WORK_GROUP; ++m) t = max(t, tape_max[m]);
+        atomic_max(&counters[SC_TAPE_MAX], t);
+    }
 }

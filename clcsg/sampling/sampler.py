@@ -95,7 +95,7 @@ from ..progress import for_option
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
-WORK_GROUP = 64
+WORK_GROUP = 64  # > the 12 statistics classify sums per work-group (sampler.cl)
 
 #: counters summed over levels into the stats (the others are per-level positions)
 _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
@@ -446,7 +446,8 @@ def _root_tasks(tape, packed, frames, radius):
 def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
                progress, max_levels, root_rows=None):
     """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
-    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT}
+    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT,
+               "WORK_GROUP": WORK_GROUP}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
     scene_buf = SceneBuffers(ctx, packed)
