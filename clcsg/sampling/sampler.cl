@@ -30,6 +30,9 @@
 #ifndef SPLIT_AT
 #error "SPLIT_AT: the split fraction comes from the driver (sampler.py)"
 #endif
+#ifndef QUAD_SPLIT_DIAG
+#error "QUAD_SPLIT_DIAG: from the driver (sampler.py)"
+#endif
 
 typedef struct {
     uint queries, leaves, evals, tapes_written;
@@ -233,17 +236,22 @@ inline real query_at(const cell_geom *g, real x, real y, __global const tape_op 
     return query(tape, n, qs, q, plane_point(&g->pf, x, y, h), w);
 }
 
-/* Split along the longest edge.  The children's tape is this tape pruned over the patch grown
- * by the radius (so it stays valid over every splat ball their samples get), counted first and
- * written with exactly that many rows into arena_out (the write replays the count's leaf
- * states).  The two new corners, shared by both
- * children, are evaluated here once with the parent's tape (valid over the whole patch). */
+/* Split along the longest edge, or along both edges (four children) while the cell is
+ * roughly square and large against the radius (QUAD_SPLIT_DIAG radii): such a cell's children
+ * would be split across the other edge at the next level anyway, and a level costs a launch
+ * and a counter read whatever its size.  The children's tape is this tape pruned over the
+ * patch grown by the radius (so it stays valid over every splat ball their samples get),
+ * counted first and written with exactly that many rows into arena_out (the write replays the
+ * count's leaf states).  The new corners, shared by the children, are evaluated here once
+ * with the parent's tape (valid over the whole patch). */
 inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
                        __global const quadric_rec *qs, int q, real radius, __global cell_rec *cells_out,
                        uint cap_cells, __global tape_op *arena_out, uint cap_arena,
                        __global volatile uint *counters, cell_work *w)
 {
-    uint slot = atomic_add(&counters[SC_CELLS], 2u);
+    bool quad = g->diag > QUAD_SPLIT_DIAG * radius && fmin(g->wx, g->wy) >= (real)0.5 * fmax(g->wx, g->wy);
+    uint k = quad ? 4u : 2u;
+    uint slot = atomic_add(&counters[SC_CELLS], k);
     prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
     uchar state;
     int first, count;
@@ -251,14 +259,37 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     memo.mode = 1;
     int rows = tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
     uint base = atomic_add(&counters[SC_ARENA], (uint)rows);
-    if (slot + 1 >= cap_cells || base + (uint)rows > cap_arena) return; /* overflow: the level re-runs */
+    if (slot + k > cap_cells || base + (uint)rows > cap_arena) return; /* overflow: the level re-runs */
     memo.mode = 2;
     tape_prune_write_memo(tape, n, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
     w->tapes_written = 1;
-    cell_rec a = c, b = c;
-    a.level = b.level = c.level + 1;
-    a.tape_first = b.tape_first = (int)base + first;
-    a.tape_count = b.tape_count = count;
+    cell_rec a = c;
+    a.level = c.level + 1;
+    a.tape_first = (int)base + first;
+    a.tape_count = count;
+    if (quad) {
+        /* corners (x0|xm|x1) x (y0|ym|y1), row-major: e[3 * j + i] */
+        real xs[3] = {c.x0, c.x0 + (real)SPLIT_AT * g->wx, c.x1};
+        real ys[3] = {c.y0, c.y0 + (real)SPLIT_AT * g->wy, c.y1};
+        real e[9];
+        e[0] = d[0]; e[2] = d[1]; e[6] = d[2]; e[8] = d[3];
+        e[1] = query_at(g, xs[1], ys[0], tape, n, qs, q, w);
+        e[3] = query_at(g, xs[0], ys[1], tape, n, qs, q, w);
+        e[4] = query_at(g, xs[1], ys[1], tape, n, qs, q, w);
+        e[5] = query_at(g, xs[2], ys[1], tape, n, qs, q, w);
+        e[7] = query_at(g, xs[1], ys[2], tape, n, qs, q, w);
+        for (int j = 0; j < 2; ++j)
+            for (int i = 0; i < 2; ++i) {
+                cell_rec b = a;
+                b.x0 = xs[i]; b.x1 = xs[i + 1];
+                b.y0 = ys[j]; b.y1 = ys[j + 1];
+                b.d[0] = e[3 * j + i]; b.d[1] = e[3 * j + i + 1];
+                b.d[2] = e[3 * (j + 1) + i]; b.d[3] = e[3 * (j + 1) + i + 1];
+                cells_out[slot + 2 * j + i] = b;
+            }
+        return;
+    }
+    cell_rec b = a;
     real e0, e1;
     if (g->wx >= g->wy) {
         real mid = c.x0 + (real)SPLIT_AT * g->wx;

@@ -43,7 +43,9 @@ each side of it (a curve flat on the cell's scale separates its corners), so onc
 about r a corner with d_q < 0 gives the single sample below; a cell on the discarded side,
 not crossing, is decided by the patch test.  Splits cut the longest edge at ``SPLIT_AT`` of
 it, not the middle: a cell edge lying exactly on a trimming curve (features in the middle of a
-box are common) has corners with d_q = 0 that no bound can separate from the curve.  So the
+box are common) has corners with d_q = 0 that no bound can separate from the curve.  A
+roughly square cell larger than ``QUAD_SPLIT_DIAG`` radii is cut across both edges at once
+(four children: a level saved, the children cover the cell just the same).  So the
 chain ends in (i) a fill, which puts every cell point within r of a sample (the anisotropic
 slope bound in ``fill.h``), (ii) a single sample whose radius covers the patch's whole 3-D
 box, or (iii) the floor: cells whose 3-D box is smaller than the floor and still unresolved
@@ -248,6 +250,11 @@ def _task_regions(t, frames, origin, grow) -> dict:
 SPLIT_AT = 0.4871
 #: the larger child's share of a split
 SPLIT_LARGER = 1 - SPLIT_AT
+#: a roughly square cell whose diagonal exceeds this many radii is split into four, not two
+#: (the build option QUAD_SPLIT_DIAG of sampler.cl)
+QUAD_SPLIT_DIAG = 8.0
+#: most children of a split
+MAX_CHILDREN = 4
 
 
 class _Progress:
@@ -447,7 +454,7 @@ def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, 
                progress, max_levels, root_rows=None):
     """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT,
-               "WORK_GROUP": WORK_GROUP}
+               "QUAD_SPLIT_DIAG": QUAD_SPLIT_DIAG, "WORK_GROUP": WORK_GROUP}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
     scene_buf = SceneBuffers(ctx, packed)
@@ -538,10 +545,10 @@ class _Subdivision:
     right after the level that emitted it (:class:`_Finisher`), while that tape is still there.
 
     Buffers are sized before a level to what it can write at most, so a level runs once: a
-    cell has at most two children, and a split writes one tape of at most its cell's rows + 1
-    (``tape_prune_rows``), so the children's tapes take at most (the rows of the level's
-    cells' tapes) + (its cells) rows; the rows of a level's cells are at most twice the rows
-    the level before wrote (two cells to a tape).  A bound past :data:`ARENA_BUDGET` of the
+    cell has at most :data:`MAX_CHILDREN` children, and a split writes one tape of at most its
+    cell's rows + 1 (``tape_prune_rows``), so the children's tapes take at most (the rows of
+    the level's cells' tapes) + (its cells) rows; the rows of a level's cells are at most
+    MAX_CHILDREN times the rows the level before wrote (the children share their tape).  A bound past :data:`ARENA_BUDGET` of the
     device, and every buffer whose size the caller forces (``capacity``), is left to the
     overflow protocol (run, see the counters past the capacity, grow, run the level again).
     """
@@ -600,8 +607,8 @@ class _Subdivision:
     def _size_for(self, n_in, arena_bound):
         """Grow the output buffers to what a level of ``n_in`` cells can write at most (see
         the class docstring), where that is allowed."""
-        if self.sized["cells"] and 2 * n_in > self.cap_cells:
-            self.cap_cells = max(2 * n_in, self.cap_cells + self.cap_cells // 2)
+        if self.sized["cells"] and MAX_CHILDREN * n_in > self.cap_cells:
+            self.cap_cells = max(MAX_CHILDREN * n_in, self.cap_cells + self.cap_cells // 2)
             self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         rows = self.scene.packed.tape.itemsize
         if self.sized["arena"] and self.cap_out < arena_bound <= self.arena_budget / rows:
@@ -664,7 +671,7 @@ class _Subdivision:
         if self.sized["arena"] and bound <= self.arena_budget / tape.itemsize:
             self.cap_out = max(bound, 16)
         self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
-        self.cap_cells = max(self.cap_cells, 2 * len(self.roots)) if self.sized["cells"] else self.cap_cells
+        self.cap_cells = max(self.cap_cells, MAX_CHILDREN * len(self.roots)) if self.sized["cells"] else self.cap_cells
         self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
         return upload(self.ctx, self.roots, writable=True), bound
@@ -702,7 +709,7 @@ class _Subdivision:
             self.arena_in, self.arena_out = self.arena_out, self.arena_in
             self.cap_in, self.cap_out = self.cap_out, self.cap_in
             n_in = n_cells_out
-            arena_bound = 2 * arena_rows + n_in
+            arena_bound = MAX_CHILDREN * arena_rows + n_in
             level += 1
         self.progress.done()
         self.n_samples = n_samples
