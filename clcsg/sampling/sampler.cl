@@ -239,8 +239,8 @@ inline real query_at(const cell_geom *g, real x, real y, __global const tape_op 
 /* Split along the longest edge, or along both edges (four children) while the cell is
  * roughly square and large against the radius (QUAD_SPLIT_DIAG radii): such a cell's children
  * would be split across the other edge at the next level anyway, and a level costs a launch
- * and a counter read whatever its size.  The children's tape is this tape pruned over the
- * patch grown by the radius (so it stays valid over every splat ball their samples get),
+ * and a counter read whatever its size.  The children's tape (one copy per two children) is
+ * this tape pruned over the patch grown by the radius (so it stays valid over every splat ball their samples get),
  * counted first and written with exactly that many rows into arena_out (the write replays the
  * count's leaf states).  The new corners, shared by the children, are evaluated here once
  * with the parent's tape (valid over the whole patch). */
@@ -258,16 +258,19 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     prune_memo memo; /* the count's leaf states, replayed by the write */
     memo.mode = 1;
     int rows = tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
-    uint base = atomic_add(&counters[SC_ARENA], (uint)rows);
-    if (slot + k > cap_cells || base + (uint)rows > cap_arena) return; /* overflow: the level re-runs */
+    /* four children get the tape twice, a copy per pair: a tape serves at most two cells */
+    uint copies = quad ? 2u : 1u;
+    uint base = atomic_add(&counters[SC_ARENA], copies * (uint)rows);
+    if (slot + k > cap_cells || base + copies * (uint)rows > cap_arena) return; /* overflow: the level re-runs */
     memo.mode = 2;
     tape_prune_write_memo(tape, n, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
-    w->tapes_written = 1;
+    w->tapes_written = copies;
     cell_rec a = c;
     a.level = c.level + 1;
     a.tape_first = (int)base + first;
     a.tape_count = count;
     if (quad) {
+        for (int m = 0; m < count; ++m) arena_out[base + rows + first + m] = arena_out[base + first + m];
         /* corners (x0|xm|x1) x (y0|ym|y1), row-major: e[3 * j + i] */
         real xs[3] = {c.x0, c.x0 + (real)SPLIT_AT * g->wx, c.x1};
         real ys[3] = {c.y0, c.y0 + (real)SPLIT_AT * g->wy, c.y1};
@@ -285,6 +288,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
                 b.y0 = ys[j]; b.y1 = ys[j + 1];
                 b.d[0] = e[3 * j + i]; b.d[1] = e[3 * j + i + 1];
                 b.d[2] = e[3 * (j + 1) + i]; b.d[3] = e[3 * (j + 1) + i + 1];
+                b.tape_first = (int)base + j * rows + first;
                 cells_out[slot + 2 * j + i] = b;
             }
         return;

@@ -545,10 +545,11 @@ class _Subdivision:
     right after the level that emitted it (:class:`_Finisher`), while that tape is still there.
 
     Buffers are sized before a level to what it can write at most, so a level runs once: a
-    cell has at most :data:`MAX_CHILDREN` children, and a split writes one tape of at most its
-    cell's rows + 1 (``tape_prune_rows``), so the children's tapes take at most (the rows of
-    the level's cells' tapes) + (its cells) rows; the rows of a level's cells are at most
-    MAX_CHILDREN times the rows the level before wrote (the children share their tape).  A bound past :data:`ARENA_BUDGET` of the
+    cell has at most :data:`MAX_CHILDREN` children, and a split writes its children's tape
+    (at most its cell's rows + 1, ``tape_prune_rows``) once per two children, so the
+    children's tapes take at most 2 ((the rows of the level's cells' tapes) + (its cells))
+    rows; the rows of a level's cells are at most twice the rows the level before wrote (two
+    cells to a tape).  A bound past :data:`ARENA_BUDGET` of the
     device, and every buffer whose size the caller forces (``capacity``), is left to the
     overflow protocol (run, see the counters past the capacity, grow, run the level again).
     """
@@ -666,7 +667,7 @@ class _Subdivision:
         first = np.zeros(max(n_first, 1), dtype=tape.dtype)
         first[:len(self.root_rows)] = self.root_rows
         self.arena_in, self.cap_in = upload(self.ctx, first, writable=True, what="tape arena"), len(first)
-        bound = int(self.roots["tape_count"].sum()) + len(self.roots)
+        bound = 2 * (int(self.roots["tape_count"].sum()) + len(self.roots))
         self.cap_out = self.cap_arena
         if self.sized["arena"] and bound <= self.arena_budget / tape.itemsize:
             self.cap_out = max(bound, 16)
@@ -709,7 +710,7 @@ class _Subdivision:
             self.arena_in, self.arena_out = self.arena_out, self.arena_in
             self.cap_in, self.cap_out = self.cap_out, self.cap_in
             n_in = n_cells_out
-            arena_bound = MAX_CHILDREN * arena_rows + n_in
+            arena_bound = 2 * (2 * arena_rows + n_in)
             level += 1
         self.progress.done()
         self.n_samples = n_samples
