@@ -30,6 +30,9 @@
 #ifndef SPLIT_AT
 #error "SPLIT_AT: the split fraction comes from the driver (sampler.py)"
 #endif
+#ifndef QUAD_SPLIT_DIAG
+#error "QUAD_SPLIT_DIAG: from the driver (sampler.py)"
+#endif
 
 typedef struct {
     uint queries, leaves, evals, tapes_written;
@@ -233,32 +236,64 @@ inline real query_at(const cell_geom *g, real x, real y, __global const tape_op 
     return query(tape, n, qs, q, plane_point(&g->pf, x, y, h), w);
 }
 
-/* Split along the longest edge.  The children's tape is this tape pruned over the patch grown
- * by the radius (so it stays valid over every splat ball their samples get), counted first and
- * written with exactly that many rows into arena_out (the write replays the count's leaf
- * states).  The two new corners, shared by both
- * children, are evaluated here once with the parent's tape (valid over the whole patch). */
+/* Split along the longest edge, or along both edges (four children) while the cell is
+ * roughly square and large against the radius (QUAD_SPLIT_DIAG radii): such a cell's children
+ * would be split across the other edge at the next level anyway, and a level costs a launch
+ * and a counter read whatever its size.  The children's tape (one copy per two children) is
+ * this tape pruned over the patch grown by the radius (so it stays valid over every splat ball their samples get),
+ * counted first and written with exactly that many rows into arena_out (the write replays the
+ * count's leaf states).  The new corners, shared by the children, are evaluated here once
+ * with the parent's tape (valid over the whole patch). */
 inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
                        __global const quadric_rec *qs, int q, real radius, __global cell_rec *cells_out,
                        uint cap_cells, __global tape_op *arena_out, uint cap_arena,
                        __global volatile uint *counters, cell_work *w)
 {
-    uint slot = atomic_add(&counters[SC_CELLS], 2u);
+    bool quad = g->diag > QUAD_SPLIT_DIAG * radius && fmin(g->wx, g->wy) >= (real)0.5 * fmax(g->wx, g->wy);
+    uint k = quad ? 4u : 2u;
+    uint slot = atomic_add(&counters[SC_CELLS], k);
     prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
     uchar state;
     int first, count;
     prune_memo memo; /* the count's leaf states, replayed by the write */
     memo.mode = 1;
     int rows = tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
-    uint base = atomic_add(&counters[SC_ARENA], (uint)rows);
-    if (slot + 1 >= cap_cells || base + (uint)rows > cap_arena) return; /* overflow: the level re-runs */
+    /* four children get the tape twice, a copy per pair: a tape serves at most two cells */
+    uint copies = quad ? 2u : 1u;
+    uint base = atomic_add(&counters[SC_ARENA], copies * (uint)rows);
+    if (slot + k > cap_cells || base + copies * (uint)rows > cap_arena) return; /* overflow: the level re-runs */
     memo.mode = 2;
     tape_prune_write_memo(tape, n, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
-    w->tapes_written = 1;
-    cell_rec a = c, b = c;
-    a.level = b.level = c.level + 1;
-    a.tape_first = b.tape_first = (int)base + first;
-    a.tape_count = b.tape_count = count;
+    w->tapes_written = copies;
+    cell_rec a = c;
+    a.level = c.level + 1;
+    a.tape_first = (int)base + first;
+    a.tape_count = count;
+    if (quad) {
+        for (int m = 0; m < count; ++m) arena_out[base + rows + first + m] = arena_out[base + first + m];
+        /* corners (x0|xm|x1) x (y0|ym|y1), row-major: e[3 * j + i] */
+        real xs[3] = {c.x0, c.x0 + (real)SPLIT_AT * g->wx, c.x1};
+        real ys[3] = {c.y0, c.y0 + (real)SPLIT_AT * g->wy, c.y1};
+        real e[9];
+        e[0] = d[0]; e[2] = d[1]; e[6] = d[2]; e[8] = d[3];
+        e[1] = query_at(g, xs[1], ys[0], tape, n, qs, q, w);
+        e[3] = query_at(g, xs[0], ys[1], tape, n, qs, q, w);
+        e[4] = query_at(g, xs[1], ys[1], tape, n, qs, q, w);
+        e[5] = query_at(g, xs[2], ys[1], tape, n, qs, q, w);
+        e[7] = query_at(g, xs[1], ys[2], tape, n, qs, q, w);
+        for (int j = 0; j < 2; ++j)
+            for (int i = 0; i < 2; ++i) {
+                cell_rec b = a;
+                b.x0 = xs[i]; b.x1 = xs[i + 1];
+                b.y0 = ys[j]; b.y1 = ys[j + 1];
+                b.d[0] = e[3 * j + i]; b.d[1] = e[3 * j + i + 1];
+                b.d[2] = e[3 * (j + 1) + i]; b.d[3] = e[3 * (j + 1) + i + 1];
+                b.tape_first = (int)base + j * rows + first;
+                cells_out[slot + 2 * j + i] = b;
+            }
+        return;
+    }
+    cell_rec b = a;
     real e0, e1;
     if (g->wx >= g->wy) {
         real mid = c.x0 + (real)SPLIT_AT * g->wx;
@@ -333,28 +368,55 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     return OUT_SPLIT;
 }
 
-__kernel void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
-                       __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
-                       __global cell_rec *cells_out, uint cap_cells,
-                       __global raw_sample_rec *samples, uint cap_samples,
-                       __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
-                       __global volatile uint *counters, real radius, real floor_size)
+#ifndef WORK_GROUP
+#error "WORK_GROUP: the work-group size comes from the driver (sampler.py)"
+#endif
+
+/* the per-cell statistics summed over a work-group before one atomic per counter (an atomic
+ * per cell and counter contends between the compute units) */
+#define WG_SUMS 11
+constant int WG_SLOT[WG_SUMS] = {SC_DISCARDED, SC_FILLED, SC_SINGLE, SC_SPLIT, SC_UNRESOLVED, SC_PRUNED_DECIDED,
+                                 SC_DISTANCE_QUERIES, SC_LEAF_DISTANCES, SC_PRUNE_EVALUATIONS, SC_TAPES_WRITTEN,
+                                 SC_TAPE_ROWS};
+
+__kernel __attribute__((reqd_work_group_size(WORK_GROUP, 1, 1)))
+void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
+              __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
+              __global cell_rec *cells_out, uint cap_cells,
+              __global raw_sample_rec *samples, uint cap_samples,
+              __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
+              __global volatile uint *counters, real radius, real floor_size)
 {
-    int gid = get_global_id(0);
-    if (gid >= n_cells) return;
-    cell_work w = {0, 0, 0, 0};
-    int out = classify_cell(cells_in[gid], qs, frames, tasks, cells_out, cap_cells, samples, cap_samples, arena_in,
-                            arena_out, cap_arena, counters, radius, floor_size, &w);
-    int slot = out == OUT_DISCARDED || out == OUT_DECIDED_DISCARD ? SC_DISCARDED
-             : out == OUT_FILLED || out == OUT_DECIDED_FILL ? SC_FILLED
-             : out == OUT_SINGLE ? SC_SINGLE
-             : out == OUT_SPLIT ? SC_SPLIT : SC_UNRESOLVED;
-    atomic_inc(&counters[slot]);
-    if (out == OUT_DECIDED_DISCARD || out == OUT_DECIDED_FILL) atomic_inc(&counters[SC_PRUNED_DECIDED]);
-    if (w.queries) atomic_add(&counters[SC_DISTANCE_QUERIES], w.queries);
-    if (w.leaves) atomic_add(&counters[SC_LEAF_DISTANCES], w.leaves);
-    if (w.evals) atomic_add(&counters[SC_PRUNE_EVALUATIONS], w.evals);
-    if (w.tapes_written) atomic_inc(&counters[SC_TAPES_WRITTEN]);
-    atomic_add(&counters[SC_TAPE_ROWS], (uint)cells_in[gid].tape_count);
-    atomic_max(&counters[SC_TAPE_MAX], (uint)cells_in[gid].tape_count);
+    __local uint sums[WG_SUMS][WORK_GROUP];
+    __local uint tape_max[WORK_GROUP];
+    int gid = get_global_id(0), lid = get_local_id(0);
+    for (int k = 0; k < WG_SUMS; ++k) sums[k][lid] = 0;
+    tape_max[lid] = 0;
+    if (gid < n_cells) {
+        cell_work w = {0, 0, 0, 0};
+        cell_rec c = cells_in[gid];
+        int out = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, samples, cap_samples, arena_in,
+                                arena_out, cap_arena, counters, radius, floor_size, &w);
+        int k = out == OUT_DISCARDED || out == OUT_DECIDED_DISCARD ? 0
+              : out == OUT_FILLED || out == OUT_DECIDED_FILL ? 1
+              : out == OUT_SINGLE ? 2 : out == OUT_SPLIT ? 3 : 4;
+        sums[k][lid] = 1;
+        sums[5][lid] = out == OUT_DECIDED_DISCARD || out == OUT_DECIDED_FILL;
+        sums[6][lid] = w.queries;
+        sums[7][lid] = w.leaves;
+        sums[8][lid] = w.evals;
+        sums[9][lid] = w.tapes_written;
+        sums[10][lid] = (uint)c.tape_count;
+        tape_max[lid] = (uint)c.tape_count;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (lid < WG_SUMS) {
+        uint t = 0;
+        for (int m = 0; m < WORK_GROUP; ++m) t += sums[lid][m];
+        if (t) atomic_add(&counters[WG_SLOT[lid]], t);
+    } else if (lid == WG_SUMS) {
+        uint t = 0;
+        for (int m = 0; m < WORK_GROUP; ++m) t = max(t, tape_max[m]);
+        atomic_max(&counters[SC_TAPE_MAX], t);
+    }
 }

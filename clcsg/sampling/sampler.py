@@ -43,7 +43,9 @@ each side of it (a curve flat on the cell's scale separates its corners), so onc
 about r a corner with d_q < 0 gives the single sample below; a cell on the discarded side,
 not crossing, is decided by the patch test.  Splits cut the longest edge at ``SPLIT_AT`` of
 it, not the middle: a cell edge lying exactly on a trimming curve (features in the middle of a
-box are common) has corners with d_q = 0 that no bound can separate from the curve.  So the
+box are common) has corners with d_q = 0 that no bound can separate from the curve.  A
+roughly square cell larger than ``QUAD_SPLIT_DIAG`` radii is cut across both edges at once
+(four children: a level saved, the children cover the cell just the same).  So the
 chain ends in (i) a fill, which puts every cell point within r of a sample (the anisotropic
 slope bound in ``fill.h``), (ii) a single sample whose radius covers the patch's whole 3-D
 box, or (iii) the floor: cells whose 3-D box is smaller than the floor and still unresolved
@@ -80,7 +82,7 @@ import numpy as np
 
 from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
-from ..cl.programs import build, kernel as program_kernel
+from ..cl.programs import build, kernel as program_kernel, launch
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
@@ -95,7 +97,7 @@ from ..progress import for_option
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
-WORK_GROUP = 64
+WORK_GROUP = 64  # > the 12 statistics classify sums per work-group (sampler.cl)
 
 #: counters summed over levels into the stats (the others are per-level positions)
 SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
@@ -248,6 +250,11 @@ def _task_regions(t, frames, origin, grow) -> dict:
 SPLIT_AT = 0.4871
 #: the larger child's share of a split
 SPLIT_LARGER = 1 - SPLIT_AT
+#: a roughly square cell whose diagonal exceeds this many radii is split into four, not two
+#: (the build option QUAD_SPLIT_DIAG of sampler.cl)
+QUAD_SPLIT_DIAG = 8.0
+#: most children of a split
+MAX_CHILDREN = 4
 
 
 #: the largest fraction of the run the bar takes from the samples emitted / the expected count
@@ -396,7 +403,7 @@ def sample(
     est = _guarded(sc, tape, radius, ctx, real, normal_form, term_limit, distortion, max_samples, max_memory)
     t1 = time.perf_counter()
     packed, frames, frames_rec = _packed(tape, real)
-    tasks, roots, root_rows = root_tasks(tape, packed, frames, radius)
+    tasks, roots, root_rows = _root_tasks(tape, packed, frames, radius)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
              "estimated_samples": est.samples,
@@ -438,10 +445,31 @@ def _packed(tape, real):
     return cache[key]
 
 
+#: radii whose root tasks are kept per tape and precision
+_ROOT_TASKS_KEPT = 4
+
+
+def _root_tasks(tape, packed, frames, radius):
+    """:func:`root_tasks`, kept per tape, precision and radius for the last few radii (a
+    viewer or a benchmark samples one scene at one radius again and again; the tasks, their
+    root cells and root tapes depend on nothing else).  Copies are returned: the driver
+    uploads them and must not see a caller's edits."""
+    cache = tape.__dict__.setdefault("_sampler_roots", {})
+    key = (np.dtype(packed.real).str, float(radius))
+    hit = cache.get(key)
+    if hit is None:
+        hit = root_tasks(tape, packed, frames, radius)
+        if len(cache) >= _ROOT_TASKS_KEPT:
+            cache.pop(next(iter(cache)))
+        cache[key] = hit
+    return tuple(a.copy() for a in hit)
+
+
 def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
                progress, max_levels, root_rows=None):
     """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
-    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT}
+    defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT,
+               "QUAD_SPLIT_DIAG": QUAD_SPLIT_DIAG, "WORK_GROUP": WORK_GROUP}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
     scene_buf = SceneBuffers(ctx, packed)
@@ -532,10 +560,11 @@ class _Subdivision:
     right after the level that emitted it (:class:`_Finisher`), while that tape is still there.
 
     Buffers are sized before a level to what it can write at most, so a level runs once: a
-    cell has at most two children, and a split writes one tape of at most its cell's rows + 1
-    (``tape_prune_rows``), so the children's tapes take at most (the rows of the level's
-    cells' tapes) + (its cells) rows; the rows of a level's cells are at most twice the rows
-    the level before wrote (two cells to a tape).  A bound past :data:`ARENA_BUDGET` of the
+    cell has at most :data:`MAX_CHILDREN` children, and a split writes its children's tape
+    (at most its cell's rows + 1, ``tape_prune_rows``) once per two children, so the
+    children's tapes take at most 2 ((the rows of the level's cells' tapes) + (its cells))
+    rows; the rows of a level's cells are at most twice the rows the level before wrote (two
+    cells to a tape).  A bound past :data:`ARENA_BUDGET` of the
     device, and every buffer whose size the caller forces (``capacity``), is left to the
     overflow protocol (run, see the counters past the capacity, grow, run the level again).
     """
@@ -594,8 +623,8 @@ class _Subdivision:
     def _size_for(self, n_in, arena_bound):
         """Grow the output buffers to what a level of ``n_in`` cells can write at most (see
         the class docstring), where that is allowed."""
-        if self.sized["cells"] and 2 * n_in > self.cap_cells:
-            self.cap_cells = max(2 * n_in, self.cap_cells + self.cap_cells // 2)
+        if self.sized["cells"] and MAX_CHILDREN * n_in > self.cap_cells:
+            self.cap_cells = max(MAX_CHILDREN * n_in, self.cap_cells + self.cap_cells // 2)
             self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         rows = self.scene.packed.tape.itemsize
         if self.sized["arena"] and self.cap_out < arena_bound <= self.arena_budget / rows:
@@ -614,7 +643,7 @@ class _Subdivision:
             # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
             # checker does not see host writes into an existing buffer)
             counters_buf = upload(self.ctx, counters, writable=True)
-            kernel(self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
+            launch(kernel, self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
                    self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
                    self.cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
                    self.arena_in, self.arena_out, np.uint32(self.cap_out), counters_buf,
@@ -653,12 +682,12 @@ class _Subdivision:
         first = np.zeros(max(n_first, 1), dtype=tape.dtype)
         first[:len(self.root_rows)] = self.root_rows
         self.arena_in, self.cap_in = upload(self.ctx, first, writable=True, what="tape arena"), len(first)
-        bound = int(self.roots["tape_count"].sum()) + len(self.roots)
+        bound = 2 * (int(self.roots["tape_count"].sum()) + len(self.roots))
         self.cap_out = self.cap_arena
         if self.sized["arena"] and bound <= self.arena_budget / tape.itemsize:
             self.cap_out = max(bound, 16)
         self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
-        self.cap_cells = max(self.cap_cells, 2 * len(self.roots)) if self.sized["cells"] else self.cap_cells
+        self.cap_cells = max(self.cap_cells, MAX_CHILDREN * len(self.roots)) if self.sized["cells"] else self.cap_cells
         self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
         return upload(self.ctx, self.roots, writable=True), bound
@@ -696,7 +725,7 @@ class _Subdivision:
             self.arena_in, self.arena_out = self.arena_out, self.arena_in
             self.cap_in, self.cap_out = self.cap_out, self.cap_in
             n_in = n_cells_out
-            arena_bound = 2 * arena_rows + n_in
+            arena_bound = 2 * (2 * arena_rows + n_in)
             level += 1
         self.progress.done()
         self.n_samples = n_samples
@@ -789,9 +818,9 @@ class _Finisher:
         self.grown += 1
 
     def _launch(self, samples, first, n, arena):
-        self.kernel(self.ctx.queue, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames, self.tasks,
-                    samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
-                    self.counters, *self.scene.colour_args(), *(self.out[name] for name, _, _ in _FINISH_OUTPUTS))
+        launch(self.kernel, self.ctx.queue, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames,
+               self.tasks, samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
+               self.counters, *self.scene.colour_args(), *(self.out[name] for name, _, _ in _FINISH_OUTPUTS))
 
     def run(self, samples, first, n, arena, tape_max, cap_samples):
         """Finish raw samples [first, first + n) whose cells' tapes (at most ``tape_max`` rows)

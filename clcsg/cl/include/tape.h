@@ -135,12 +135,30 @@ typedef struct {
 inline int st_and(int x, int y) { return (x == ST_F || y == ST_F) ? ST_F : (x == ST_T && y == ST_T) ? ST_T : ST_LIVE; }
 inline int st_or(int x, int y) { return (x == ST_T || y == ST_T) ? ST_T : (x == ST_F && y == ST_F) ? ST_F : ST_LIVE; }
 
+/* What the leaf tests need of a region that does not depend on the leaf, computed once per
+ * pruning pass (prune_forward) instead of once per leaf. */
+typedef struct {
+    real slack;     /* rounding slack of the box and ball tests */
+    real half_diag; /* |a0|^2 + |a1|^2 + |a2|^2, square-rooted */
+    real pl;        /* 1 + |pc| + |a0| + |a1| + |a2| (on_patch regions) */
+} prune_consts;
+
+inline prune_consts prune_consts_of(const prune_region *g)
+{
+    prune_consts k;
+    real scale = fabs(g->rho) + length(g->c) + length(g->a0) + length(g->a1) + length(g->a2);
+    k.slack = ROUNDING_ULPS * REAL_EPS * scale;
+    k.half_diag = sqrt(dot(g->a0, g->a0) + dot(g->a1, g->a1) + dot(g->a2, g->a2));
+    k.pl = g->on_patch ? 1 + length(g->pc) + length(g->a0) + length(g->a1) + length(g->a2) : 0;
+    return k;
+}
+
 /* The state of a leaf over the region: ST_T (holds everywhere), ST_F or ST_LIVE. */
-inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, const prune_region *g)
+inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, const prune_region *g,
+                            const prune_consts *k)
 {
     __global const real *c = qs[q].coef;
-    real scale = fabs(g->rho) + length(g->c) + length(g->a0) + length(g->a1) + length(g->a2);
-    real slack = ROUNDING_ULPS * REAL_EPS * scale;
+    real slack = k->slack;
     if (c[0] == 0 && c[1] == 0 && c[2] == 0 && c[4] == 0 && c[5] == 0 && c[7] == 0) {
         /* a plane: sign Q(x) = g.x + w, |grad| = |g| */
         real3 gr = 2 * sign * (real3)(c[3], c[6], c[8]);
@@ -149,7 +167,7 @@ inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, con
         return v > spread ? ST_F : v < -spread ? ST_T : ST_LIVE;
     }
     real d = literal_distance(qs, q, sign, g->c);
-    real reach = g->rho + sqrt(dot(g->a0, g->a0) + dot(g->a1, g->a1) + dot(g->a2, g->a2)) + slack;
+    real reach = g->rho + k->half_diag + slack;
     return d >= reach ? ST_F : d <= -reach ? ST_T : ST_LIVE;
 }
 
@@ -178,7 +196,8 @@ inline real2 gradient_along(quadric Q, real3 u, const prune_region *g)
  * the derivative, so a cell at distance D from the curve Q = 0 is decided once D exceeds
  * O(h^2), where the box and ball tests need D of the order of the cell's size h.  The rounding
  * slack covers Q(pc) and pc's own error. */
-inline int leaf_over_patch(__global const quadric_rec *qs, int q, int sign, const prune_region *g)
+inline int leaf_over_patch(__global const quadric_rec *qs, int q, int sign, const prune_region *g,
+                           const prune_consts *k)
 {
     quadric Q = quadric_load(qs, q);
     real2 gk = gradient_along(Q, g->uk, g);
@@ -189,7 +208,7 @@ inline int leaf_over_patch(__global const quadric_rec *qs, int q, int sign, cons
     __global const real *c = qs[q].coef;
     real cs = 0;
     for (int m = 0; m < 10; ++m) cs += fabs(c[m]);
-    real pl = 1 + length(g->pc) + length(g->a0) + length(g->a1) + length(g->a2);
+    real pl = k->pl;
     spread += ROUNDING_ULPS * REAL_EPS * (4 * cs * pl * pl + length(quadric_gradient(Q, g->pc)) * pl);
     if (!isfinite(spread)) return ST_LIVE;
     return v > spread ? ST_F : v < -spread ? ST_T : ST_LIVE;
@@ -221,6 +240,7 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
     if (memo_mode == 1)
         for (int w = 0; w < PRUNE_MEMO_ROWS / 16; ++w) memo->bits[w] = 0;
     int k_out = 0, lst = -1;
+    prune_consts pk = prune_consts_of(g);
     for (int k = 0; k < n; ++k) {
         tape_op o = t[k];
         tape_op keep = o;
@@ -235,8 +255,8 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
                     s = (memo->bits[k >> 4] >> (2 * (k & 15))) & 3;
                 } else {
                     ++*evals;
-                    s = leaf_over_region(qs, o.a, o.b, g);
-                    if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g);
+                    s = leaf_over_region(qs, o.a, o.b, g, &pk);
+                    if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g, &pk);
                     if (memo_mode == 1 && k < PRUNE_MEMO_ROWS) memo->bits[k >> 4] |= (uint)s << (2 * (k & 15));
                 }
                 st[o.out] = ST_PACK(s, s, s);
