@@ -57,11 +57,20 @@ def commands(folder: str) -> dict[str, list[str]]:
             "two cubes": cli + ["sample", scene, "-o", os.path.join(folder, "x.ply")]}
 
 
+def package_root() -> str:
+    """The folder holding the ``clcsg`` package this benchmark imported."""
+    import clcsg
+
+    return os.path.dirname(os.path.dirname(os.path.abspath(clcsg.__file__)))
+
+
 def environment_for_runs() -> dict:
-    """The caller's environment with Python's bytecode cache on (as a user has it)."""
+    """The caller's environment with Python's bytecode cache on (as a user has it), and this
+    ``clcsg`` first on the path (the console script would otherwise load the installed one)."""
     env = dict(os.environ)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     env.pop("CLCSG_NO_CACHE", None)
+    env["PYTHONPATH"] = os.pathsep.join([package_root()] + [p for p in [env.get("PYTHONPATH")] if p])
     return env
 
 
@@ -162,6 +171,7 @@ def run(quick: bool = False, device=None, runs: int | None = None) -> dict:
     load = Load()
     result = measure(runs or (5 if quick else 10))
     result["environment"] = load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(),
+                                       "clcsg": package_root(),
                                        "python": sys.version.split()[0], "git_commit": git_commit(),
                                        "git_dirty": git_dirty(), "timing": "process CPU (user + sys, wait4) "
                                        "and wall time of fresh processes, caches warm"})
