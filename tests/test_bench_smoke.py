@@ -67,6 +67,21 @@ def test_no_import_cycles_between_bench_modules():
             assert mods <= {"common", "zoo"}, (name, mods)
 
 
+def test_startup_measures_the_three_commands(cl_context):
+    """One round of the start-up part: each command ran (CPU and wall times), the ratios are
+    against the bare start, and the sampling command imports modules the bare start does not."""
+    result = startup.measure(1)
+    rows = {r["command"]: r for r in result["rows"]}
+    assert set(rows) == {"bare", "version", "two cubes"}
+    for r in rows.values():
+        assert r["cpu_s"]["min"] > 0 and r["wall_s"]["min"] >= r["cpu_s"]["min"] / 4
+    for name in ("version", "two cubes"):
+        assert rows[name]["cpu_ratio"] == pytest.approx(rows[name]["cpu_s"]["min"] / rows["bare"]["cpu_s"]["min"])
+    imports = result["extra_imports"]
+    assert imports["modules"] > 0 and any(k.startswith("clcsg.") for k in imports["by_package_ms"])
+    assert "| two cubes |" in startup.table(result)
+
+
 def test_micro_kernels_run(cl_context):
     """Every Table 1 micro kernel builds and returns finite sums (a tiny launch, not a measurement)."""
     real = cl_context.real_dtype
@@ -169,17 +184,3 @@ def test_render_row_pieces(cl_context):
     assert rec["seconds"] > 0 and rec["tile_tape_mean"] > 0 and rec["prune_s"] >= 0
     assert rec["covered_pixels"] > 0
 
-
-def test_startup_measures_the_three_commands(cl_context):
-    """One round of the start-up part: each command ran (CPU and wall times), the ratios are
-    against the bare start, and the sampling command imports modules the bare start does not."""
-    result = startup.measure(1)
-    rows = {r["command"]: r for r in result["rows"]}
-    assert set(rows) == {"bare", "version", "two cubes"}
-    for r in rows.values():
-        assert r["cpu_s"]["min"] > 0 and r["wall_s"]["min"] >= r["cpu_s"]["min"] / 4
-    for name in ("version", "two cubes"):
-        assert rows[name]["cpu_ratio"] == pytest.approx(rows[name]["cpu_s"]["min"] / rows["bare"]["cpu_s"]["min"])
-    imports = result["extra_imports"]
-    assert imports["modules"] > 0 and any(k.startswith("clcsg.") for k in imports["by_package_ms"])
-    assert "| two cubes |" in startup.table(result)
