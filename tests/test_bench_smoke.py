@@ -183,4 +183,3 @@ def test_render_row_pieces(cl_context):
     rec = render.raytrace_record(t, st)
     assert rec["seconds"] > 0 and rec["tile_tape_mean"] > 0 and rec["prune_s"] >= 0
     assert rec["covered_pixels"] > 0
-
