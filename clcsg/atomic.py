@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import secrets
 
 from .errors import OutputError
 
@@ -34,7 +33,7 @@ def _umask() -> int:
 
 def _tmp_name(path: str) -> str:
     folder, base = os.path.split(path)
-    return os.path.join(folder, f".{base}.{secrets.token_hex(6)}.tmp")
+    return os.path.join(folder, f".{base}.{os.urandom(6).hex()}.tmp")
 
 
 def _open_unnamed(folder: str):

@@ -20,7 +20,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from bench import common, micro, models, peers, zoo  # noqa: E402
+from bench import common, micro, models, peers, startup, zoo  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -65,6 +65,21 @@ def test_no_import_cycles_between_bench_modules():
     for name, mods in imports.items():
         if name != "__main__":
             assert mods <= {"common", "zoo"}, (name, mods)
+
+
+def test_startup_measures_the_three_commands(cl_context):
+    """One round of the start-up part: each command ran (CPU and wall times), the ratios are
+    against the bare start, and the sampling command imports modules the bare start does not."""
+    result = startup.measure(1)
+    rows = {r["command"]: r for r in result["rows"]}
+    assert set(rows) == {"bare", "version", "two cubes"}
+    for r in rows.values():
+        assert r["cpu_s"]["min"] > 0 and r["wall_s"]["min"] >= r["cpu_s"]["min"] / 4
+    for name in ("version", "two cubes"):
+        assert rows[name]["cpu_ratio"] == pytest.approx(rows[name]["cpu_s"]["min"] / rows["bare"]["cpu_s"]["min"])
+    imports = result["extra_imports"]
+    assert imports["modules"] > 0 and any(k.startswith("clcsg.") for k in imports["by_package_ms"])
+    assert "| two cubes |" in startup.table(result)
 
 
 def test_micro_kernels_run(cl_context):

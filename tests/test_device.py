@@ -76,10 +76,42 @@ def test_a_device_whose_compiler_fails_is_passed_over_by_rule_only():
     assert D.choose_usable(infos, "oclgrind", {}, build_error) == 2
 
 
-def test_the_default_device_compiles():
-    """The device clcsg picks here builds a kernel (the probe is what selection relies on)."""
+def test_the_default_device_compiles(tmp_path, monkeypatch):
+    """The device clcsg picks here builds a kernel (the probe is what selection relies on);
+    built here, not answered from a record of an earlier process."""
     dev = D.select_device()
+    monkeypatch.setenv("CLCSG_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(D, "_probe_results", {})
+    built = []
+    real = cl.Program
+
+    def program(*args):
+        built.append(args[1:])
+        return real(*args)
+
+    monkeypatch.setattr(cl, "Program", program)
     assert D._build_error(dev) is None
+    assert built == [(D.PROBE_SOURCE,)]
+
+
+def test_a_probed_device_is_remembered_per_driver(tmp_path, monkeypatch):
+    """The probe's success is kept in the cache folder, under a name that changes with the
+    device's and driver's versions; a later lookup in the process needs no build."""
+    monkeypatch.setenv("CLCSG_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("CLCSG_NO_CACHE", raising=False)
+    dev = D.select_device()
+    mark = D._probe_mark(dev)
+    assert mark is not None and mark.startswith(str(tmp_path))
+    monkeypatch.setattr(D, "_probe_results", {})
+    assert D._build_error(dev) is None and __import__("os").path.exists(mark)
+
+    class Renamed:  # the same device after a driver update
+        name, version, platform = dev.name, dev.version, dev.platform
+        driver_version = dev.driver_version + "-next"
+
+    assert D._probe_mark(Renamed()) not in (None, mark)
+    monkeypatch.setenv("CLCSG_NO_CACHE", "1")
+    assert D._probe_mark(dev) is None
 
 
 def test_default_with_only_accelerator():

@@ -291,3 +291,26 @@ def test_float32_path_keeps_the_guarantees(name, cl_context, monkeypatch):
     shape, radius = SCENES[name]
     s = _check(shape.scale(100).translate((150, -80, 40)), radius * 100, cl_context)
     assert s.packed.real == np.float32
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed):
+    """Random clip programs (lengths 0-5, drawn from few distinct rows so many repeat): each
+    sample reads back its own rows, each distinct program is stored once, empty ones point at 0."""
+    from clcsg.sampling.sampler import dedupe_programs
+
+    rng = np.random.default_rng(seed)
+    n = 300
+    count = rng.integers(0, 6, n).astype(np.int32)
+    if seed == 0:
+        count[count == 0] = 1  # no empty programs: the smallest length must still be kept
+    first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int32)
+    rows = rng.integers(0, 2, (int(count.sum()), 4)).astype(np.int32)
+    f2, c2, r2 = dedupe_programs(rows, first, count)
+    assert np.array_equal(c2, count)
+    for i in range(n):
+        assert np.array_equal(r2[f2[i]:f2[i] + c2[i]], rows[first[i]:first[i] + count[i]])
+    assert np.all(f2[count == 0] == 0)
+    stored = {tuple(map(tuple, r2[f:f + c])) for f, c in zip(f2[count > 0], c2[count > 0])}
+    distinct = {tuple(map(tuple, rows[f:f + c])) for f, c in zip(first[count > 0], count[count > 0])}
+    assert stored == distinct and len(r2) == sum(len(p) for p in distinct)

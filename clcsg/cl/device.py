@@ -22,7 +22,9 @@ a ``P:D`` / ``P`` naming it, or ``PYOPENCL_CTX`` pointing at it do.
 
 A device is used only if its compiler builds a one-line kernel.  PoCL's pip wheel, for one,
 fails on CPUs newer than its LLVM ("unknown target CPU 'generic'"): the default, ``cpu`` and
-``gpu`` then pass over it to the next device of the rule, and naming it gets that reason.
+``gpu`` then pass over it to the next device of the rule, and naming it gets that reason.  A
+device that built the probe once is remembered in the program cache and not probed again until
+its driver changes.
 
 The rule lives in the pure function :func:`choose`, which works on a list of
 :class:`DeviceInfo` and a mapping of environment variables, so it can be tested on synthetic
@@ -32,6 +34,7 @@ one-line message.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import threading
 from dataclasses import asdict, dataclass
@@ -40,6 +43,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from ..errors import DeviceError, UsageError
+from .programs import cache_dir
 
 __all__ = [
     "Context",
@@ -307,17 +311,49 @@ _probe_results: dict = {}
 _probe_contexts: dict = {}
 
 
+def _probe_mark(dev) -> str | None:
+    """The file that records that ``dev`` built :data:`PROBE_SOURCE`: in the program cache
+    (:func:`~clcsg.cl.programs.cache_dir`), named by the hash of the probe and of the device's
+    and driver's names and versions, so a new driver or device probes again.  None when the
+    disk cache is off."""
+    folder = cache_dir()
+    if folder is None:
+        return None
+    p = dev.platform
+    ident = repr((PROBE_SOURCE, dev.name, dev.version, dev.driver_version, p.name, p.version))
+    return os.path.join(folder, "probe-" + hashlib.sha256(ident.encode()).hexdigest() + ".ok")
+
+
+def _remember_probe(mark: str) -> None:
+    try:
+        os.makedirs(os.path.dirname(mark), exist_ok=True)
+        with open(mark, "w", encoding="utf-8") as f:
+            f.write(PROBE_SOURCE + "\n")
+    except OSError:  # a cache that cannot be written only costs the next process a probe
+        pass
+
+
 def _build_error(dev) -> str | None:
     """None if ``dev`` builds :data:`PROBE_SOURCE`, else the first error line of its compiler
-    (remembered per device for the process; the probe's context is kept for :class:`Context`)."""
+    (remembered per device for the process; the probe's context is kept for :class:`Context`).
+
+    A success is also remembered on disk (:func:`_probe_mark`): the build takes a few tens of
+    milliseconds, as long as the rest of a small ``clcsg sample``'s start, and the answer only
+    changes with the driver.  A failure is probed again in each process."""
     key = int(dev.int_ptr)
     if key not in _probe_results:
+        mark = _probe_mark(dev)
+        if mark is not None and os.path.exists(mark):
+            _probe_results[key] = None
+            return None
         cl = _cl()
         try:
             ctx = cl.Context([dev])
             cl.Program(ctx, PROBE_SOURCE).build()
             _probe_results[key] = None
             _probe_contexts[key] = ctx
+            if mark is not None:
+                _remember_probe(mark)
         except (cl.Error, RuntimeError) as e:
             lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
             errors = [ln for ln in lines if ln.lower().startswith("error")]

@@ -581,7 +581,7 @@ def _tape_stats(tape: Tape, **extra) -> dict:
         "shape": tape.shape,
         "instructions": int(len(tape.ops)),
         "leaves": int(len(leaves)),
-        "quadrics": int(len(np.unique(leaves[:, 2]))) if len(leaves) else 0,
+        "quadrics": len(set(leaves[:, 2].tolist())),  # not np.unique: it imports numpy.ma
         "registers": int(tape.n_regs),
         "primitives": len(tape.instances),
         **extra,

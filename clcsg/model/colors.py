@@ -19,7 +19,6 @@ path, the ``.csg`` line, the option name).
 
 from __future__ import annotations
 
-import difflib
 import math
 import numbers
 import re
@@ -90,6 +89,8 @@ def from_string(text: str) -> tuple[float, float, float, float]:
         return _rgba([int(digits[k:k + 2], 16) for k in range(0, len(digits), 2)], 255.0)
     if s.startswith("#"):
         raise ColorError(f"{text!r} is not a hex color: use #rgb, #rgba, #rrggbb or #rrggbbaa")
+    import difflib  # only for the error message
+
     close = difflib.get_close_matches(low, list(NAMED_COLORS), n=1, cutoff=0.75)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
     raise ColorError(f"unknown color name {text!r}{hint}; expected {FORMS}")

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import tempfile
 import warnings
 
@@ -107,6 +106,8 @@ def export_csg(scad_path, csg_path, *, timeout: float | None = None, source: str
     cmd = [exe, "-o", out, scad]
     if deps_path is not None:
         cmd[1:1] = ["-d", os.path.abspath(os.fspath(deps_path))]
+    import subprocess  # here, not at the top: reading a .csg or .json needs no child process
+
     try:
         proc = subprocess.run(
             cmd,

@@ -17,7 +17,6 @@ selects, or the union's title when none or several fit.
 
 from __future__ import annotations
 
-import difflib
 import json
 import numbers
 import re
@@ -69,6 +68,8 @@ def jtype(v) -> str:
 
 
 def suggest(word, choices) -> str:
+    import difflib  # only for the error message
+
     close = difflib.get_close_matches(str(word), list(choices), n=1, cutoff=0.7)
     return f" (did you mean {close[0]!r}?)" if close else ""
 
