@@ -71,8 +71,8 @@ def edges_of(tri):
 
 def common(sa, sb):
     """Per row the quadrics of set ``sa`` also in ``sb`` ((N, 3) -1 padded, in sa's order)."""
-    hit = (sa[:, :, None] == sb[:, None, :]).any(axis=2) & (sa >= 0)
-    return np.where(hit, sa, -1)
+    hit = np.stack([(sa[:, i] == sb[:, 0]) | (sa[:, i] == sb[:, 1]) | (sa[:, i] == sb[:, 2]) for i in range(3)], 1)
+    return np.where(hit & (sa >= 0), sa, -1)
 
 
 def _compact(sets):
