@@ -57,6 +57,8 @@ def _contained(m, v, u):
 
 def _topology_ok(m, edges, v, u):
     """The link condition, and not both of degree three (a tetrahedron), per candidate (v, u)."""
+    if not len(v):  # scipy indexes a sparse matrix by empty arrays into a sparse matrix
+        return np.zeros(0, dtype=bool)
     n = len(m.vertices)
     a = np.concatenate([edges[:, 0], edges[:, 1]])
     b = np.concatenate([edges[:, 1], edges[:, 0]])
