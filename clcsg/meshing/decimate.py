@@ -48,11 +48,17 @@ SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0
 def _contained(m, v, u):
     """Rows where every quadric of vertex v is one of vertex u's."""
     sv, su = m.sets[v], m.sets[u]
-    return ((sv[:, :, None] == su[:, None, :]).any(axis=2) | (sv < 0)).all(axis=1)
+    out = np.ones(len(v), dtype=bool)
+    for i in range(3):  # nine column comparisons: no (N, 3, 3) temporaries
+        svi = sv[:, i]
+        out &= (svi < 0) | (svi == su[:, 0]) | (svi == su[:, 1]) | (svi == su[:, 2])
+    return out
 
 
 def _topology_ok(m, edges, v, u):
     """The link condition, and not both of degree three (a tetrahedron), per candidate (v, u)."""
+    if not len(v):  # scipy indexes a sparse matrix by empty arrays into a sparse matrix
+        return np.zeros(0, dtype=bool)
     n = len(m.vertices)
     a = np.concatenate([edges[:, 0], edges[:, 1]])
     b = np.concatenate([edges[:, 1], edges[:, 0]])

@@ -71,8 +71,8 @@ def edges_of(tri):
 
 def common(sa, sb):
     """Per row the quadrics of set ``sa`` also in ``sb`` ((N, 3) -1 padded, in sa's order)."""
-    hit = (sa[:, :, None] == sb[:, None, :]).any(axis=2) & (sa >= 0)
-    return np.where(hit, sa, -1)
+    hit = np.stack([(sa[:, i] == sb[:, 0]) | (sa[:, i] == sb[:, 1]) | (sa[:, i] == sb[:, 2]) for i in range(3)], 1)
+    return np.where(hit & (sa >= 0), sa, -1)
 
 
 def _compact(sets):
@@ -99,6 +99,28 @@ def _candidates(sa, sb):
     rows.append(r)
     sets.append(np.sort(distinct[r], axis=1)[:, -3:])
     return np.concatenate(rows), np.concatenate(sets)
+
+
+def _nearest_on_boundary(tape, rows, n, x, dist):
+    """Per row (0..n-1) the candidate (index into ``x``) of lowest ``dist`` among
+    those with a finite ``dist`` that lie on the solid's boundary (:func:`on_boundary`, its
+    probe radius from all of them), -1 if
+    none.  The same pick as testing every candidate, but the boundary test (the costly part)
+    runs on each row's best remaining candidate only, round after round."""
+    best = np.full(n, -1)
+    alive = np.isfinite(dist)
+    scale = max(1.0, float(np.abs(x[alive]).max())) if alive.any() else 1.0  # the probes' of all
+    while alive.any():
+        cand = np.flatnonzero(alive)
+        order = cand[np.lexsort((dist[cand], rows[cand]))]
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = rows[order][1:] != rows[order][:-1]
+        pick = order[first]
+        ok = on_boundary(tape, x[pick], scale)
+        best[rows[pick[ok]]] = pick[ok]
+        alive[pick] = False
+        alive &= best[rows] < 0
+    return best
 
 
 def _solve(tape, sets, x0, planes=None):
@@ -178,7 +200,7 @@ def _straddles(tape, x, radius, directions) -> np.ndarray:
     return ins.any(axis=1) & ~ins.all(axis=1)
 
 
-def on_boundary(tape, x) -> np.ndarray:
+def on_boundary(tape, x, scale=None) -> np.ndarray:
     """Points (N, 3) on the solid's boundary to rounding: among the points at distance
     :data:`PROBE` x scale (:func:`_probe_directions`) some are inside and some outside, and
     likewise at 100 times that distance.  Used for points on curves and corners, where
@@ -187,7 +209,7 @@ def on_boundary(tape, x) -> np.ndarray:
     all directions at a quarter of the evaluations."""
     if not len(x):
         return np.zeros(0, dtype=bool)
-    scale = max(1.0, float(np.abs(x).max()))
+    scale = max(1.0, float(np.abs(x).max())) if scale is None else scale
     out = np.ones(len(x), dtype=bool)
     for r in (PROBE, 100 * PROBE):  # two radii: a rounding-level disagreement of one probe is not enough
         sel = np.flatnonzero(out)
@@ -222,16 +244,13 @@ def _edge_splits(m, tol, edges, tri_edge):
     span = np.flatnonzero((n_shared == 0) & long_enough)
     rows, sets = _candidates(s[a[span]], s[b[span]])
     sx, sok = _solve(m.tape, sets, mid[span[rows]], edge_planes(m, edges, tri_edge)[span[rows]])
-    sok[sok] = on_boundary(m.tape, sx[sok])
     dist = np.where(sok, np.linalg.norm(sx - mid[span[rows]], axis=1), np.inf)
     dist[dist > REACH * length[span[rows]]] = np.inf
-    best = np.full(len(span), -1)
-    corner = sets[:, 2] >= 0  # a corner ends the edge's chain of splits: first choice when valid
-    order = np.lexsort((dist, ~corner, rows))
-    first = np.ones(len(order), dtype=bool)
-    first[1:] = rows[order][1:] != rows[order][:-1]
-    pick = order[first & np.isfinite(dist[order])]
-    best[rows[pick]] = pick
+    corner = sets[:, 2] >= 0  # a corner ends the edge's chain of splits: the only choice where there is one
+    has_corner = np.zeros(len(span), dtype=bool)
+    has_corner[rows[corner]] = True
+    dist[has_corner[rows] & ~corner] = np.inf
+    best = _nearest_on_boundary(m.tape, rows, len(span), sx, dist)
     got = best >= 0
     _upgrade_ends(m, tol, edges[span[got]], sx[best[got]], sets[best[got]], got, np.flatnonzero(got))
     e_idx = np.concatenate([chord[cok], span[got]])
