@@ -91,6 +91,19 @@ def eye_inside(tape, eye) -> bool:
 OUTPUTS = ("depth", "ids", "primitives", "rgba")
 
 
+def _shading_tables(context, resolve_prg, scene, view_buf, hint):
+    """The per-view tables the resolve pass reads: each primitive's albedo (and the fallback's,
+    last) and the colour encoding over ``SHADE_BINS`` bins; (albedo, encoding, their events)."""
+    q = context.queue
+    n_prims = len(scene.packed.prims)
+    albedo = device_buffer(context, (n_prims + 1) * 16, "albedo table", hint=hint)
+    ev_albedo = kernel(resolve_prg, "albedo")(q, (-(-(n_prims + 1) // 64) * 64,), (64,), scene.prims,
+                                              np.int32(n_prims), view_buf, albedo)
+    encoding = device_buffer(context, (SHADE_BINS + 1) * 2, "encoding table", hint=hint)
+    ev_encoding = kernel(resolve_prg, "encoding")(q, (-(-(SHADE_BINS + 1) // 64) * 64,), (64,), view_buf, encoding)
+    return albedo, encoding, [ev_albedo, ev_encoding]
+
+
 def rasterize(context, samples, camera, shading=None, precision="auto", surface_aligned=True,
               backface_culling=True, stats=True, read=OUTPUTS) -> Image:
     """Render ``samples`` from ``camera`` on ``context``; ``read``: the outputs copied back
@@ -140,14 +153,10 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
             clip_buf, view_buf, fb, cnt_buf,
             wait_for=[ev_clear]))
     n_prims = len(scene.packed.prims)
-    albedo = device_buffer(context, (n_prims + 1) * 16, "albedo table", hint=hint)
-    ev_albedo = kernel(resolve_prg, "albedo")(q, (-(-(n_prims + 1) // 64) * 64,), (64,), scene.prims,
-                                              np.int32(n_prims), view_buf, albedo)
-    encoding = device_buffer(context, (SHADE_BINS + 1) * 2, "encoding table", hint=hint)
-    ev_encoding = kernel(resolve_prg, "encoding")(q, (-(-(SHADE_BINS + 1) // 64) * 64,), (64,), view_buf, encoding)
+    albedo, encoding, table_events = _shading_tables(context, resolve_prg, scene, view_buf, hint)
     ev_resolve = kernel(resolve_prg, "resolve")(
         q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, albedo,
-        np.int32(n_prims), encoding, *outs, wait_for=events[-1:] + [ev_albedo, ev_encoding])
+        np.int32(n_prims), encoding, *outs, wait_for=events[-1:] + table_events)
     wanted = set(read) | {"ids", "rgba"}
     for name, a, b in zip(OUTPUTS, (depth, ids, prims, rgba), outs):
         if name in wanted:
