@@ -520,15 +520,18 @@ def halfspace_boxes(w: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray
     The set is a box cut by one plane, so along axis k its extent is an interval: with the
     other coordinates at the corner minimizing their part of w . x (``rest``), x_k ranges over
     the box's [lo_k, hi_k] where w_k x_k <= d - rest, i.e. up to (d - rest) / w_k for w_k > 0
-    and down to it for w_k < 0.  The set is empty when even the minimizing corner is outside."""
+    and down to it for w_k < 0.  The set is empty when even the minimizing corner is outside
+    (by more than rounding: a plane touching the box leaves the touched face)."""
     w, d = np.asarray(w, dtype=np.float64), np.asarray(d, dtype=np.float64)
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     part = np.minimum(w * lo, w * hi)
     rest = part.sum(axis=1, keepdims=True) - part
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (d[:, None] - rest) / w
-    out_lo = np.where(w < 0, np.maximum(lo, t), lo)
-    out_hi = np.where(w > 0, np.minimum(hi, t), hi)
-    empty = (part.sum(axis=1) > d) | np.any(lo > hi, axis=1) | np.any(out_lo > out_hi, axis=1)
+    out_lo = np.where(w < 0, np.minimum(np.maximum(lo, t), hi), lo)
+    out_hi = np.where(w > 0, np.maximum(np.minimum(hi, t), lo), hi)
+    # a plane touching the box (to rounding) leaves the face it touches, not nothing
+    slack = 1e-12 * (np.abs(d) + np.abs(w).sum(axis=1) * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1))
+    empty = (part.sum(axis=1) > d + slack) | np.any(lo > hi, axis=1)
     out_lo[empty], out_hi[empty] = np.inf, -np.inf
     return out_lo, out_hi

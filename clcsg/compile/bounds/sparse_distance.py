@@ -27,7 +27,8 @@ would make boxes x planes pairs, each carried through the reductions.  Such oper
 distance, ``s (w . c + e)`` with w its unit normal and s = -1 for a negated plane (eq. 10 with
 lam = 0: f / |grad f|), so the group's reduction (max for an AND, min for an OR) is one dense
 matrix product per batch of boxes, and enters the parent as a single operand present at every
-box: the same value the parent would reduce from the planes one by one (to rounding).
+box: the same value the parent would reduce from the planes one by one (to rounding; a plane
+with a bounded side, normal to an axis, is FALSE over the boxes that miss its box, as above).
 """
 
 from __future__ import annotations
@@ -151,12 +152,16 @@ class SparseDistance:
         self.group_nodes = np.arange(n, n_all)
         self.group_kind = np.array([self.kind[p] for p, _ in groups], dtype=np.int8)
         self.group_planes = []  # per group: (w (k, 3), e (k,)), signs folded in
+        self.group_bounded = []  # per group: (columns, their boxes' lo, hi, FALSE values)
         leaf_index = {int(node): j for j, node in enumerate(self.leaf_nodes)}
+        box_lo, box_hi = np.asarray(box_lo, dtype=np.float64), np.asarray(box_hi, dtype=np.float64)
         for _, members in groups:
-            lits = self.lit_first[[leaf_index[k] for k in members]]
-            w, e = plane_distance(self.mats[lits])
+            rows = np.array([leaf_index[k] for k in members], dtype=np.int64)
+            w, e = plane_distance(self.mats[self.lit_first[rows]])
             s = np.where([neg[k] for k in members], -1.0, 1.0)
             self.group_planes.append((w * s[:, None], e * s))
+            cols = np.flatnonzero(np.any(np.isfinite(box_lo[rows]) | np.isfinite(box_hi[rows]), axis=1))
+            self.group_bounded.append((cols, box_lo[rows[cols]], box_hi[rows[cols]], np.where(s[cols] < 0, -np.inf, np.inf)))
         used[self.root] = True
         self.tree_leaves = np.flatnonzero(used[self.leaf_nodes]) if n else np.zeros(0, dtype=np.int64)
         self.tree = BoxTree(np.asarray(box_lo)[self.tree_leaves], np.asarray(box_hi)[self.tree_leaves])
@@ -185,25 +190,36 @@ class SparseDistance:
                 out.append((i, members))
         return out
 
-    def _group_entries(self, centers):
+    def _group_entries(self, centers, reach):
         """(node, box, value) of every plane group at every box: the dense reductions."""
         nodes, cells, vals = [], [], []
         n_cells = len(centers)
-        for gid, kind, (w, e) in zip(self.group_nodes, self.group_kind, self.group_planes):
+        for gid, kind, (w, e), (cols, blo, bhi, false) in zip(self.group_nodes, self.group_kind, self.group_planes,
+                                                             self.group_bounded):
             step = max(1, GROUP_CHUNK // max(1, len(e)))
             out = np.empty(n_cells)
             reduce = np.max if kind == AND else np.min
             for s in range(0, n_cells, step):
-                out[s:s + step] = reduce(centers[s:s + step] @ w.T + e, axis=1)
+                v = centers[s:s + step] @ w.T + e
+                if len(cols):
+                    c, r = centers[s:s + step, None, :], reach[s:s + step, None, :]
+                    miss = np.any((c - r > bhi[None]) | (c + r < blo[None]), axis=2)
+                    v[:, cols] = np.where(miss, false[None], v[:, cols])
+                out[s:s + step] = reduce(v, axis=1)
             nodes.append(np.full(n_cells, gid))
             cells.append(np.arange(n_cells))
             vals.append(out)
         return nodes, cells, vals
 
+    @staticmethod
+    def _reach(centers, half):
+        """Half-sizes of the boxes padded as the box tree is queried."""
+        pad = 1e-9 * (1.0 + np.abs(centers).max(axis=1) + half.max(axis=1))
+        return half + pad[:, None]
+
     def _leaf_entries(self, centers, half):
         """(node, box, value) of every box and leaf read one by one whose boxes meet."""
-        pad = 1e-9 * (1.0 + np.abs(centers).max(axis=1) + half.max(axis=1))
-        reach = half + pad[:, None]
+        reach = self._reach(centers, half)
         cell, leaf = self.tree.query(centers - reach, centers + reach)
         leaf = self.tree_leaves[leaf]
         if not len(cell):
@@ -230,7 +246,7 @@ class SparseDistance:
         n_cells = len(centers)
         node, cell, val = self._leaf_entries(centers, half)
         keep = val != self.default[node]
-        gn, gc, gv = self._group_entries(centers)
+        gn, gc, gv = self._group_entries(centers, self._reach(centers, half))
         node = np.concatenate([node[keep]] + gn).astype(np.int64)
         cell = np.concatenate([cell[keep]] + gc).astype(np.int64)
         val = np.concatenate([val[keep]] + gv)

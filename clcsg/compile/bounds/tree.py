@@ -15,7 +15,7 @@ import numpy as np
 from ...errors import SceneError, UnboundedError
 from ...model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ...model.quadric import Quadric
-from .sparse_distance import SparseDistance, plane_rows
+from .sparse_distance import MIN_GROUP, SparseDistance, plane_rows
 from .exact_boxes import empty_box, halfspace_boxes, is_empty, kind_boxes, literals_box, meet, primitive_box
 
 # The graph is walked once (iteratively) into *instances*: a node under one accumulated world
@@ -463,12 +463,14 @@ class _Leaves:
         f = self.first[i]
         return self.unit[f:f + self.count[i]]
 
-    def sparse_distance(self) -> SparseDistance:
-        """The conservative distance of the graph over balls (:mod:`.sparse_distance`)."""
+    def sparse_distance(self, min_group: int = MIN_GROUP) -> SparseDistance:
+        """The conservative distance of the graph over balls (:mod:`.sparse_distance`; an
+        AND/OR's plane operands as one dense group when there are ``min_group`` of them, 0:
+        never)."""
         lam = np.linalg.eigvalsh(self.world[:, :3, :3]) if len(self.world) else np.zeros((0, 3))
         g = self.g
         return SparseDistance(g.kind, g.kids, g.neg, self.ids, self.first_array, self.count_array, self.world,
-                              lam[:, 0], lam[:, -1], self.own_lo[self.ids], self.own_hi[self.ids])
+                              lam[:, 0], lam[:, -1], self.own_lo[self.ids], self.own_hi[self.ids], min_group)
 
     def own(self, i):
         """The exact box of the primitive itself (not negated)."""
