@@ -13,6 +13,11 @@ leaf).  A convex mesh is one intersection of its face planes.  The planes are th
 of the triangles, so the surface is a set of planar patches clipped by the expression itself;
 no quadric and no triangle is approximated.
 
+A plane with no triangle in front of it splits off nothing: ``H- & S_back`` with every
+triangle behind, and that stays true in the back subset for every other such plane, so all the
+planes of a node's triangles that have none in front are taken at once, as one AND with the
+expression of the triangles on none of them (a convex mesh: one AND, one pass).
+
 Triangles that span a splitter are cut (their parts keep the triangle's plane, which only the
 node that takes that plane uses); triangles within ``eps`` of a splitter's plane are that
 plane's and leave the tree there.
@@ -107,6 +112,14 @@ def bsp_expression(tris: np.ndarray, planes: np.ndarray, normals, offsets, eps: 
     while stack:
         t, pl, slot, i = stack.pop()
         uniq = np.unique(pl)
+        behind = _behind_all(t, uniq, normals, offsets, eps)
+        if len(behind):
+            rest = _off_planes(t, pl, behind, normals, offsets, eps)
+            node = {"planes": behind, "sub": [None], "slot": slot, "i": i}
+            if rest.any():
+                stack.append((t[rest], pl[rest], node["sub"], 0))
+            pending.append(node)
+            continue
         p = int(uniq[_choose(uniq, normals, offsets, t, eps, rng)])
         (ft, fp), (bt, bp) = _partition(t, pl, p, normals, offsets, eps)
         node = {"plane": p, "front": [_FRONT_LEAF], "back": [_BACK_LEAF], "slot": slot, "i": i}
@@ -116,8 +129,41 @@ def bsp_expression(tris: np.ndarray, planes: np.ndarray, normals, offsets, eps: 
             stack.append((bt, bp, node["back"], 0))
         pending.append(node)
     for node in reversed(pending):
-        node["slot"][node["i"]] = _fold(node["plane"], node["back"][0], node["front"][0])
+        if "planes" in node:
+            items = [("plane", int(p)) for p in node["planes"]] + ([node["sub"][0]] if node["sub"][0] is not None else [])
+            node["slot"][node["i"]] = items[0] if len(items) == 1 else _flat("and", items)
+        else:
+            node["slot"][node["i"]] = _fold(node["plane"], node["back"][0], node["front"][0])
     return root[0]
+
+
+#: (point, plane) distances computed at once
+_CHUNK = 1 << 22
+
+
+def _behind_all(tris, uniq, normals, offsets, eps) -> np.ndarray:
+    """The planes of ``uniq`` with every corner of ``tris`` behind or on them."""
+    pts = np.unique(tris.reshape(-1, 3), axis=0)
+    step = max(1, _CHUNK // max(1, len(pts)))
+    out = []
+    for s in range(0, len(uniq), step):
+        u = uniq[s:s + step]
+        far = (pts @ normals[u].T - offsets[u]).max(axis=0)
+        out.append(u[far <= eps])
+    return np.concatenate(out)
+
+
+def _off_planes(tris, planes, chosen, normals, offsets, eps) -> np.ndarray:
+    """Mask of the triangles on none of the ``chosen`` planes (their own plane not chosen, and
+    not within ``eps`` of a chosen one)."""
+    keep = ~np.isin(planes, chosen)
+    idx = np.flatnonzero(keep)
+    step = max(1, _CHUNK // max(1, 3 * len(chosen)))
+    for s in range(0, len(idx), step):
+        k = idx[s:s + step]
+        d = np.abs(tris[k].reshape(-1, 3) @ normals[chosen].T - offsets[chosen]).reshape(len(k), 3, -1)
+        keep[k[np.any(np.all(d <= eps, axis=1), axis=1)]] = False
+    return keep
 
 
 def _fold(p, back, front):

@@ -33,7 +33,8 @@ class MeshError(SceneError):
 
 #: relative tolerance (of the mesh's size) for points on a plane
 PLANE_EPS = 1e-9
-#: the most distinct face planes a mesh operand may have (compiling 1,280 takes about a minute)
+#: the most distinct face planes a mesh operand may have (compiling is near linear in them, but
+#: sampling a convex mesh grows with cells x planes: 5,120 take about a minute)
 MAX_FACE_PLANES = 4096
 #: relative tolerance below which two triangles' planes are one face plane
 FACE_PLANE_EPS = 1e-6

@@ -401,15 +401,39 @@ def kind_boxes(nodes, matrices):
             lo[rows], hi[rows] = mid - half, mid + half
         elif kind in ("cylinder", "cone"):
             lo[rows], hi[rows] = _frusta_boxes(kind, params, lin[rows], t[rows])
+        elif kind == "halfspace":
+            lo[rows], hi[rows] = _halfspace_own_boxes(params, m[rows])
     done = np.isin(np.array([node.kind for node in nodes]), list(_CLOSED_FORM)) if n else np.zeros(0, bool)
-    size = 1.0 + np.abs(np.where(done[:, None], np.concatenate([lo, hi], axis=1), 0.0)).max(axis=1, initial=0.0)
-    # a box's sides are its planes: no padding, as literals_box meets a polytope's box with
-    # its vertices' (a face shared with a subtracted box must cut exactly)
-    pad = np.where(np.array([node.kind == "box" for node in nodes], dtype=bool), 0.0, _FEASIBLE * size)
+    size = 1.0 + np.abs(np.where(done[:, None] & np.isfinite(np.concatenate([lo, hi], axis=1)),
+                                 np.concatenate([lo, hi], axis=1), 0.0)).max(axis=1, initial=0.0)
+    # a box's (a half-space's) sides are its planes: no padding, as literals_box meets a
+    # polytope's box with its vertices' (a face shared with a subtracted box must cut exactly)
+    pad = np.where(np.array([node.kind in ("box", "halfspace") for node in nodes], dtype=bool), 0.0,
+                   _FEASIBLE * size)
     return lo - pad[:, None], hi + pad[:, None], done
 
 
-_CLOSED_FORM = ("box", "sphere", "ellipsoid", "cylinder", "cone")
+_CLOSED_FORM = ("box", "sphere", "ellipsoid", "cylinder", "cone", "halfspace")
+
+
+def _halfspace_own_boxes(params, m):
+    """Boxes of half-spaces n . x <= d under affine maps m (k, 4, 4): all space, except for a
+    world normal along one axis k (n_w = L^-T n, d_w = d + n_w . t), bounded on that side at
+    d_w / n_w,k."""
+    n = np.array([_vec3(p.get("normal", (0, 0, 1)), "normal") for p in params])
+    d = np.array([float(p.get("offset", 0.0)) for p in params])
+    with np.errstate(all="ignore"):
+        nw = np.einsum("nji,nj->ni", np.linalg.inv(m[:, :3, :3]), n)
+    dw = d + np.einsum("ni,ni->n", nw, m[:, :3, 3])
+    lo, hi = np.full((len(d), 3), -np.inf), np.full((len(d), 3), np.inf)
+    axis = np.sum(nw != 0.0, axis=1) == 1
+    for r in np.flatnonzero(axis):
+        k = int(np.flatnonzero(nw[r])[0])
+        if nw[r, k] > 0:
+            hi[r, k] = dw[r] / nw[r, k]
+        else:
+            lo[r, k] = dw[r] / nw[r, k]
+    return lo, hi
 
 
 def _frusta_boxes(kind, params, lin, t):
@@ -487,3 +511,27 @@ def kind_box(node, matrix):
     """:func:`kind_boxes` of one primitive: (lo, hi), or None for a kind without a closed form."""
     lo, hi, done = kind_boxes([node], np.asarray(matrix, dtype=np.float64)[None])
     return (lo[0], hi[0]) if done[0] else None
+
+
+def halfspace_boxes(w: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """Exact boxes (lo, hi) (n, 3) of the half-spaces w . x <= d (w (n, 3), d (n,)) within the
+    finite boxes [lo, hi] (n, 3), all at once; empty rows are (inf, -inf).
+
+    The set is a box cut by one plane, so along axis k its extent is an interval: with the
+    other coordinates at the corner minimizing their part of w . x (``rest``), x_k ranges over
+    the box's [lo_k, hi_k] where w_k x_k <= d - rest, i.e. up to (d - rest) / w_k for w_k > 0
+    and down to it for w_k < 0.  The set is empty when even the minimizing corner is outside
+    (by more than rounding: a plane touching the box leaves the touched face)."""
+    w, d = np.asarray(w, dtype=np.float64), np.asarray(d, dtype=np.float64)
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    part = np.minimum(w * lo, w * hi)
+    rest = part.sum(axis=1, keepdims=True) - part
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (d[:, None] - rest) / w
+    out_lo = np.where(w < 0, np.minimum(np.maximum(lo, t), hi), lo)
+    out_hi = np.where(w > 0, np.maximum(np.minimum(hi, t), lo), hi)
+    # a plane touching the box (to rounding) leaves the face it touches, not nothing
+    slack = 1e-12 * (np.abs(d) + np.abs(w).sum(axis=1) * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1))
+    empty = (part.sum(axis=1) > d + slack) | np.any(lo > hi, axis=1)
+    out_lo[empty], out_hi[empty] = np.inf, -np.inf
+    return out_lo, out_hi

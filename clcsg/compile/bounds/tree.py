@@ -15,8 +15,8 @@ import numpy as np
 from ...errors import SceneError, UnboundedError
 from ...model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ...model.quadric import Quadric
-from .sparse_distance import SparseDistance
-from .exact_boxes import empty_box, is_empty, kind_boxes, literals_box, meet, primitive_box
+from .sparse_distance import MIN_GROUP, SparseDistance, plane_rows
+from .exact_boxes import empty_box, halfspace_boxes, is_empty, kind_boxes, literals_box, meet, primitive_box
 
 # The graph is walked once (iteratively) into *instances*: a node under one accumulated world
 # transform M and one polarity (complements pushed to the leaves, De Morgan), memoized on
@@ -445,6 +445,12 @@ class _Leaves:
                 self.own_lo[i], self.own_hi[i] = _norm_box(primitive_box(self.quads(i)))
         self.convex = np.array([g.kind[i] == _LEAF and g.node[i].kind in CONVEX_KINDS for i in range(n)], dtype=bool)
         self.single = np.array([self.count.get(i, 0) == 1 for i in range(n)], dtype=bool)
+        self.leaf_index = np.zeros(n, dtype=np.int64)
+        self.leaf_index[self.ids] = np.arange(len(self.ids))
+        self.halfspace = np.zeros(n, dtype=bool)
+        if len(self.ids) and len(self.world):
+            first = np.minimum(self.first_array, len(self.world) - 1)
+            self.halfspace[self.ids] = self.single[self.ids] & plane_rows(self.world[first])
 
     def quads(self, i):
         qs = self._quads.get(i)
@@ -457,12 +463,14 @@ class _Leaves:
         f = self.first[i]
         return self.unit[f:f + self.count[i]]
 
-    def sparse_distance(self) -> SparseDistance:
-        """The conservative distance of the graph over balls (:mod:`.sparse_distance`)."""
+    def sparse_distance(self, min_group: int = MIN_GROUP) -> SparseDistance:
+        """The conservative distance of the graph over balls (:mod:`.sparse_distance`; an
+        AND/OR's plane operands as one dense group when there are ``min_group`` of them, 0:
+        never)."""
         lam = np.linalg.eigvalsh(self.world[:, :3, :3]) if len(self.world) else np.zeros((0, 3))
         g = self.g
         return SparseDistance(g.kind, g.kids, g.neg, self.ids, self.first_array, self.count_array, self.world,
-                              lam[:, 0], lam[:, -1], self.own_lo[self.ids], self.own_hi[self.ids])
+                              lam[:, 0], lam[:, -1], self.own_lo[self.ids], self.own_hi[self.ids], min_group)
 
     def own(self, i):
         """The exact box of the primitive itself (not negated)."""
@@ -484,6 +492,13 @@ class _Leaves:
         finite = np.all(np.isfinite(rlo) & np.isfinite(rhi), axis=1) & live
         single = ~self.convex[ids] & self.single[ids]
         slow = (~neg & ~holds & live) | (neg & finite & (self._may_cut(ids, rlo, rhi) | single))
+        half = slow & ~neg & finite & self.halfspace[ids]
+        if half.any():  # one batch: the many face planes of a mesh operand
+            k = np.flatnonzero(half)
+            m = self.world[self.first_array[self.leaf_index[ids[k]]]]
+            b = m[:, :3, 3]
+            lo[k], hi[k] = halfspace_boxes(2.0 * b, -m[:, 3, 3], rlo[k], rhi[k])
+            slow &= ~half
         for k in np.flatnonzero(slow):
             lo[k], hi[k] = self.box(int(ids[k]), (rlo[k], rhi[k]))
         return lo, hi
