@@ -14,7 +14,8 @@ reload), ``mesh`` (``clcsg mesh`` against ``openscad -o part.stl`` and manifold3
 CPU time and measured error on the everyday parts and the zoo), ``compile`` (host compile, tree
 bounds and root tapes against the number of primitives: a perforated plate and a union of
 spheres, 100 to 5,000 primitives), ``operands`` (meshes minus 20 cylinders: a CAD-like plate with
-bosses and tessellated spheres, against manifold3d's Boolean).  Each writes
+bosses and tessellated spheres, against manifold3d's Boolean), ``load`` (reading 0.5, 5 and 50 MB ``.csg`` and ``.json``
+scenes: CPU time and peak memory per byte of the file, ``openscad`` on the same ``.csg``).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -24,7 +25,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands")
+PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands", "load")
 
 
 def main(argv=None):

@@ -19,6 +19,9 @@ from ..errors import LimitError
 CSG_FACTOR = 30
 #: peak bytes of memory per byte of a .json scene file while it is read into a Scene
 JSON_FACTOR = 50
+#: the same for a .json scene read whole (``loads_json`` on a string, or a file with an error,
+#: read again to report its first error in document order)
+WHOLE_JSON_FACTOR = 50
 
 
 def available_memory() -> float:
