@@ -101,20 +101,30 @@ def fmt(v, limit: int = 60) -> str:
 
 
 # -- tokens -----------------------------------------------------------------------------------
+_NUM = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+_SNUM = rf"[+-]?{_NUM}"
+_ROW = rf"\[\s*{_SNUM}(?:\s*,\s*{_SNUM})*\s*\]"
 #: one token after any whitespace and comments (one match per token); no token group matched
-#: means the end of the text or a character no token starts with
+#: means the end of the text or a character no token starts with.  ``vec`` is a shortcut: a
+#: vector of signed numbers, or a vector of such vectors (a matrix), without comments or a
+#: trailing comma, is one token (CSG export writes every size, color and matrix so); any
+#: other vector is read token by token, to the same value
 _TOKEN_RE = re.compile(
-    r"""
+    rf"""
     (?:[ \t\r\n\f\v]+ | //[^\n]* | /\*.*?\*/)*
     (?:
-      (?P<num>(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)
+      (?P<num>{_NUM})
+    | (?P<vec>\[\s*(?:{_ROW}(?:\s*,\s*{_ROW})*|{_SNUM}(?:\s*,\s*{_SNUM})*)\s*\])
     | (?P<id>\$?[A-Za-z_][A-Za-z0-9_]*)
     | (?P<str>"(?:[^"\\]|\\.)*")
-    | (?P<punct>[()\[\]{},;=:!#%*+\-])
+    | (?P<punct>[()\[\]{{}},;=:!#%*+\-])
     )?
     """,
     re.VERBOSE | re.DOTALL | re.ASCII,
 )
+
+_SNUM_RE = re.compile(_SNUM, re.ASCII)
+_ROW_RE = re.compile(r"\[[^\[\]]*\]")
 
 _ESCAPES = {"n": "\n", "t": "\t", "r": "\r", '"': '"', "\\": "\\"}
 _ESCAPE_RE = re.compile(r"\\(x[0-9A-Fa-f]{2}|u[0-9A-Fa-f]{4}|U[0-9A-Fa-f]{6}|.)", re.DOTALL)
@@ -145,6 +155,8 @@ class Token(NamedTuple):
 def show(tok: Token) -> str:
     if tok.kind == "eof":
         return "end of file"
+    if tok.kind == "vec":  # as if the vector had been read token by token
+        return "'['"
     t = tok.text
     if len(t) > 24:
         t = t[:21] + "..."
@@ -236,6 +248,17 @@ _NUMBER_TEXT = 6
 _KEEP = 64
 
 
+def _number(numbers: dict, t: str) -> float:
+    """float(t), kept in ``numbers`` if the text is short (0.0 is not kept: ``get() or``
+    parses it again, which is cheap)."""
+    v = float(t)
+    if len(t) <= _NUMBER_TEXT and v:
+        if len(numbers) > _NUMBER_CACHE:
+            numbers.clear()
+        numbers[t] = v
+    return v
+
+
 def tokenize(src: Source):
     """The tokens of ``src``, one at a time (a generator: no list of tokens is built, and only
     the chunk being read is held), the last one of kind ``eof``.
@@ -271,14 +294,13 @@ def tokenize(src: Source):
         start = m.start(kind) + base
         t = m.group(kind)
         if kind == "num":
-            v = numbers.get(t)
-            if v is None:
-                v = float(t)
-                if len(t) <= _NUMBER_TEXT:
-                    if len(numbers) > _NUMBER_CACHE:
-                        numbers.clear()
-                    numbers[t] = v
-            yield Token("num", t, v, start)
+            yield Token("num", t, numbers.get(t) or _number(numbers, t), start)
+        elif kind == "vec":
+            if t.count("[") == 1:
+                v = [numbers.get(x) or _number(numbers, x) for x in _SNUM_RE.findall(t)]
+            else:
+                v = [[numbers.get(x) or _number(numbers, x) for x in _SNUM_RE.findall(row)] for row in _ROW_RE.findall(t)]
+            yield Token("vec", t, v, start)
         elif kind == "str":
             yield Token("str", t, _unescape(t[1:-1]), start)
         else:  # names and punctuation repeat: one string object each
@@ -534,6 +556,13 @@ class Parser:
         if kind == "num" or kind == "str":
             self.advance()
             return t.value
+        if kind == "vec":
+            v = t.value
+            if self.vdepth + (2 if type(v[0]) is list else 1) > self.max_depth:
+                pos = t.pos if self.vdepth + 1 > self.max_depth else t.pos + t.text.index("[", 1)
+                raise self.src.error(pos, f"values nested deeper than {self.max_depth} levels are not supported")
+            self.advance()
+            return v
         if kind == "punct" and (t.text == "-" or t.text == "+"):
             self.enter_value(t)
             self.advance()
