@@ -252,6 +252,7 @@ class _Evaluator(Constructions):
                     else:
                         f.nodes[-1].children.append(node)
                         if kind == OPEN:
+                            node.children = []
                             f.nodes.append(node)
                         continue
                 elif kind == CLOSE:
@@ -503,6 +504,7 @@ class _Collect:
     __slots__ = ("nodes", "ctx")
 
     def __init__(self, node, ctx):
+        node.children = []  # rebuilt from the events (a tree's nodes come with theirs)
         self.nodes = [node]
         self.ctx = ctx
 

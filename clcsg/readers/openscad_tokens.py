@@ -243,6 +243,9 @@ def _bad_character(src: Source, text: str, i: int, base: int) -> SceneError:
 #: the largest object of the reader)
 _NUMBER_CACHE = 4096
 _NUMBER_TEXT = 6
+#: a match ending this close to the buffer's end may be cut short by it (``1e`` of ``1e5``:
+#: the number matches ``1``), so it is retried with the next chunk appended
+_AHEAD = 8
 #: characters kept before the current token when the buffer is refilled (for messages that
 #: look back, such as the ``include <...>`` hint)
 _KEEP = 64
@@ -264,8 +267,10 @@ def tokenize(src: Source):
     the chunk being read is held), the last one of kind ``eof``.
 
     A token is matched in a buffer that holds the rest of the current chunk; a match that
-    reaches the buffer's end (a number, name, string or comment may go on in the next chunk)
-    or that finds no token is retried after the next chunk is appended."""
+    ends within :data:`_AHEAD` characters of the buffer's end (a number, name, string or
+    comment may go on in the next chunk) or that finds no token is retried after the next
+    chunk is appended.  A vector token cut by the buffer's end does not match: that vector is
+    read token by token, to the same value."""
     buf = src.read()
     base = 0  # file offset of buf[0]
     more = bool(buf)
@@ -276,7 +281,7 @@ def tokenize(src: Source):
     while True:
         m = match(buf, i)
         kind = m.lastgroup
-        if more and (kind is None or m.end() >= n):
+        if more and (kind is None or m.end() + _AHEAD > n):
             keep = max(0, i - _KEEP)
             nxt = src.read()
             if not nxt:
@@ -367,9 +372,9 @@ def events_of(nodes):
         if done:
             yield CLOSE, node
         elif node.has_children_block:
-            yield OPEN, node
             stack.append((node, True))
             stack.extend((c, False) for c in reversed(node.children))
+            yield OPEN, node  # (whoever gets it may rebuild node.children from the events)
         else:
             yield LEAF, node
 

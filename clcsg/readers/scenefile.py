@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from ..atomic import atomic_open
-from ..errors import SceneError, TransformError
+from ..errors import LimitError, SceneError, TransformError
 from ..model import solids
 from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.construction import Construction, first_color
@@ -116,7 +116,7 @@ def load_json(path) -> Scene:
         raise SceneError(f"{p}: cannot read: {e.strerror or e}") from None
     try:
         check_file(p, WHOLE_JSON_FACTOR)
-    except SceneError:  # too large to read whole: what the stream met is the message
+    except LimitError:  # too large to read whole: what the stream met is the message
         raise SceneError(_one_line(restart if restart.startswith(p) else f"{p}: {restart}")) from None
     try:
         with open(p, encoding="utf-8-sig") as f:
