@@ -46,6 +46,13 @@ module evaluates the nodes.  Semantics follow OpenSCAD's own evaluator (2021.01 
 The parser raises nothing but :class:`SceneError` for any input text: syntax errors read
 ``<file>:<line>:<col>: syntax error: expected ...``.
 
+Streaming: the text is read a chunk at a time and the parser yields an event per node (open,
+close, or a leaf); the evaluator builds the model from the events as they come and keeps only
+the nodes still open, so memory holds the model, not the file or its syntax tree.  Two things
+keep the meaning of a file read whole: a syntax error anywhere is the error reported (the
+evaluation's warnings are collected and emitted once the file has parsed), and a file with a
+root modifier (``!``, which makes one subtree the whole model) is parsed into a tree first.
+
 Deep nesting: the parser and the evaluator keep pending nodes on explicit stacks instead of
 recursing, so any nesting depth loads (1,000 nested ``difference()`` are an ordinary model;
 :data:`MAX_NODE_DEPTH`, 100,000 levels, only bounds memory for absurd input).  Values are

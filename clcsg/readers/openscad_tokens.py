@@ -1,7 +1,7 @@
 """The tokenizer and parser of OpenSCAD's CSG export (the syntax half of :mod:`clcsg.readers.openscad`).
 
-Grammar (a hand-written tokenizer and recursive-descent parser, no dependencies; the rules
-for statements and nodes run on an explicit stack, :func:`clcsg.readers.trampoline.run`)::
+Grammar (a hand-written tokenizer and parser, no dependencies; the rules for statements and
+nodes run on an explicit stack of open blocks)::
 
     file       := statement* EOF
     statement  := ';'  |  '{' statement* '}'  |  modifier* NAME '(' arguments ')' child
@@ -14,11 +14,13 @@ for statements and nodes run on an explicit stack, :func:`clcsg.readers.trampoli
     NUMBER     := digits ['.' digits] | '.' digits, with an optional exponent (1e-05, -3.5E+2)
     comments   := '// ...' to the end of the line, '/* ... */'
 
-:class:`Parser` turns the text into a list of :class:`Node` (name, arguments, children,
-modifiers, position); syntax errors are :class:`~clcsg.errors.SceneError` reading
-``<file>:<line>:<col>: syntax error: expected ...``.  Nodes nest up to ``max_node_depth``
-levels (explicit stacks, no recursion); values (vectors, signs) are parsed recursively and
-nest up to ``max_depth`` levels.
+:class:`Parser` turns the text, read a chunk at a time by :class:`Source`, into a stream of
+events: ``(OPEN, node)`` and ``(CLOSE, node)`` around a node's children, ``(LEAF, node)`` for a
+node without (a :class:`Node`: name, arguments, modifiers, position); :func:`tree` builds the
+syntax tree from the events where one is needed.  Syntax errors are
+:class:`~clcsg.errors.SceneError` reading ``<file>:<line>:<col>: syntax error: expected ...``.
+Nodes nest up to ``max_node_depth`` levels (an explicit stack, no recursion); values
+(vectors, signs) are parsed recursively and nest up to ``max_depth`` levels.
 """
 
 from __future__ import annotations
