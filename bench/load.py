@@ -175,12 +175,10 @@ def run(quick: bool = False, device=None) -> None:
                        "traced_peak_per_byte": traced["traced_peak"] / size,
                        "openscad_cpu_s": openscad_seconds(path) if ext == ".csg" else None}
                 rows.append(row)
+                write("load", {"environment": _environment(load), "files": rows})  # what is done so far
                 print(f"{ext} {size / 1e6:.1f} MB: {row['cpu_s']:.1f} s, peak {row['traced_peak_per_byte']:.1f}x "
                       f"(traced), {row['rss_growth_per_byte']:.1f}x (RSS)", flush=True)
-    env = load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(), "python": sys.version.split()[0],
-                     "openscad": _openscad_version(),
-                     "timer": "process CPU time of clcsg.load in a fresh process; openscad: CPU time of "
-                              "openscad -o out.csg in.csg (parse and tree evaluation, no geometry)"})
+    env = _environment(load)
     path = write("load", {"environment": env, "files": rows})
     print("| file | MB | primitives | load s | us / primitive | peak / size (tracemalloc) | peak RSS growth / size | openscad s |")
     print("|---|---|---|---|---|---|---|---|")
@@ -191,6 +189,13 @@ def run(quick: bool = False, device=None) -> None:
     if env["openscad"] is None:
         print("openscad is not installed: no peer column")
     print(f"wrote {path}")
+
+
+def _environment(load) -> dict:
+    return load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(), "python": sys.version.split()[0],
+                      "openscad": _openscad_version(),
+                      "timer": "process CPU time of clcsg.load in a fresh process; openscad: CPU time of "
+                               "openscad -o out.csg in.csg (parse and tree evaluation, no geometry)"})
 
 
 def _openscad_version() -> str | None:
