@@ -251,6 +251,8 @@ def _color(color):
     if len(c) != 4 or not all(0.0 <= x <= 1.0 for x in c):
         raise ParameterError(f"color must be 3 or 4 numbers in [0, 1], got {list(color)}")
     c = tuple(c)
+    if 0.0 in c and any(math.copysign(1.0, x) < 0.0 for x in c):
+        return c  # -0.0 == 0.0: not shared with the tuple that has 0.0
     if len(_COLORS) >= _COLOR_CACHE:
         _COLORS.clear()
     return _COLORS.setdefault(c, c)
