@@ -16,7 +16,8 @@ bounds and root tapes against the number of primitives: a perforated plate and a
 spheres, 100 to 5,000 primitives), ``operands`` (meshes minus 20 cylinders: a CAD-like plate with
 bosses and tessellated spheres, against manifold3d's Boolean), ``startup`` (the fixed cost of a
 process: ``clcsg --version`` and ``clcsg sample`` of two cubes against a bare numpy + pyopencl
-start).  Each writes
+start), ``load`` (reading 0.5, 5 and 50 MB ``.csg`` and ``.json`` scenes: CPU time and peak
+memory per byte of the file, ``openscad`` on the same ``.csg``).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -26,7 +27,8 @@ from __future__ import annotations
 import argparse
 import importlib
 
-PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands", "startup")
+PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands",
+         "startup", "load")
 
 
 def main(argv=None):

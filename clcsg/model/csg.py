@@ -65,24 +65,46 @@ class Primitive(Shape):
     """A named solid (box, sphere, ...) with parameters and a color.
 
     ``kind`` and ``params`` are what scene files store; :func:`clcsg.solids.literals` expands
-    them into the quadrics whose insides intersect to the solid.
+    them into the quadrics whose insides intersect to the solid.  The parameters are checked
+    (by expanding them) when the primitive is made, but the quadrics are kept only from the
+    first call of :meth:`quadrics` on: a model read from a large file holds its primitives'
+    parameters (a tuple of values, the names shared by all primitives of a kind) and not four
+    to six 4x4 matrices each.
     """
 
-    __slots__ = ("kind", "params", "color", "_quadrics")
+    __slots__ = ("kind", "_names", "_values", "color", "_quadrics")
 
     def __init__(self, kind: str, params: dict, color=None):
         from .solids import literals  # the registry lives in solids.py
 
+        params = dict(params)
+        literals(kind, params)  # raises the solid's own errors now, not when it is compiled
         self.kind = kind
-        self.params = dict(params)
+        names = tuple(params)
+        self._names = _NAMES.setdefault(names, names)
+        self._values = tuple(params.values())
         self.color = _color(color)
-        self._quadrics = tuple(literals(kind, self.params))
+        self._quadrics = None
+
+    @property
+    def params(self) -> dict:
+        """The parameters (a new dict each time: the primitive is immutable)."""
+        return dict(zip(self._names, self._values))
 
     def quadrics(self) -> tuple[Quadric, ...]:
-        return self._quadrics
+        q = self._quadrics
+        if q is None:
+            from .solids import literals
+
+            q = self._quadrics = tuple(literals(self.kind, self.params))
+        return q
 
     def __repr__(self) -> str:
         return f"{self.kind}({', '.join(f'{k}={_short(v)}' for k, v in self.params.items())})"
+
+
+#: one tuple of parameter names per distinct set (shared by the primitives that use it)
+_NAMES: dict = {}
 
 
 class Operation(Shape):
@@ -228,7 +250,17 @@ def _color(color):
         c.append(1.0)
     if len(c) != 4 or not all(0.0 <= x <= 1.0 for x in c):
         raise ParameterError(f"color must be 3 or 4 numbers in [0, 1], got {list(color)}")
-    return tuple(c)
+    c = tuple(c)
+    if 0.0 in c and any(math.copysign(1.0, x) < 0.0 for x in c):
+        return c  # -0.0 == 0.0: not shared with the tuple that has 0.0
+    if len(_COLORS) >= _COLOR_CACHE:
+        _COLORS.clear()
+    return _COLORS.setdefault(c, c)
+
+
+#: colors in use, one tuple each (a model's primitives mostly share a few colors)
+_COLORS: dict = {}
+_COLOR_CACHE = 4096
 
 
 def _short(v):

@@ -146,19 +146,30 @@ KINDS = {
 
 def parameters(kind: str) -> dict:
     """Parameter names of ``kind`` and their defaults (inspect.Parameter.empty if required)."""
-    sig = inspect.signature(KINDS[kind])
-    return {name: p.default for name, p in sig.parameters.items()}
+    return dict(_signature(kind)[0])
+
+
+def _signature(kind: str):
+    """(names and defaults, the set of names, the required names) of ``kind``, computed once."""
+    sig = _SIGNATURES.get(kind)
+    if sig is None:
+        known = {name: p.default for name, p in inspect.signature(KINDS[kind]).parameters.items()}
+        sig = _SIGNATURES[kind] = (known, frozenset(known), [k for k, d in known.items() if d is inspect.Parameter.empty])
+    return sig
+
+
+_SIGNATURES: dict = {}
 
 
 def literals(kind: str, params: dict) -> list[Quadric]:
     """Expand a primitive into the quadrics whose insides intersect to the solid."""
     if kind not in KINDS:
         raise ParameterError(f"unknown primitive kind {kind!r}; known: {', '.join(sorted(KINDS))}")
-    known = parameters(kind)
-    unknown = set(params) - set(known)
-    if unknown:
+    known, names, required = _signature(kind)
+    if not names.issuperset(params):
+        unknown = set(params) - names
         raise ParameterError(f"{kind} has no parameter {sorted(unknown)[0]!r}; it takes {', '.join(known)}")
-    missing = [k for k, d in known.items() if d is inspect.Parameter.empty and k not in params]
+    missing = [k for k in required if k not in params]
     if missing:
         raise ParameterError(f"{kind} needs parameter {missing[0]!r}")
     return KINDS[kind](**params)

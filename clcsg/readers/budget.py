@@ -1,9 +1,12 @@
 """The memory a reader will need, checked against the machine's before it starts.
 
-Reading a scene builds Python objects worth a multiple of the file's size (measured on
-generated files with ``resource.getrusage``: an OpenSCAD ``.csg`` export about
-:data:`CSG_FACTOR` times its size at peak, a ``.json`` scene about :data:`JSON_FACTOR`
-times).  :func:`check_input` raises a one-line :class:`~clcsg.errors.LimitError` (exit code
+Reading a scene builds Python objects worth a multiple of the file's size.  Both readers
+stream (the file is read a chunk or a JSON event at a time and the model built as it goes), so
+the peak is the model plus small buffers: measured on generated files of 0.5 to 50 MB
+(``python -m bench load``: ``tracemalloc`` and ``resource.getrusage``), an OpenSCAD ``.csg``
+export peaks at 3 to 6.5 times its size and a ``.json`` scene at 4 to 9 times; the factors
+below are those bounds, rounded up.  A ``.json`` text read whole (a string, or a file with an
+error, read again to report it in document order) costs :data:`WHOLE_JSON_FACTOR`.  :func:`check_input` raises a one-line :class:`~clcsg.errors.LimitError` (exit code
 5, like the sampler's resource guard) when that estimate passes the memory available now
 (``MemAvailable`` of ``/proc/meminfo``; no check where it is unknown), before a byte is
 parsed, instead of the machine swapping or the out-of-memory killer ending the process.
@@ -16,9 +19,12 @@ import os
 from ..errors import LimitError
 
 #: peak bytes of memory per byte of a .csg file while it is read into a Scene
-CSG_FACTOR = 30
+CSG_FACTOR = 10
 #: peak bytes of memory per byte of a .json scene file while it is read into a Scene
-JSON_FACTOR = 50
+JSON_FACTOR = 10
+#: the same for a .json scene read whole (``loads_json`` on a string, or a file with an error,
+#: read again to report its first error in document order)
+WHOLE_JSON_FACTOR = 50
 
 
 def available_memory() -> float:

@@ -46,6 +46,13 @@ module evaluates the nodes.  Semantics follow OpenSCAD's own evaluator (2021.01 
 The parser raises nothing but :class:`SceneError` for any input text: syntax errors read
 ``<file>:<line>:<col>: syntax error: expected ...``.
 
+Streaming: the text is read a chunk at a time and the parser yields an event per node (open,
+close, or a leaf); the evaluator builds the model from the events as they come and keeps only
+the nodes still open, so memory holds the model, not the file or its syntax tree.  Two things
+keep the meaning of a file read whole: a syntax error anywhere is the error reported (the
+evaluation's warnings are collected and emitted once the file has parsed), and a file with a
+root modifier (``!``, which makes one subtree the whole model) is parsed into a tree first.
+
 Deep nesting: the parser and the evaluator keep pending nodes on explicit stacks instead of
 recursing, so any nesting depth loads (1,000 nested ``difference()`` are an ordinary model;
 :data:`MAX_NODE_DEPTH`, 100,000 levels, only bounds memory for absurd input).  Values are
@@ -57,10 +64,10 @@ recurse per level either.
 """
 from __future__ import annotations
 
+import codecs
 import math
 import os
 from dataclasses import dataclass
-from types import GeneratorType
 
 import numpy as np
 
@@ -70,8 +77,8 @@ from ..model.scene import Scene
 from ..model.colors import NAMED_COLORS, ColorError, from_string
 from .budget import CSG_FACTOR, check_file, check_input
 from .openscad_2d import PARAMS_2D, REFUSED, Constructions
-from .openscad_tokens import SOURCE_HINT, UNDEF, Node, OpenScadWarning, Parser, Source, fmt, is_num
-from .trampoline import run
+from .openscad_tokens import (CLOSE, OPEN, SOURCE_HINT, UNDEF, Node, OpenScadWarning, Parser, Source, chunks_of, events_of,
+                              fmt, is_num)
 from ..model import solids
 
 __all__ = [
@@ -180,6 +187,8 @@ class _Evaluator(Constructions):
 
     # tree
     def shape(self, nodes: list[Node]) -> Shape | None:
+        """The model of a whole syntax tree: the first root (``!``) subtree if there is one,
+        else the union of the top-level nodes."""
         roots = []
         self._find_roots(nodes, roots)
         if roots:
@@ -191,8 +200,8 @@ class _Evaluator(Constructions):
                 )
             if root.background:
                 return None
-            return self.node(root, _Ctx())
-        return self.union_of(nodes, _Ctx())
+            return self.evaluate(events_of([root]))
+        return self.evaluate(events_of(nodes))
 
     def _find_roots(self, nodes, out):
         stack = list(reversed(nodes))
@@ -205,30 +214,7 @@ class _Evaluator(Constructions):
             if n.name not in _PRIMITIVES:  # OpenSCAD does not instantiate a primitive's children
                 stack.extend(reversed(n.children))
 
-    # The tree is evaluated without recursion: the n_* methods of nodes with children are
-    # generators that yield ``(child, ctx)`` requests, or the generator of children(), and get
-    # the child's shape sent back; node() drives them with an explicit stack (_trampoline).
-    def children(self, node: Node, ctx: _Ctx):
-        """The children that take part (not disabled, not background), evaluated."""
-        out = []
-        kids = node.children
-        for i, c in enumerate(kids):
-            if not (c.disabled or c.background):
-                out.append((yield (c, ctx)))
-            kids[i] = None  # evaluated: its syntax tree is garbage now (memory stays near the file's size)
-        return out
-
-    def union_of(self, nodes: list[Node], ctx: _Ctx) -> Shape | None:
-        shapes = [self.node(c, ctx) for c in nodes if not (c.disabled or c.background)]
-        return _union(shapes)
-
-    def node(self, node: Node, ctx: _Ctx) -> Shape | None:
-        r = self._start((node, ctx))
-        return run(r, self._start) if type(r) is GeneratorType else r
-
-    def _start(self, request):
-        """Evaluate a primitive, or return the generator that evaluates a node with children."""
-        node, ctx = request
+    def _method(self, node: Node):
         method = getattr(self, "n_" + node.name, None) if node.name in _PARAMS else None
         if method is None:
             if node.name in REFUSED:
@@ -236,19 +222,94 @@ class _Evaluator(Constructions):
             if node.name in _SOURCE_MODULES:
                 raise self.src.error(node.pos, f"{node.name}() is not supported: {SOURCE_HINT}")
             raise self.src.error(node.pos, f"{node.name}() is not supported: {_UNSUPPORTED_HINT}")
+        return method
+
+    # The model is evaluated from the parser's events as they come (streaming): a node with
+    # children gets a frame on an explicit stack while its children are read.  The n_* methods
+    # of the Booleans, transforms and colors are generators: they run up to ``kids = yield
+    # ctx`` when the node opens (argument warnings come first, as OpenSCAD gives them) and get
+    # their children's shapes (None for an empty child; disabled and background children are
+    # left out) when it closes.  Other nodes with children (extrusions, whose 2-D children are
+    # evaluated as a tree, and primitives, which ignore theirs) collect their subtree and are
+    # evaluated when they close.  Disabled and background subtrees are read and skipped.
+    def evaluate(self, events) -> Shape | None:
+        """The union of the top-level nodes of an event stream."""
+        top: list = []
+        stack: list = []
+        ctx0 = _Ctx()
+        for kind, node in events:
+            if stack:
+                f = stack[-1]
+                tf = type(f)
+                if tf is _Skip:
+                    if kind == OPEN:
+                        f.depth += 1
+                    elif kind == CLOSE:
+                        f.depth -= 1
+                        if f.depth == 0:
+                            stack.pop()
+                    continue
+                if tf is _Collect:
+                    if kind == CLOSE:
+                        f.nodes.pop()
+                        if f.nodes:
+                            continue
+                        stack.pop()
+                        r = self._method(node)(node, f.ctx)
+                    else:
+                        f.nodes[-1].children.append(node)
+                        if kind == OPEN:
+                            node.children = []
+                            f.nodes.append(node)
+                        continue
+                elif kind == CLOSE:
+                    stack.pop()
+                    r = _finish(f.gen, f.kids)
+                else:
+                    r = self._start(kind, node, f.ctx, stack)
+                    if r is _PENDING:
+                        continue
+            else:
+                r = self._start(kind, node, ctx0, stack)
+                if r is _PENDING:
+                    continue
+            if stack:
+                stack[-1].kids.append(r)
+            else:
+                top.append(r)
+        return _union(top)
+
+    def _start(self, kind, node: Node, ctx: _Ctx, stack: list):
+        """A node that opens or is a leaf: its shape, or _PENDING when it opened a frame
+        (skipped nodes give _PENDING too, and never a shape)."""
+        if node.disabled or node.background:
+            if kind == OPEN:
+                stack.append(_Skip())
+            return _PENDING
+        method = self._method(node)
+        if node.name in _STREAMED:
+            gen = method(node, ctx)
+            child_ctx = gen.send(None)  # runs up to the children
+            if kind == OPEN:
+                stack.append(_Frame(gen, child_ctx))
+                return _PENDING
+            return _finish(gen, [])
+        if kind == OPEN:
+            stack.append(_Collect(node, ctx))
+            return _PENDING
         return method(node, ctx)
 
     # Booleans and groups
     def n_group(self, node, ctx):
         self.bind(node)
-        return _union((yield self.children(node, ctx)))
+        return _union((yield ctx))
 
     n_union = n_group
     n_render = n_group
 
     def n_difference(self, node, ctx):
         self.bind(node)
-        kids = yield self.children(node, ctx)
+        kids = yield ctx
         if not kids or kids[0] is None:
             return None
         rest = [k for k in kids[1:] if k is not None]
@@ -256,7 +317,7 @@ class _Evaluator(Constructions):
 
     def n_intersection(self, node, ctx):
         self.bind(node)
-        kids = yield self.children(node, ctx)
+        kids = yield ctx
         if not kids or any(k is None for k in kids):
             return None
         return Intersection(kids) if len(kids) > 1 else kids[0]
@@ -264,7 +325,7 @@ class _Evaluator(Constructions):
     # transform
     def n_multmatrix(self, node, ctx):
         p = self.bind(node)
-        child = _union((yield self.children(node, ctx)))
+        child = _union((yield ctx))
         m = np.eye(4)
         raw = p.get("m")
         if isinstance(raw, list):
@@ -332,7 +393,7 @@ class _Evaluator(Constructions):
         # OpenSCAD: the outermost color wins (a color node only colors what has none yet)
         if color is not None and ctx.color is None:
             ctx = _Ctx(color)
-        return _union((yield self.children(node, ctx)))
+        return _union((yield ctx))
 
     # primitives
     def _no_children(self, node):
@@ -426,6 +487,52 @@ class _Evaluator(Constructions):
 
 
 
+_PENDING = object()
+
+#: nodes whose n_* method is a generator that gets its children's shapes
+_STREAMED = frozenset(("group", "union", "render", "difference", "intersection", "multmatrix", "color",
+                       "hull", "minkowski"))
+
+
+class _Frame:
+    """A streamed node whose children are being read: its generator and their shapes."""
+
+    __slots__ = ("gen", "ctx", "kids")
+
+    def __init__(self, gen, ctx):
+        self.gen = gen
+        self.ctx = ctx
+        self.kids: list = []
+
+
+class _Collect:
+    """A node evaluated from its subtree, which is being collected (``nodes``: the open ones)."""
+
+    __slots__ = ("nodes", "ctx")
+
+    def __init__(self, node, ctx):
+        node.children = []  # rebuilt from the events (a tree's nodes come with theirs)
+        self.nodes = [node]
+        self.ctx = ctx
+
+
+class _Skip:
+    """A disabled or background subtree being read (``depth``: its nodes still open)."""
+
+    __slots__ = ("depth",)
+
+    def __init__(self):
+        self.depth = 1
+
+
+def _finish(gen, kids):
+    try:
+        gen.send(kids)
+    except StopIteration as stop:
+        return stop.value
+    raise RuntimeError(f"{gen.__name__} asked for its children twice")  # pragma: no cover
+
+
 def _union(shapes: list) -> Shape | None:
     kept = [s for s in shapes if s is not None]
     if not kept:
@@ -436,6 +543,10 @@ def _union(shapes: list) -> Shape | None:
 
 
 # -- entry points -----------------------------------------------------------------------------
+#: characters per chunk the reader decodes and tokenizes at a time
+CHUNK = 1 << 16
+
+
 def parse_csg(text: str, source: str = "<string>", base: str | None = None) -> Scene:
     """Parse OpenSCAD CSG export ``text`` into a :class:`Scene`.
 
@@ -449,10 +560,22 @@ def parse_csg(text: str, source: str = "<string>", base: str | None = None) -> S
     if text.startswith("\ufeff"):
         text = text[1:]
     check_input(str(source), len(text), CSG_FACTOR)
+    return _read(chunks_of(text, CHUNK), str(source), source if base is None else base, "!" in text)
+
+
+def _read(chunks, source: str, base, has_root: bool) -> Scene:
+    """The scene of a text given in chunks.  Without a root modifier (``!``) anywhere the
+    model is evaluated while the text streams by; with one, the file is parsed into a tree
+    first (the first root decides what the rest of the file means)."""
+    src = Source(chunks, source)
     try:
-        src = Source(text, str(source))
-        nodes = Parser(src, MAX_NODE_DEPTH, MAX_DEPTH).parse_file()
-        shape = _Evaluator(src, source if base is None else base).shape(nodes)
+        parser = Parser(src, MAX_NODE_DEPTH, MAX_DEPTH)
+        evaluator = _Evaluator(src, base)
+        if has_root:
+            nodes = parser.parse_file()
+            shape = _evaluated(src, lambda: evaluator.shape(nodes))
+        else:
+            shape = _streamed(src, parser.events(), evaluator)
     except SceneError:
         raise
     except RecursionError:
@@ -460,22 +583,91 @@ def parse_csg(text: str, source: str = "<string>", base: str | None = None) -> S
     except MemoryError:
         raise SceneError(f"{source}: the model is too large to load") from None
     if shape is None:
-        src.warn(len(text), "the model is empty (nothing to render)")
+        src.warn(src.length, "the model is empty (nothing to render)")
+        src.flush()
         shape = Union([])
-    return Scene(shape, None, str(source))
+    return Scene(shape, None, source)
+
+
+def _evaluated(src: Source, evaluate):
+    try:
+        shape = evaluate()
+    except SceneError:
+        src.flush()  # the warnings before the error
+        raise
+    src.flush()
+    return shape
+
+
+def _streamed(src: Source, events, evaluator: _Evaluator):
+    """Evaluate while parsing; a syntax error anywhere in the file is what is reported (and
+    then no warnings), as when the whole file was parsed before it was evaluated."""
+    syntax = []
+
+    def checked():
+        try:
+            yield from events
+        except SceneError:
+            syntax.append(True)
+            raise
+
+    stream = checked()
+    try:
+        shape = evaluator.evaluate(stream)
+    except SceneError as e:
+        if syntax:
+            src.pending.clear()
+            raise
+        try:
+            for _ in stream:  # the rest of the file, for a syntax error that comes first
+                pass
+        except SceneError:
+            src.pending.clear()
+            raise
+        src.flush()
+        raise e from None
+    src.flush()
+    return shape
+
+
+def _file_chunks(f, size: int):
+    """The UTF-8 text of binary file ``f`` (undecodable bytes replaced, a BOM dropped) in
+    chunks of about ``size`` characters."""
+    decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
+    first = True
+    while True:
+        data = f.read(size)
+        text = decoder.decode(data, final=not data)
+        if first and text:
+            first = False
+            if text.startswith("\ufeff"):
+                text = text[1:]
+        if text:
+            yield text
+        if not data:
+            return
+
+
+def _has_root(f, size: int) -> bool:
+    """Whether binary file ``f`` holds a '!' (a root modifier, or one in a string or comment)."""
+    while True:
+        data = f.read(size)
+        if not data:
+            return False
+        if b"!" in data:
+            return True
 
 
 def load_csg(path) -> Scene:
-    """Load an OpenSCAD ``.csg`` file (``openscad -o model.csg model.scad``)."""
+    """Load an OpenSCAD ``.csg`` file (``openscad -o model.csg model.scad``), a chunk at a time."""
     p = os.fspath(path)
     check_file(p, CSG_FACTOR)
     try:
         with open(p, "rb") as f:
-            data = f.read()
+            has_root = _has_root(f, CHUNK)
+            f.seek(0)
+            return _read(_file_chunks(f, CHUNK), p, p, has_root)
     except FileNotFoundError:
         raise SceneError(f"{p}: no such file") from None
     except OSError as e:
         raise SceneError(f"{p}: cannot read: {e.strerror or e}") from None
-    text = data.decode("utf-8", errors="replace")
-    del data  # the text alone is kept while parsing
-    return parse_csg(text, source=p)

@@ -103,7 +103,7 @@ class Constructions:
     # -- 3-D hull and Minkowski sum -----------------------------------------------------------
     def n_hull(self, node, ctx):
         self.bind(node)
-        kids = [k for k in (yield self.children(node, ctx)) if k is not None]
+        kids = [k for k in (yield ctx) if k is not None]
         if not kids:
             return None
         try:
@@ -113,7 +113,7 @@ class Constructions:
 
     def n_minkowski(self, node, ctx):
         self.bind(node)
-        kids = [k for k in (yield self.children(node, ctx)) if k is not None]
+        kids = [k for k in (yield ctx) if k is not None]
         if not kids:
             return None
         try:

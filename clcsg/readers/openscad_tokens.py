@@ -1,7 +1,7 @@
 """The tokenizer and parser of OpenSCAD's CSG export (the syntax half of :mod:`clcsg.readers.openscad`).
 
-Grammar (a hand-written tokenizer and recursive-descent parser, no dependencies; the rules
-for statements and nodes run on an explicit stack, :func:`clcsg.readers.trampoline.run`)::
+Grammar (a hand-written tokenizer and parser, no dependencies; the rules for statements and
+nodes run on an explicit stack of open blocks)::
 
     file       := statement* EOF
     statement  := ';'  |  '{' statement* '}'  |  modifier* NAME '(' arguments ')' child
@@ -14,24 +14,29 @@ for statements and nodes run on an explicit stack, :func:`clcsg.readers.trampoli
     NUMBER     := digits ['.' digits] | '.' digits, with an optional exponent (1e-05, -3.5E+2)
     comments   := '// ...' to the end of the line, '/* ... */'
 
-:class:`Parser` turns the text into a list of :class:`Node` (name, arguments, children,
-modifiers, position); syntax errors are :class:`~clcsg.errors.SceneError` reading
-``<file>:<line>:<col>: syntax error: expected ...``.  Nodes nest up to ``max_node_depth``
-levels (explicit stacks, no recursion); values (vectors, signs) are parsed recursively and
-nest up to ``max_depth`` levels.
+:class:`Parser` turns the text, read a chunk at a time by :class:`Source`, into a stream of
+events: ``(OPEN, node)`` and ``(CLOSE, node)`` around a node's children, ``(LEAF, node)`` for a
+node without (a :class:`Node`: name, arguments, modifiers, position); :func:`tree` builds the
+syntax tree from the events where one is needed.  Syntax errors are
+:class:`~clcsg.errors.SceneError` reading ``<file>:<line>:<col>: syntax error: expected ...``.
+Nodes nest up to ``max_node_depth`` levels (an explicit stack, no recursion); values
+(vectors, signs) are parsed recursively and nest up to ``max_depth`` levels.
 """
 
 from __future__ import annotations
 
 import math
 import re
+from array import array
+from bisect import bisect_right
 from sys import intern
 import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numpy as np
+
 from ..errors import SceneError
-from .trampoline import run
 
 
 class OpenScadWarning(UserWarning):
@@ -98,20 +103,30 @@ def fmt(v, limit: int = 60) -> str:
 
 
 # -- tokens -----------------------------------------------------------------------------------
+_NUM = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+_SNUM = rf"[+-]?{_NUM}"
+_ROW = rf"\[\s*{_SNUM}(?:\s*,\s*{_SNUM})*\s*\]"
 #: one token after any whitespace and comments (one match per token); no token group matched
-#: means the end of the text or a character no token starts with
+#: means the end of the text or a character no token starts with.  ``vec`` is a shortcut: a
+#: vector of signed numbers, or a vector of such vectors (a matrix), without comments or a
+#: trailing comma, is one token (CSG export writes every size, color and matrix so); any
+#: other vector is read token by token, to the same value
 _TOKEN_RE = re.compile(
-    r"""
+    rf"""
     (?:[ \t\r\n\f\v]+ | //[^\n]* | /\*.*?\*/)*
     (?:
-      (?P<num>(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)
+      (?P<num>{_NUM})
+    | (?P<vec>\[\s*(?:{_ROW}(?:\s*,\s*{_ROW})*|{_SNUM}(?:\s*,\s*{_SNUM})*)\s*\])
     | (?P<id>\$?[A-Za-z_][A-Za-z0-9_]*)
     | (?P<str>"(?:[^"\\]|\\.)*")
-    | (?P<punct>[()\[\]{},;=:!#%*+\-])
+    | (?P<punct>[()\[\]{{}},;=:!#%*+\-])
     )?
     """,
     re.VERBOSE | re.DOTALL | re.ASCII,
 )
+
+_SNUM_RE = re.compile(_SNUM, re.ASCII)
+_ROW_RE = re.compile(r"\[[^\[\]]*\]")
 
 _ESCAPES = {"n": "\n", "t": "\t", "r": "\r", '"': '"', "\\": "\\"}
 _ESCAPE_RE = re.compile(r"\\(x[0-9A-Fa-f]{2}|u[0-9A-Fa-f]{4}|U[0-9A-Fa-f]{6}|.)", re.DOTALL)
@@ -142,6 +157,8 @@ class Token(NamedTuple):
 def show(tok: Token) -> str:
     if tok.kind == "eof":
         return "end of file"
+    if tok.kind == "vec":  # as if the vector had been read token by token
+        return "'['"
     t = tok.text
     if len(t) > 24:
         t = t[:21] + "..."
@@ -149,87 +166,158 @@ def show(tok: Token) -> str:
 
 
 class Source:
-    """The text plus offset -> (line, column) and message formatting.  Lines are counted only
-    when a message needs them (no index of line starts is kept: memory stays that of the text)."""
+    """The text, read a chunk at a time, and offset -> (line, column) for messages.
 
-    def __init__(self, text: str, name: str):
-        self.text = text
+    ``chunks`` is an iterable of str pieces of the text; :meth:`read` hands out the next one
+    and records where its lines start (an ``array`` of 8-byte offsets, about a fifth of the
+    text's size), so that a message can name the line and column of any offset after the text
+    itself is gone.  Warnings are collected in :attr:`pending` and emitted by :meth:`flush`:
+    the reader emits them once the whole file has parsed (a syntax error anywhere wins over
+    the evaluation's warnings, as when the file was parsed before it was evaluated).
+    """
+
+    def __init__(self, chunks, name: str):
         self.name = name
-        self._mark = (0, 1)  # (offset, its line): messages mostly come in text order
+        self._chunks = iter(chunks)
+        self.length = 0  # characters read so far
+        self._lines = array("q", [0])  # offsets of line starts
+        self.pending: list[tuple[str, int]] = []
+
+    def read(self) -> str:
+        """The next chunk of the text ('' at its end)."""
+        c = next(self._chunks, "")
+        if c:
+            if c.isascii():
+                codes = np.frombuffer(c.encode("ascii"), dtype=np.uint8)
+            else:
+                codes = np.frombuffer(c.encode("utf-32-le", "surrogatepass"), dtype=np.uint32)
+            starts = np.flatnonzero(codes == 10).astype(np.int64) + (self.length + 1)
+            self._lines.frombytes(starts.tobytes())
+            self.length += len(c)
+        return c
+
+    def line_col(self, pos: int) -> tuple[int, int]:
+        line = bisect_right(self._lines, pos)
+        return line, pos - self._lines[line - 1] + 1
 
     def where(self, pos: int) -> str:
-        at, line = self._mark if pos >= self._mark[0] else (0, 1)
-        line += self.text.count("\n", at, pos)
-        self._mark = (pos, line)
-        start = self.text.rfind("\n", 0, pos) + 1
-        return f"{self.name}:{line}:{pos - start + 1}"
+        line, col = self.line_col(pos)
+        return f"{self.name}:{line}:{col}"
 
     def error(self, pos: int, message: str) -> SceneError:
         return SceneError(one_line(f"{self.where(pos)}: {message}"))
 
     def warn(self, pos: int, message: str) -> None:
-        where = self.where(pos)
-        line = int(where.rsplit(":", 2)[1])
-        # reported at the .csg file's line, not at this module's
-        warnings.warn_explicit(one_line(f"{where}: {message}"), OpenScadWarning, self.name, line)
+        self.pending.append((one_line(f"{self.where(pos)}: {message}"), self.line_col(pos)[0]))
+
+    def flush(self) -> None:
+        """Emit the collected warnings (reported at the .csg file's line, not at this module's)."""
+        pending, self.pending = self.pending, []
+        for message, line in pending:
+            warnings.warn_explicit(message, OpenScadWarning, self.name, line)
+
+
+def chunks_of(text: str, size: int):
+    """``text`` in pieces of ``size`` characters."""
+    for i in range(0, len(text), size):
+        yield text[i:i + size]
 
 
 def one_line(s: str) -> str:
     return " ".join(s.splitlines())
 
 
-def _bad_character(src: Source, pos: int) -> SceneError:
-    text = src.text
-    c = text[pos]
-    if text.startswith("/*", pos):
+def _bad_character(src: Source, text: str, i: int, base: int) -> SceneError:
+    """The error for the character at ``text[i]`` (offset ``base + i`` of the file)."""
+    c = text[i]
+    pos = base + i
+    if text.startswith("/*", i):
         return src.error(pos, "syntax error: unterminated comment (missing '*/')")
     if c == '"':
         return src.error(pos, "syntax error: unterminated string (missing '\"')")
-    if c == "<" and text[max(0, pos - 64):pos].rstrip().endswith(("include", "use")):
+    if c == "<" and text[max(0, i - 64):i].rstrip().endswith(("include", "use")):
         return src.error(pos, f"syntax error: unexpected character '<': {SOURCE_HINT}")
     return src.error(pos, f"syntax error: unexpected character {c!r}")
 
 
-#: distinct number texts whose float objects the tokenizer shares
-_NUMBER_CACHE = 1 << 16
+#: distinct number texts whose float objects the tokenizer shares, and the longest such text
+#: (short numbers such as 0, 1 and 0.5 repeat; long ones rarely do and would make the cache
+#: the largest object of the reader)
+_NUMBER_CACHE = 4096
+_NUMBER_TEXT = 6
+#: a match ending this close to the buffer's end may be cut short by it (``1e`` of ``1e5``:
+#: the number matches ``1``), so it is retried with the next chunk appended
+_AHEAD = 8
+#: characters kept before the current token when the buffer is refilled (for messages that
+#: look back, such as the ``include <...>`` hint)
+_KEEP = 64
+
+
+def _number(numbers: dict, t: str) -> float:
+    """float(t), kept in ``numbers`` if the text is short (0.0 is not kept: ``get() or``
+    parses it again, which is cheap)."""
+    v = float(t)
+    if len(t) <= _NUMBER_TEXT and v:
+        if len(numbers) > _NUMBER_CACHE:
+            numbers.clear()
+        numbers[t] = v
+    return v
 
 
 def tokenize(src: Source):
-    """The tokens of ``src``, one at a time (a generator: no list of tokens is built), the
-    last one of kind ``eof``."""
-    text = src.text
-    n = len(text)
+    """The tokens of ``src``, one at a time (a generator: no list of tokens is built, and only
+    the chunk being read is held), the last one of kind ``eof``.
+
+    A token is matched in a buffer that holds the rest of the current chunk; a match that
+    ends within :data:`_AHEAD` characters of the buffer's end (a number, name, string or
+    comment may go on in the next chunk) or that finds no token is retried after the next
+    chunk is appended.  A vector token cut by the buffer's end does not match: that vector is
+    read token by token, to the same value."""
+    buf = src.read()
+    base = 0  # file offset of buf[0]
+    more = bool(buf)
     match = _TOKEN_RE.match
     numbers: dict[str, float] = {}  # one float object per distinct number text (0, 1, ... repeat a lot)
-    pos = 0
+    i = 0
+    n = len(buf)
     while True:
-        m = match(text, pos)
+        m = match(buf, i)
         kind = m.lastgroup
+        if more and (kind is None or m.end() + _AHEAD > n):
+            keep = max(0, i - _KEEP)
+            nxt = src.read()
+            if not nxt:
+                more = False
+            buf = buf[keep:] + nxt
+            base += keep
+            i -= keep
+            n = len(buf)
+            continue
         if kind is None:
             end = m.end()
             if end >= n:
                 break
-            raise _bad_character(src, end)
-        start = m.start(kind)
+            raise _bad_character(src, buf, end, base)
+        start = m.start(kind) + base
         t = m.group(kind)
         if kind == "num":
-            v = numbers.get(t)
-            if v is None:
-                if len(numbers) > _NUMBER_CACHE:
-                    numbers.clear()
-                v = numbers[t] = float(t)
-            yield Token("num", t, v, start)
+            yield Token("num", t, numbers.get(t) or _number(numbers, t), start)
+        elif kind == "vec":
+            if t.count("[") == 1:
+                v = [numbers.get(x) or _number(numbers, x) for x in _SNUM_RE.findall(t)]
+            else:
+                v = [[numbers.get(x) or _number(numbers, x) for x in _SNUM_RE.findall(row)] for row in _ROW_RE.findall(t)]
+            yield Token("vec", t, v, start)
         elif kind == "str":
             yield Token("str", t, _unescape(t[1:-1]), start)
         else:  # names and punctuation repeat: one string object each
             t = intern(t)
             yield Token(kind, t, t, start)
-        pos = m.end()
-    yield Token("eof", "", None, n)
+        i = m.end()
+    yield Token("eof", "", None, base + n)
 
 
-
-# -- syntax tree ------------------------------------------------------------------------------
+# -- nodes and events -------------------------------------------------------------------------
 @dataclass(slots=True)
 class Arg:
     name: str | None
@@ -241,7 +329,7 @@ class Arg:
 class Node:
     name: str
     args: list[Arg]
-    children: list["Node"]
+    children: list["Node"]  # filled only where a tree is built (tree(), 2-D profiles)
     modifiers: str  # subset of "*%!#" in source order
     pos: int  # of the name
     has_children_block: bool = False  # children were given (block or single statement)
@@ -259,41 +347,94 @@ class Node:
         return "!" in self.modifiers
 
 
+#: event kinds: a node with children starts and ends, a node without children
+OPEN, CLOSE, LEAF = 0, 1, 2
+
+
+def tree(events) -> list[Node]:
+    """The nodes of an event stream as a tree (``children`` filled in)."""
+    top: list[Node] = []
+    stack = [top]
+    for kind, node in events:
+        if kind == LEAF:
+            stack[-1].append(node)
+        elif kind == OPEN:
+            stack[-1].append(node)
+            stack.append(node.children)
+        else:
+            stack.pop()
+    return top
+
+
+def events_of(nodes):
+    """The event stream of a tree of nodes (the inverse of :func:`tree`)."""
+    stack = [(n, False) for n in reversed(nodes)]
+    while stack:
+        node, done = stack.pop()
+        if done:
+            yield CLOSE, node
+        elif node.has_children_block:
+            stack.append((node, True))
+            stack.extend((c, False) for c in reversed(node.children))
+            yield OPEN, node  # (whoever gets it may rebuild node.children from the events)
+        else:
+            yield LEAF, node
+
+
+class _Block:
+    """An open '{' (``owner``: the node it belongs to, or None for a bare block)."""
+
+    __slots__ = ("owner",)
+
+    def __init__(self, owner):
+        self.owner = owner
+
+
+class _Single:
+    """A node whose one child is a statement without braces."""
+
+    __slots__ = ("owner",)
+
+    def __init__(self, owner):
+        self.owner = owner
+
+
 class Parser:
-    """``Parser(src, max_node_depth, max_depth).parse_file()``: the nodes of a CSG export."""
+    """``Parser(src, max_node_depth, max_depth).events()``: the nodes of a CSG export as a
+    stream of ``(OPEN, node)``, ``(CLOSE, node)`` and ``(LEAF, node)`` events, in file order.
+
+    The statement rules run on an explicit stack of open blocks (no recursion, and no
+    syntax tree: a node's children are not kept), so memory follows the nesting depth of the
+    file, not its size."""
 
     def __init__(self, src: Source, max_node_depth: int, max_depth: int):
         self.src = src
         self._tokens = tokenize(src)
-        self._ahead = [next(self._tokens)]  # the current token and at most one more
+        self.tok = next(self._tokens)  # the current token
+        self._next = None  # the token after it, once peek() has read it
         self.depth = 0  # nested nodes
         self.vdepth = 0  # nested vectors and signs
-        self.limits = {"depth": max_node_depth, "vdepth": max_depth}
+        self.max_node_depth = max_node_depth
+        self.max_depth = max_depth
 
     # token helpers
-    @property
-    def tok(self) -> Token:
-        return self._ahead[0]
-
     def peek(self) -> Token:
         """The token after the current one."""
-        ahead = self._ahead
-        if len(ahead) == 1:
-            ahead.append(ahead[0] if ahead[0].kind == "eof" else next(self._tokens))
-        return ahead[1]
+        if self._next is None:
+            self._next = self.tok if self.tok.kind == "eof" else next(self._tokens)
+        return self._next
 
     def is_punct(self, p: str, tok: Token | None = None) -> bool:
         t = self.tok if tok is None else tok
         return t.kind == "punct" and t.text == p
 
     def advance(self) -> Token:
-        ahead = self._ahead
-        t = ahead[0]
+        t = self.tok
         if t.kind != "eof":
-            if len(ahead) == 1:
-                ahead[0] = next(self._tokens)
+            if self._next is None:
+                self.tok = next(self._tokens)
             else:
-                del ahead[0]
+                self.tok, self._next = self._next, None
         return t
 
     def fail(self, what: str, tok: Token | None = None):
@@ -301,66 +442,84 @@ class Parser:
         raise self.src.error(t.pos, f"syntax error: expected {what}, got {show(t)}")
 
     def expect(self, p: str, what: str | None = None) -> Token:
-        if not self.is_punct(p):
+        t = self.tok
+        if t.kind != "punct" or t.text != p:
             self.fail(what or repr(p))
         return self.advance()
 
-    def enter(self, tok: Token, what: str = "depth"):
-        d = getattr(self, what) + 1
-        setattr(self, what, d)
-        limit = self.limits[what]
-        if d > limit:
-            kind = "nodes" if what == "depth" else "values"
-            raise self.src.error(tok.pos, f"{kind} nested deeper than {limit} levels are not supported")
+    def enter(self, tok: Token):
+        self.depth += 1
+        if self.depth > self.max_node_depth:
+            raise self.src.error(tok.pos, f"nodes nested deeper than {self.max_node_depth} levels are not supported")
 
-    def leave(self, what: str = "depth"):
-        setattr(self, what, getattr(self, what) - 1)
+    def enter_value(self, tok: Token):
+        self.vdepth += 1
+        if self.vdepth > self.max_depth:
+            raise self.src.error(tok.pos, f"values nested deeper than {self.max_depth} levels are not supported")
 
     # grammar
-    #
-    # statements(), statement() and instantiation() are the recursive-descent rules written as
-    # generators: where a rule needs a sub-rule it yields the sub-rule's generator and run()
-    # sends back its result.  run() keeps the pending rules on an explicit stack, so the
-    # nesting depth of the input is bounded by max_node_depth, not by Python's recursion limit
-    # (``yield from`` would recurse in C once per level).
-    def parse_file(self) -> list[Node]:
-        nodes = run(self.statements(end=None))
-        if self.tok.kind != "eof":  # pragma: no cover - statements() stops only at eof here
-            self.fail("a statement")
-        return nodes
-
-    def statements(self, end: str | None):
-        out: list[Node] = []
+    def events(self):
+        """The events of the whole file (a generator)."""
+        stack: list = [_Block(None)]  # the file is a block that ends at eof
         while True:
+            top = stack[-1]
             t = self.tok
-            if t.kind == "eof":
-                if end is not None:
-                    self.fail(repr(end))
-                return out
-            if end is not None and self.is_punct(end):
-                return out
-            if self.is_punct(";"):  # statement() inlined for the commonest cases
-                self.advance()
-            elif t.kind == "id":
-                out.append((yield self.instantiation()))
+            if type(top) is _Single:
+                node = self.header()
             else:
-                out.extend((yield self.statement()))
+                if t.kind == "punct":
+                    p = t.text
+                    if p == ";":
+                        self.advance()
+                        continue
+                    if p == "}" and len(stack) > 1:
+                        self.advance()
+                        stack.pop()
+                        self.depth -= 1
+                        if top.owner is None:
+                            continue
+                        yield CLOSE, top.owner
+                        while type(stack[-1]) is _Single:  # their one child is complete
+                            yield CLOSE, stack.pop().owner
+                            self.depth -= 1
+                        continue
+                    if p == "{":
+                        self.enter(t)
+                        self.advance()
+                        stack.append(_Block(None))
+                        continue
+                elif t.kind == "eof":
+                    if len(stack) > 1:
+                        self.fail(repr("}"))
+                    return
+                node = self.header()
+            c = self.tok
+            if c.kind == "punct" and c.text == ";":
+                self.advance()
+                yield LEAF, node
+                while type(stack[-1]) is _Single:
+                    yield CLOSE, stack.pop().owner
+                    self.depth -= 1
+            elif c.kind == "punct" and c.text == "{":
+                self.enter(c)
+                self.advance()
+                node.has_children_block = True
+                yield OPEN, node
+                stack.append(_Block(node))
+            elif c.kind == "id" or (c.kind == "punct" and c.text in "*%!#"):
+                self.enter(c)
+                node.has_children_block = True
+                yield OPEN, node
+                stack.append(_Single(node))
+            else:
+                self.fail(f"';' or '{{' after {node.name}(...)")
 
-    def statement(self):
-        t = self.tok
-        if self.is_punct(";"):
-            self.advance()
-            return []
-        if self.is_punct("{"):
-            self.enter(t)
-            self.advance()
-            body = yield self.statements("}")
-            self.expect("}")
-            self.leave()
-            return body
-        return [(yield self.instantiation())]
+    def parse_file(self) -> list[Node]:
+        """The nodes of the whole file as a tree."""
+        return tree(self.events())
 
-    def instantiation(self):
+    def header(self) -> Node:
+        """``modifier* NAME '(' arguments ')'``: a node without its children."""
         mods = ""
         while self.tok.kind == "punct" and self.tok.text in "*%!#":
             mods += self.advance().text
@@ -378,56 +537,48 @@ class Parser:
         self.expect("(", f"'(' after {name}")
         args = self.arguments()
         self.expect(")", f"',' or ')' in the arguments of {name}()")
-        node = Node(name, args, [], mods, t.pos)
-        c = self.tok
-        if self.is_punct(";"):
-            self.advance()
-        elif self.is_punct("{"):
-            self.enter(c)
-            self.advance()
-            node.children = yield self.statements("}")
-            self.expect("}")
-            self.leave()
-            node.has_children_block = True
-        elif c.kind == "id" or (c.kind == "punct" and c.text in "*%!#"):
-            self.enter(c)
-            node.children = [(yield self.instantiation())]
-            self.leave()
-            node.has_children_block = True
-        else:
-            self.fail(f"';' or '{{' after {name}(...)")
-        return node
+        return Node(name, args, [], mods, t.pos)
 
     def arguments(self) -> list[Arg]:
         args: list[Arg] = []
-        while not self.is_punct(")"):
+        while True:
             t = self.tok
+            if t.kind == "punct" and t.text == ")":
+                return args
             if t.kind == "id" and self.is_punct("=", self.peek()):
                 self.advance()
                 self.advance()
                 args.append(Arg(t.text, self.value(), t.pos))
             else:
                 args.append(Arg(None, self.value(), t.pos))
-            if self.is_punct(","):
+            t = self.tok
+            if t.kind == "punct" and t.text == ",":
                 self.advance()
-            elif not self.is_punct(")"):
+            elif not (t.kind == "punct" and t.text == ")"):
                 self.fail("',' or ')'")
-        return args
 
     def value(self):
         t = self.tok
-        if self.is_punct("-") or self.is_punct("+"):
-            self.enter(t, "vdepth")
+        kind = t.kind
+        if kind == "num" or kind == "str":
+            self.advance()
+            return t.value
+        if kind == "vec":
+            v = t.value
+            if self.vdepth + (2 if type(v[0]) is list else 1) > self.max_depth:
+                pos = t.pos if self.vdepth + 1 > self.max_depth else t.pos + t.text.index("[", 1)
+                raise self.src.error(pos, f"values nested deeper than {self.max_depth} levels are not supported")
+            self.advance()
+            return v
+        if kind == "punct" and (t.text == "-" or t.text == "+"):
+            self.enter_value(t)
             self.advance()
             v = self.value()
-            self.leave("vdepth")
+            self.vdepth -= 1
             if not is_num(v):
                 raise self.src.error(t.pos, f"syntax error: {t.text!r} must be followed by a number")
             return -v if t.text == "-" else v
-        if t.kind in ("num", "str"):
-            self.advance()
-            return t.value
-        if t.kind == "id":
+        if kind == "id":
             word = t.text
             if word in ("true", "false"):
                 self.advance()
@@ -446,12 +597,12 @@ class Parser:
                 f"syntax error: expected a value (number, string, vector, true, false or undef), "
                 f"got {show(t)}: variables and expressions do not occur in CSG export",
             )
-        if self.is_punct("["):
-            self.enter(t, "vdepth")
+        if kind == "punct" and t.text == "[":
+            self.enter_value(t)
             self.advance()
             if self.is_punct("]"):
                 self.advance()
-                self.leave("vdepth")
+                self.vdepth -= 1
                 return []
             first = self.value()
             if self.is_punct(":"):
@@ -464,21 +615,21 @@ class Parser:
                 else:
                     r = Range(first, 1.0, second)
                 self.expect("]", "']' closing the range")
-                self.leave("vdepth")
+                self.vdepth -= 1
                 return r
             items = [first]
             while True:
-                if self.is_punct(","):
+                t = self.tok
+                if t.kind == "punct" and t.text == ",":
                     self.advance()
                     if self.is_punct("]"):
                         break
                     items.append(self.value())
-                elif self.is_punct("]"):
+                elif t.kind == "punct" and t.text == "]":
                     break
                 else:
                     self.fail("',' or ']' in the vector")
             self.advance()
-            self.leave("vdepth")
+            self.vdepth -= 1
             return items
         self.fail("a value (number, string, vector, true, false or undef)")
-

@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from ..atomic import atomic_open
-from ..errors import SceneError, TransformError
+from ..errors import LimitError, SceneError, TransformError
 from ..model import solids
 from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.construction import Construction, first_color
@@ -68,7 +68,7 @@ from ..model.polyhedron import polyhedron
 from ..model.revolve import revolve
 from ..model.scene import Scene
 from ..model.colors import ColorError, parse_color
-from .budget import JSON_FACTOR, check_file, check_input
+from .budget import JSON_FACTOR, WHOLE_JSON_FACTOR, check_file, check_input
 from .mesh_files import load_mesh, resolve
 from ..model.surfels import Surfels
 from .profile_json import profile_from_json
@@ -95,9 +95,30 @@ SAVE_DEPTH = 100
 
 # -- public API ---------------------------------------------------------------------------------
 def load_json(path) -> Scene:
-    """Load and validate a ``.json`` scene file."""
+    """Load and validate a ``.json`` scene file.
+
+    A valid file is read as a stream, node by node (:mod:`clcsg.readers.scene_stream`:
+    memory holds the model, not the document); a file with a problem is then read whole, so
+    that the first problem in document order is the one reported."""
+    from .scene_stream import Restart, StreamLoader
+
     p = os.fspath(path)
     check_file(p, JSON_FACTOR)
+    try:
+        with open(p, "rb") as f:
+            if f.read(3) != b"\xef\xbb\xbf":
+                f.seek(0)
+            return StreamLoader(p).load(f)
+    except Restart as e:
+        restart = e.reason
+    except FileNotFoundError:
+        raise SceneError(f"{p}: no such file") from None
+    except OSError as e:
+        raise SceneError(f"{p}: cannot read: {e.strerror or e}") from None
+    try:
+        check_file(p, WHOLE_JSON_FACTOR)
+    except LimitError:  # too large to read whole: what the stream met is the message
+        raise SceneError(_one_line(restart if restart.startswith(p) else f"{p}: {restart}")) from None
     try:
         with open(p, encoding="utf-8-sig") as f:
             text = f.read()
@@ -119,7 +140,7 @@ def parse_json(text: str, source: str = "<string>") -> Any:
     """Strict JSON parsing: syntax errors with line and column; NaN, Infinity and duplicate
     keys are kept as markers that :func:`scene_from_dict` reports with their JSON path."""
     if isinstance(text, str):
-        check_input(source, len(text), JSON_FACTOR)
+        check_input(source, len(text), WHOLE_JSON_FACTOR)
     try:
         return json.loads(text, parse_constant=_BadConstant, object_pairs_hook=_object)
     except json.JSONDecodeError as e:
@@ -285,6 +306,8 @@ class _Loader:
         return run(self._node(v, path))
 
     def _node(self, v, path):
+        if isinstance(v, Shape):  # built already (the streaming loader builds nodes as they end)
+            return v
         self.validate(self.schema.node_errors(v), path)
         kind = next(k for k in v if k not in NODE_EXTRA_KEYS)
         kpath = key(path, kind)

@@ -3,8 +3,8 @@ sub-rules, run by an explicit stack.
 
 A rule ``x = yield sub`` runs the generator ``sub`` to completion and gets its return value
 back as ``x``; the pending generators live on a list, so arbitrarily deep call chains need no
-Python (or C) stack.  The OpenSCAD parser and evaluator and the scene-file loader and saver
-walk graphs of any depth this way (``yield from`` would recurse in C once per level).
+Python (or C) stack.  The scene-file loader and saver walk graphs of any depth this way
+(``yield from`` would recurse in C once per level).
 """
 
 from __future__ import annotations
