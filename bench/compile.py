@@ -31,28 +31,16 @@ from clcsg.compile.bounds.estimates import estimate_regions
 from clcsg.compile.bounds.regions import quadric_regions
 from clcsg.compile.bounds.tree import tree_bounds
 from clcsg.compile.quadric_frames import principal_frame
-from clcsg.model.csg import Difference, Union
+from clcsg.model.csg import Union
 from clcsg.model.quadric import Quadric
 from clcsg.model.scene import Scene
 from clcsg.sampling.sampler import root_tasks
 
 from .common import Load, fmt, write
+from .zoo import plate
 
 PLATE_GRIDS = (7, 10, 16, 22, 32, 50)
 UNION_SIZES = (100, 250, 500, 1000, 2500, 5000)
-
-
-def plate(n: int, size: float = 200.0, thick: float = 5.0):
-    """A plate minus an n x n grid of holes, each a cylinder and a cone chamfer at the top."""
-    pitch = size / n
-    r = 0.3 * pitch
-    parts = [clcsg.box((size, size, thick))]
-    for i in range(n):
-        for j in range(n):
-            x, y = -size / 2 + (i + 0.5) * pitch, -size / 2 + (j + 0.5) * pitch
-            parts.append(clcsg.cylinder(thick + 2, r, (x, y, 0)))
-            parts.append(clcsg.cone(0.6 * r + 0.01, 1.5 * r, r - 0.01, (x, y, thick / 2 - 0.3 * r)))
-    return Difference(parts)
 
 
 def spheres(n: int):

@@ -214,7 +214,7 @@ def many_leaf_scenes(quick=False):
     import numpy as np
 
     from clcsg.rendering.camera import Camera
-    from .compile import plate
+    from .zoo import plate
 
     out = []
     for n in (16,) if quick else (16, 50):

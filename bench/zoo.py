@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import clcsg
+from clcsg.model.csg import Difference
 from clcsg.model.solids import _make
 
 ZOO_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "zoo")
@@ -249,3 +250,16 @@ def write_all(directory=ZOO_DIR) -> list[tuple[str, int, int]]:
 if __name__ == "__main__":
     for name, got, want in write_all():
         print(f"{name:12s} {got:3d} unique quadrics (paper row: {want}){'' if got == want else '  MISMATCH'}")
+
+
+def plate(n: int, size: float = 200.0, thick: float = 5.0):
+    """A plate minus an n x n grid of holes, each a cylinder and a cone chamfer at the top."""
+    pitch = size / n
+    r = 0.3 * pitch
+    parts = [clcsg.box((size, size, thick))]
+    for i in range(n):
+        for j in range(n):
+            x, y = -size / 2 + (i + 0.5) * pitch, -size / 2 + (j + 0.5) * pitch
+            parts.append(clcsg.cylinder(thick + 2, r, (x, y, 0)))
+            parts.append(clcsg.cone(0.6 * r + 0.01, 1.5 * r, r - 0.01, (x, y, thick / 2 - 0.3 * r)))
+    return Difference(parts)
