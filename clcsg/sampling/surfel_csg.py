@@ -187,6 +187,23 @@ def sample(scene, radius, device=None, **options) -> Samples:
     return sample_with_surfels(sc, radius, lambda s: sampler.sample(s, radius, ctx, **options))
 
 
+def marker_tape(scene: Scene, radius: float) -> tuple[SurfelTape, np.ndarray]:
+    """(tape, bound): the tape of ``scene`` with each point operand replaced by its marker
+    plane, and the bound of :func:`proxy_scene` grown by ``radius`` (the runs' bound)."""
+    ops = operands(scene.shape)
+    keys, clouds = list(ops), list(ops.values())
+    bound = proxy_scene(scene).compile().bound
+    bound = np.array([bound[0] - radius, bound[1] + radius])
+    markers = {k: _marker(j, bound) for j, k in enumerate(keys)}
+    tape = compile_shape(substitute(scene.shape, lambda key, s: markers[key]), bound, scene.source)
+    literal = {id(i.node): (i.index, i.literals[0]) for i in tape.instances if id(i.node) in map(id, markers.values())}
+    tape = SurfelTape(**{f: getattr(tape, f) for f in Tape.__dataclass_fields__}, operands=clouds,
+                      markers=[literal[id(markers[k])][1] for k in keys])
+    tape.first_surfel_quadric = tape.n_quadrics
+    tape.operand_instances = [literal[id(markers[k])][0] for k in keys]
+    return tape, bound
+
+
 def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
     """Samples of ``scene`` (with point operands) at ``radius``; ``run(scene)`` is the device
     sampler (:func:`clcsg.sample` with the caller's options) on a scene without them."""
@@ -195,16 +212,8 @@ def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
     if len(keys) > MAX_OPERANDS:
         raise LimitError(f"{scene.source}: {len(keys)} point operands; at most {MAX_OPERANDS} are sampled "
                          f"(2^k sampler runs)")
-    bound = proxy_scene(scene).compile().bound
-    bound = np.array([bound[0] - radius, bound[1] + radius])
-    markers = {k: _marker(j, bound) for j, k in enumerate(keys)}
-    tape = compile_shape(substitute(scene.shape, lambda key, s: markers[key]), bound, scene.source)
-    literal = {id(i.node): (i.index, i.literals[0]) for i in tape.instances if id(i.node) in map(id, markers.values())}
-    marker_inst = [literal[id(markers[k])][0] for k in keys]
-    tape = SurfelTape(**{f: getattr(tape, f) for f in Tape.__dataclass_fields__}, operands=clouds,
-                      markers=[literal[id(markers[k])][1] for k in keys])
-    tape.first_surfel_quadric = tape.n_quadrics
-    tape.operand_instances = marker_inst
+    tape, bound = marker_tape(scene, radius)
+    marker_inst = tape.operand_instances
     prog = ClipPrograms(tape)
     inst_index = {(id(i.node), i.matrix.tobytes()): i.index for i in tape.instances}
     parts: list = []
