@@ -299,7 +299,13 @@ def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: ClipPrograms
         near = np.zeros(len(c), dtype=bool)
         scene_q = [q for q in range(tape.n_quadrics) if q not in {mq for mq, _ in tape.markers}]
         for q in scene_q:
-            near |= np.abs(Quadric(tape.quadrics[q]).distance(c)) < r
+            m = tape.quadrics[q]
+            if not np.any(m[:3, :3]):  # a plane: value 2 m[:3, 3] . x + m[3, 3], linear
+                g = 2.0 * m[:3, 3]
+                d = (c @ g + m[3, 3]) / np.linalg.norm(g)
+            else:
+                d = Quadric(m).distance(c)
+            near |= np.abs(d) < r
         for i, s in enumerate(tape.operands):
             if i != j:
                 near |= cls[i][0] < r + 2.0 * float(s.radii.max())
