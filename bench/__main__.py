@@ -14,10 +14,12 @@ reload), ``mesh`` (``clcsg mesh`` against ``openscad -o part.stl`` and manifold3
 CPU time and measured error on the everyday parts and the zoo), ``compile`` (host compile, tree
 bounds and root tapes against the number of primitives: a perforated plate and a union of
 spheres, 100 to 5,000 primitives), ``operands`` (meshes minus 20 cylinders: a CAD-like plate with
-bosses and tessellated spheres, against manifold3d's Boolean), ``startup`` (the fixed cost of a
-process: ``clcsg --version`` and ``clcsg sample`` of two cubes against a bare numpy + pyopencl
-start), ``load`` (reading 0.5, 5 and 50 MB ``.csg`` and ``.json`` scenes: CPU time and peak
-memory per byte of the file, ``openscad`` on the same ``.csg``).  Each writes
+bosses and tessellated spheres, against manifold3d's Boolean), ``surfels`` (a sphere of 50k to
+500k surfels minus a box: sampling split by phase and rendering, against manifold3d on an
+icosphere), ``startup`` (the fixed cost of a process: ``clcsg --version`` and ``clcsg sample`` of
+two cubes against a bare numpy + pyopencl start), ``load`` (reading 0.5, 5 and 50 MB ``.csg`` and
+``.json`` scenes: CPU time and peak memory per byte of the file, ``openscad`` on the same
+``.csg``).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -27,8 +29,9 @@ from __future__ import annotations
 import argparse
 import importlib
 
+MODULES = {"surfels": "surfel_operands"}
 PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands",
-         "startup", "load")
+         "surfels", "startup", "load")
 
 
 def main(argv=None):
@@ -46,7 +49,7 @@ def main(argv=None):
 
     if a.out:
         common.RESULTS = a.out
-    module = importlib.import_module(f".{a.part}", __package__)
+    module = importlib.import_module(f".{MODULES.get(a.part, a.part)}", __package__)
     kw = {"gallery": True} if a.gallery and a.part == "render" else {}
     if a.part == "bounds" and a.programs is not None:
         kw["programs"] = a.programs

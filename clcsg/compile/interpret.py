@@ -156,7 +156,7 @@ def leaf_over_region(matrix, sign: int, center, axes, rho: float) -> int:
     return _F if d >= reach else _T if d <= -reach else _LIVE
 
 
-def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=None):
+def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=None, leaf_state=None):
     """The tape simplified over a region: (ops, decided, evaluations).
 
     The region is the ball (center, radius), or with ``axes`` (3, 3) the oriented box
@@ -170,6 +170,8 @@ def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=Non
     instruction reads are dropped.  ``decided``: +1 if both sides are known and equal over the
     whole ball (no surface on the self quadric there), -1 if known and different (all of the
     quadric inside the ball is surface), 0 otherwise.  A constant tape is one CONST row.
+    ``leaf_state(quadric, sign)``, if given, is a leaf's state over the region in place of
+    :func:`leaf_over_region` (states found for many regions at once).
     """
     axes = np.zeros((3, 3)) if axes is None else axes
     ops = np.asarray(ops)
@@ -183,7 +185,7 @@ def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=Non
                 emitted.append((op, out, a, b))
                 continue
             evaluations += 1
-            st = leaf_over_region(quadrics[a], b, center, axes, radius)
+            st = leaf_over_region(quadrics[a], b, center, axes, radius) if leaf_state is None else leaf_state(a, b)
             state[out] = (st, st, st)
             if st == _LIVE:
                 emitted.append((op, out, a, b))

@@ -61,6 +61,11 @@ _TRUE, _FALSE = 0, 1  # expression ids of the constants
 _LEAF, _AND, _OR, _CONST = "leaf", "and", "or", "const"
 
 
+#: batches of at least this many quadrics are first checked for rows with no near neighbour
+_BATCH = 256
+#: irregular weights of unit 1-norm: the projection that finds those rows
+_PROJECTION = np.array([0.131, -0.097, 0.113, 0.089, -0.071, 0.103, 0.083, -0.119, 0.107, 0.087])
+_PROJECTION = _PROJECTION / np.abs(_PROJECTION).sum()
 _ROWS = np.array([i for i, _ in COEFFICIENT_INDEX])
 _COLS = np.array([j for _, j in COEFFICIENT_INDEX])
 
@@ -98,8 +103,33 @@ class QuadricTable:
         # rounding boundary: those axes need the neighbouring keys too
         near = np.abs(scaled - keys) > 0.25
         keys = keys.astype(np.int64)
-        return [(self._find(c, tuple(k), np.flatnonzero(nr)), int(sg))
-                for c, k, nr, sg in zip(coef, keys.tolist(), near, sign)]
+        if len(coef) < _BATCH:
+            return [(self._find(c, tuple(k), np.flatnonzero(nr)), int(sg))
+                    for c, k, nr, sg in zip(coef, keys.tolist(), near, sign)]
+        out = []
+        for c, k, nr, sg, alone in zip(coef, keys.tolist(), near, sign.tolist(), self._isolated(coef).tolist()):
+            if alone:  # no quadric of the table or the batch within the tolerance: a new entry
+                self.coefs.append(c)
+                self._grid.setdefault(tuple(k), []).append(len(self.coefs) - 1)
+                out.append((len(self.coefs) - 1, sg))
+            else:
+                out.append((self._find(c, tuple(k), np.flatnonzero(nr)), sg))
+        return out
+
+    def _isolated(self, coef) -> np.ndarray:
+        """Per row of ``coef``: is no other row and no table entry within SAME_QUADRIC of it?
+        Two such quadrics are within SAME_QUADRIC of each other on the projection onto
+        ``_PROJECTION`` (unit 1-norm), so a row alone on it (with twice that margin) is alone."""
+        proj = coef @ _PROJECTION
+        old = np.array(self.coefs, dtype=np.float64).reshape(-1, 10) @ _PROJECTION
+        allp = np.concatenate([old, proj])
+        order = np.argsort(allp, kind="stable")
+        gaps = np.diff(allp[order])
+        close = np.zeros(len(allp), dtype=bool)
+        tight = gaps <= 2 * SAME_QUADRIC
+        close[order[:-1][tight]] = True
+        close[order[1:][tight]] = True
+        return ~close[len(old):]
 
     def _find(self, coef, key, near=range(10)) -> int:
         for k in self._neighbours(key, near):

@@ -57,7 +57,9 @@ class Surfels(Shape):
         if self._tree is None:
             from scipy.spatial import cKDTree  # an optional dependency: only point operands need it
 
-            self._tree = cKDTree(self.points)
+            # boxes not shrunk to the points: for a query point far inside a closed cloud
+            # (all centers at nearly one distance) the search visits about 9x fewer nodes
+            self._tree = cKDTree(self.points, compact_nodes=False)
         return self._tree
 
     def box(self) -> tuple[np.ndarray, np.ndarray]:
@@ -81,19 +83,24 @@ class Surfels(Shape):
     def nearest(self, x, k: int = 1):
         """(distances, indices) of the ``k`` centers nearest to each point of ``x`` (m, 3)."""
         k = min(k, len(self))
-        d, i = self.tree.query(np.asarray(x, dtype=np.float64).reshape(-1, 3), k=k)
+        d, i = self.tree.query(np.asarray(x, dtype=np.float64).reshape(-1, 3), k=k, workers=-1)
         return d.reshape(len(d), k), i.reshape(len(i), k)
 
     def contains(self, x) -> np.ndarray:
         """Membership of the points ``x`` (m, 3) by the two-nearest-surfel rule (eqs. 3-5)."""
+        return self.classify(x)[2]
+
+    def classify(self, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(distance, index) of the center nearest to each point of ``x`` (m, 3) and its
+        membership (:meth:`contains`), from one query of the two nearest."""
         x = np.asarray(x, dtype=np.float64).reshape(-1, 3)
-        _, idx = self.nearest(x, 2)
+        d, idx = self.nearest(x, 2)
         c, n = self.points[idx], self.normals[idx]  # (m, k, 3)
         behind = np.einsum("mkj,mkj->mk", x[:, None, :] - c, n) <= 0.0
         if idx.shape[1] == 1:
-            return behind[:, 0]
+            return d[:, 0], idx[:, 0], behind[:, 0]
         concave = concave_pairs(c[:, 0], n[:, 0], c[:, 1], n[:, 1])
-        return np.where(concave, behind[:, 0] | behind[:, 1], behind[:, 0] & behind[:, 1])
+        return d[:, 0], idx[:, 0], np.where(concave, behind[:, 0] | behind[:, 1], behind[:, 0] & behind[:, 1])
 
 
 def concave_pairs(c1, n1, c2, n2) -> np.ndarray:

@@ -36,7 +36,9 @@ radius from every center of an operand does not meet that operand's surface.
 from __future__ import annotations
 
 import itertools
+import time
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,6 +61,19 @@ from .surfel_clips import ClipPrograms
 
 #: 2^k device runs for k point operands
 MAX_OPERANDS = 4
+
+#: the phases of :func:`sample_with_surfels` whose process CPU seconds ``stats["host_cpu_s"]`` holds
+PHASES = ("device_runs", "classify", "keep", "clips", "combine")
+
+
+@contextmanager
+def _timed(stats: dict, phase: str):
+    t = time.process_time()
+    try:
+        yield
+    finally:
+        cpu = stats.setdefault("host_cpu_s", dict.fromkeys(PHASES, 0.0))
+        cpu[phase] += time.process_time() - t
 
 
 def operands(shape) -> dict:
@@ -172,6 +187,23 @@ def sample(scene, radius, device=None, **options) -> Samples:
     return sample_with_surfels(sc, radius, lambda s: sampler.sample(s, radius, ctx, **options))
 
 
+def marker_tape(scene: Scene, radius: float) -> tuple[SurfelTape, np.ndarray]:
+    """(tape, bound): the tape of ``scene`` with each point operand replaced by its marker
+    plane, and the bound of :func:`proxy_scene` grown by ``radius`` (the runs' bound)."""
+    ops = operands(scene.shape)
+    keys, clouds = list(ops), list(ops.values())
+    bound = proxy_scene(scene).compile().bound
+    bound = np.array([bound[0] - radius, bound[1] + radius])
+    markers = {k: _marker(j, bound) for j, k in enumerate(keys)}
+    tape = compile_shape(substitute(scene.shape, lambda key, s: markers[key]), bound, scene.source)
+    literal = {id(i.node): (i.index, i.literals[0]) for i in tape.instances if id(i.node) in map(id, markers.values())}
+    tape = SurfelTape(**{f: getattr(tape, f) for f in Tape.__dataclass_fields__}, operands=clouds,
+                      markers=[literal[id(markers[k])][1] for k in keys])
+    tape.first_surfel_quadric = tape.n_quadrics
+    tape.operand_instances = [literal[id(markers[k])][0] for k in keys]
+    return tape, bound
+
+
 def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
     """Samples of ``scene`` (with point operands) at ``radius``; ``run(scene)`` is the device
     sampler (:func:`clcsg.sample` with the caller's options) on a scene without them."""
@@ -180,16 +212,8 @@ def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
     if len(keys) > MAX_OPERANDS:
         raise LimitError(f"{scene.source}: {len(keys)} point operands; at most {MAX_OPERANDS} are sampled "
                          f"(2^k sampler runs)")
-    bound = proxy_scene(scene).compile().bound
-    bound = np.array([bound[0] - radius, bound[1] + radius])
-    markers = {k: _marker(j, bound) for j, k in enumerate(keys)}
-    tape = compile_shape(substitute(scene.shape, lambda key, s: markers[key]), bound, scene.source)
-    literal = {id(i.node): (i.index, i.literals[0]) for i in tape.instances if id(i.node) in map(id, markers.values())}
-    marker_inst = [literal[id(markers[k])][0] for k in keys]
-    tape = SurfelTape(**{f: getattr(tape, f) for f in Tape.__dataclass_fields__}, operands=clouds,
-                      markers=[literal[id(markers[k])][1] for k in keys])
-    tape.first_surfel_quadric = tape.n_quadrics
-    tape.operand_instances = marker_inst
+    tape, bound = marker_tape(scene, radius)
+    marker_inst = tape.operand_instances
     prog = ClipPrograms(tape)
     inst_index = {(id(i.node), i.matrix.tobytes()): i.index for i in tape.instances}
     parts: list = []
@@ -197,7 +221,7 @@ def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
     stats = {"point_operands": len(keys), "surfels": int(sum(len(s) for s in clouds)), "runs": 0}
     for sigma in itertools.product((0, 1), repeat=len(keys)):
         folded = substitute(scene.shape, lambda key, s: everything() if sigma[keys.index(key)] else nothing())
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _timed(stats, "device_runs"):
             warnings.simplefilter("ignore")  # a run whose solid is empty (S = nothing in S - C) is normal
             got = run(Scene(folded, bound, scene.source))
         stats["runs"] += 1
@@ -208,107 +232,120 @@ def sample_with_surfels(scene: Scene, radius: float, run) -> Samples:
         tape.folded[sigma] = got.tape
         n_regs = max(n_regs, got.tape.n_regs)
         if len(got):
-            parts.append(_quadric_samples(got, sigma, clouds, prog, inst_index))
+            parts.append(_quadric_samples(got, sigma, clouds, prog, inst_index, stats))
     for j, cloud in enumerate(clouds):
-        parts.append(_surfel_samples(j, cloud, tape, prog, marker_inst[j]))
-    return _combined(parts, tape, prog, n_regs, radius, stats)
+        parts.append(_surfel_samples(j, cloud, tape, prog, marker_inst[j], stats))
+    with _timed(stats, "combine"):
+        return _combined(parts, tape, prog, n_regs, radius, stats)
 
 
-def _partners(clouds, points):
-    """Per operand: (distance, index) of the surfel nearest to each point."""
-    out = []
-    for s in clouds:
-        d, i = s.nearest(points, 1)
-        out.append((d[:, 0], i[:, 0]))
-    return out
+def _classified(clouds, points, skip=-1):
+    """Per operand (None for operand ``skip``): (distance, index) of the surfel nearest to each
+    point and the point's membership, from one k-d tree query per operand."""
+    return [None if j == skip else s.classify(points) for j, s in enumerate(clouds)]
 
 
-def _quadric_samples(got: Samples, sigma, clouds, prog: ClipPrograms, inst_index) -> dict:
+def _slices(first, count) -> np.ndarray:
+    """The row indices first[i] .. first[i] + count[i] - 1 of every i, concatenated."""
+    total = int(count.sum())
+    starts = np.repeat(np.cumsum(count) - count, count)
+    return np.repeat(first, count) + (np.arange(total) - starts)
+
+
+def _quadric_samples(got: Samples, sigma, clouds, prog: ClipPrograms, inst_index, stats) -> dict:
     """The samples of the run on F_sigma that are on the solid's surface, in combined numbering."""
     p = got.positions
-    keep = np.ones(len(p), dtype=bool)
-    for j, s in enumerate(clouds):
-        keep &= s.contains(p) == bool(sigma[j])
-    remap = np.array([prog.table.add(m)[0] for m in got.tape.quadrics], dtype=np.int32)
-    insts = np.array([inst_index.get((id(i.node), i.matrix.tobytes()), -1) for i in got.tape.instances] + [-1],
-                     dtype=np.int32)
-    partners = _partners(clouds, p)
-    near = np.zeros(len(p), dtype=bool)
-    for (d, _), s in zip(partners, clouds):
-        near |= d < got.radii + 2.0 * float(s.radii.max())
-    first = np.zeros(len(p), dtype=np.int32)
-    count = np.zeros(len(p), dtype=np.int32)
-    quadrics = remap[got.quadrics]
-    # a splat near a cloud is decided by its clip program, not by its center: its center may
-    # be on the wrong side while part of its disk covers the surface
-    keep |= near
-    for i in np.flatnonzero(keep):
-        if near[i]:
-            planes = [(s.points[idx[i]], s.normals[idx[i]]) for (_, idx), s in zip(partners, clouds)]
-            got_clip = prog.clip(p[i], got.radii[i], int(quadrics[i]), planes)
-            if got_clip is None:
-                keep[i] = False
-                continue
-            first[i], count[i] = got_clip
-        elif got.clip_count[i]:
-            rows = got.clip_ops[got.clip_first[i]: got.clip_first[i] + got.clip_count[i]].copy()
+    with _timed(stats, "classify"):
+        cls = _classified(clouds, p)
+        keep = np.ones(len(p), dtype=bool)
+        near = np.zeros(len(p), dtype=bool)
+        for j, ((d, _, inside), s) in enumerate(zip(cls, clouds)):
+            keep &= inside == bool(sigma[j])
+            near |= d < got.radii + 2.0 * float(s.radii.max())
+    with _timed(stats, "clips"):
+        remap = np.array([prog.table.add(m)[0] for m in got.tape.quadrics], dtype=np.int32)
+        insts = np.array([inst_index.get((id(i.node), i.matrix.tobytes()), -1) for i in got.tape.instances] + [-1],
+                         dtype=np.int32)
+        first = np.zeros(len(p), dtype=np.int32)
+        count = np.zeros(len(p), dtype=np.int32)
+        quadrics = remap[got.quadrics]
+        # a splat near a cloud is decided by its clip program, not by its center: its center may
+        # be on the wrong side while part of its disk covers the surface
+        keep |= near
+        sel = np.flatnonzero(near)
+        planes = [(s.points[c[1][sel]], s.normals[c[1][sel]]) for c, s in zip(cls, clouds)]
+        first[sel], count[sel], keep[sel] = prog.clip_many(p[sel], got.radii[sel], quadrics[sel], planes)
+        far = np.flatnonzero(keep & ~near & (got.clip_count > 0))
+        if len(far):
+            rows = got.clip_ops[_slices(got.clip_first[far], got.clip_count[far])].copy()
             leaf = rows[:, 0] == OP_LEAF
             rows[leaf, 2] = remap[rows[leaf, 2]]
-            first[i], count[i] = prog.add_rows(rows)
+            start, _ = prog.add_rows(rows)
+            count[far] = got.clip_count[far]
+            first[far] = start + np.cumsum(count[far]) - count[far]
     k = keep
     return dict(positions=p[k], normals=got.normals[k], radii=got.radii[k], quadrics=quadrics[k],
                 signs=got.signs[k], primitives=insts[got.primitives[k]], clip_first=first[k], clip_count=count[k])
 
 
-def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: ClipPrograms, inst: int) -> dict:
+def _surfel_samples(j: int, cloud: Surfels, tape: SurfelTape, prog: ClipPrograms, inst: int, stats) -> dict:
     """The surfels of operand j on the solid's surface, as plane samples."""
     c, n, r = cloud.points, cloud.normals, cloud.radii
-    inside, outside = _sides(tape, j, c)
-    keep = inside != outside
-    partners = _partners(tape.operands, c)
-    near = np.zeros(len(c), dtype=bool)
-    scene_q = [q for q in range(tape.n_quadrics) if q not in {mq for mq, _ in tape.markers}]
-    for q in scene_q:
-        near |= np.abs(Quadric(tape.quadrics[q]).distance(c)) < r
-    for i, s in enumerate(tape.operands):
-        if i != j:
-            near |= partners[i][0] < r + 2.0 * float(s.radii.max())
-    solid_inside = inside.copy()
-    late = np.flatnonzero(near & ~keep)  # centers off the surface: a point of the disk may be on it
-    if len(late):
-        found, side = _disk_sides(tape, j, c[late], n[late], r[late])
-        keep[late[found]] = True
-        solid_inside[late[found]] = side[found]
-    quadrics = np.full(len(c), -1, dtype=np.int32)
-    csign = np.ones(len(c), dtype=np.int32)
-    quadrics[keep], csign[keep] = prog.planes(c[keep], n[keep])
-    signs = np.where(solid_inside, csign, -csign).astype(np.int32)
-    normals = np.where(solid_inside[:, None], n, -n)
-    first = np.zeros(len(c), dtype=np.int32)
-    count = np.zeros(len(c), dtype=np.int32)
-    for i in np.flatnonzero(keep & near):
-        planes = [(c[i], n[i]) if k == j else (s.points[partners[k][1][i]], s.normals[partners[k][1][i]])
+    with _timed(stats, "classify"):
+        cls = _classified(tape.operands, c, skip=j)
+        inside, outside = _sides(tape, j, c, cls)
+    with _timed(stats, "keep"):
+        keep = inside != outside
+        near = np.zeros(len(c), dtype=bool)
+        scene_q = [q for q in range(tape.n_quadrics) if q not in {mq for mq, _ in tape.markers}]
+        for q in scene_q:
+            m = tape.quadrics[q]
+            if not np.any(m[:3, :3]):  # a plane: value 2 m[:3, 3] . x + m[3, 3], linear
+                g = 2.0 * m[:3, 3]
+                d = (c @ g + m[3, 3]) / np.linalg.norm(g)
+            else:
+                d = Quadric(m).distance(c)
+            near |= np.abs(d) < r
+        for i, s in enumerate(tape.operands):
+            if i != j:
+                near |= cls[i][0] < r + 2.0 * float(s.radii.max())
+        solid_inside = inside.copy()
+        late = np.flatnonzero(near & ~keep)  # centers off the surface: a point of the disk may be on it
+        if len(late):
+            found, side = _disk_sides(tape, j, c[late], n[late], r[late])
+            keep[late[found]] = True
+            solid_inside[late[found]] = side[found]
+    with _timed(stats, "clips"):
+        quadrics = np.full(len(c), -1, dtype=np.int32)
+        csign = np.ones(len(c), dtype=np.int32)
+        quadrics[keep], csign[keep] = prog.planes(c[keep], n[keep])
+        signs = np.where(solid_inside, csign, -csign).astype(np.int32)
+        normals = np.where(solid_inside[:, None], n, -n)
+        first = np.zeros(len(c), dtype=np.int32)
+        count = np.zeros(len(c), dtype=np.int32)
+        sel = np.flatnonzero(keep & near)
+        planes = [(c[sel], n[sel]) if k == j else (s.points[cls[k][1][sel]], s.normals[cls[k][1][sel]])
                   for k, s in enumerate(tape.operands)]
-        got = prog.clip(c[i], r[i], tape.markers[j][0], planes)
-        if got is None:
-            keep[i] = False
-            continue
-        first[i], count[i] = got
-    lits = tape.instances[inst].literals  # the instance owns its surfels' planes (colours)
-    owned = {q for q, _ in lits}
-    for q, sg in zip(quadrics[keep].tolist(), signs[keep].tolist()):
-        if q not in owned:
-            owned.add(q)
-            lits.append((q, sg))
+        first[sel], count[sel], keep[sel] = prog.clip_many(c[sel], r[sel], np.full(len(sel), tape.markers[j][0]),
+                                                           planes)
+        lits = tape.instances[inst].literals  # the instance owns its surfels' planes (colours)
+        owned = {q for q, _ in lits}
+        q_kept, s_kept = quadrics[keep], signs[keep]
+        _, at = np.unique(q_kept, return_index=True)
+        for q, sg in zip(q_kept[np.sort(at)].tolist(), s_kept[np.sort(at)].tolist()):
+            if q not in owned:
+                owned.add(q)
+                lits.append((q, sg))
     k = keep
     return dict(positions=c[k], normals=normals[k], radii=r[k].copy(), quadrics=quadrics[k], signs=signs[k],
                 primitives=np.full(int(k.sum()), inst, dtype=np.int32), clip_first=first[k], clip_count=count[k])
 
 
-def _sides(tape: SurfelTape, j: int, x) -> tuple[np.ndarray, np.ndarray]:
+def _sides(tape: SurfelTape, j: int, x, classified=None) -> tuple[np.ndarray, np.ndarray]:
     """The solid at ``x`` with operand j everything and with it nothing, every other operand
-    at its classification there."""
-    cls = [s.contains(x) if i != j else None for i, s in enumerate(tape.operands)]
+    at its classification there (``classified``: :func:`_classified` of ``x``, if known)."""
+    classified = _classified(tape.operands, x, skip=j) if classified is None else classified
+    cls = [None if got is None else got[2] for got in classified]
     side = {}
     for v in (0, 1):
         m = np.zeros(len(x), dtype=bool)
