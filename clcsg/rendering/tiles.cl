@@ -3,7 +3,8 @@
  * the part of it being walked (far parts of the solid do not ride along with near ones).
  *
  * prune_tiles: one work-item per TILE x TILE pixel tile.  The tile's rays, between the depths
- * z0, z1 (along the view's forward axis) at which they can meet the scene bound, fill the
+ * z0, z1 (along the view's forward axis) at which they can meet the scene bound (the bound's
+ * corner depths narrowed per axis to the tile's frustum, tile_depths), fill the
  * frustum hull of 8 points (the tile's corner directions d, whose forward component is 1,
  * scaled to z0 and z1); the tape pruned over that box cut by the scene bound is written to the
  * tile arena, and [z0, z1] to the tile's depth range.
@@ -39,8 +40,13 @@ __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op
     int tile = ty * ntx + tx;
     tiles[tile] = (int2)(0, 0);
     tile_z[tile] = (real2)(z0, z1);
+    if (!(z1 > 0)) return;
+    real2 zt = tile_depths(view, tx, ty, z0, z1, blo, bhi);
+    z0 = zt.x;
+    z1 = zt.y;
     prune_region g;
-    if (!(z1 > 0) || !tile_box(view, tx, ty, z0, z1, blo, bhi, &g)) return;
+    if (!(z0 <= z1) || !tile_box(view, tx, ty, z0, z1, blo, bhi, &g)) return;
+    tile_z[tile] = (real2)(z0, z1);
     uint evals = 0;
     uint base = atomic_add(&counters[0], (uint)(n + 1));
     if (base + (uint)(n + 1) > cap_arena) return;
