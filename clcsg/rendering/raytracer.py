@@ -3,7 +3,8 @@
 :func:`raytrace` compiles a scene (or takes the tape of :class:`~clcsg.sampling.samples.Samples`)
 and traces one ray per pixel.  The tape is first pruned per 16 x 16 tile over the part of the
 tile's frustum inside the scene bound, then per depth slab of the tile (:data:`SLABS` equal
-slabs, each pruned from its tile's tape, its leaves renumbered to its own quadric list), so a
+slabs, each pruned from the tape of the slab pair holding it, that from its pair's, and so on up
+to the tile's tape; its leaves renumbered to its own quadric list), so a
 ray meets only the leaves near the stretch it walks.  Per ray and slab, front to back, each
 listed quadric whose culling box (:mod:`~clcsg.rendering.ray_culling`) the ray's stretch meets
 is solved once (the others keep one known sign along it); its roots classify its sign along the
@@ -35,8 +36,11 @@ from .shading import Shading, pack_view
 from .supersample import supersample
 
 TILE = 16
-#: depth slabs per tile, each with its own pruned tape
+#: depth slabs per tile, each with its own pruned tape: the leaves of a binary tree of depth
+#: ranges over the tile's (each node's tape pruned from its parent's), so a power of two
 SLABS = 8
+SLAB_LEVELS = SLABS.bit_length() - 1
+assert 1 << SLAB_LEVELS == SLABS
 #: fixed work-group shape of the per-pixel kernels (raytrace, resolve): PoCL compiles a kernel
 #: variant per work-group size, so one chosen by the runtime per image size would cost a
 #: compilation (about half a second) at every new size, e.g. each time a viewer window resizes
@@ -128,7 +132,8 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     import pyopencl as cl
 
     q = context.queue
-    prg = build(context, "rendering/tiles.cl", {"TAPE_REGS": scene.packed.n_regs, "TILE": TILE, "SLABS": SLABS},
+    prg = build(context, "rendering/tiles.cl", {"TAPE_REGS": scene.packed.n_regs, "TILE": TILE, "SLABS": SLABS,
+                                                  "SLAB_LEVELS": SLAB_LEVELS},
                 real)
     ntx, nty = -(-width // TILE), -(-height // TILE)
     nt, n = ntx * nty, len(scene.packed.tape)
@@ -153,14 +158,15 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     stats = {"tile_tape_mean": tile_rows / nt, "tile_leaves_max": int(counters[3]),
              "prune_evaluations": int(counters[1])}
     work = -(-nt // 64) * 64
-    scratch = _rows_buffer(context, tile_rows + nt + 1, TAPE_OP_DTYPE, "slab scratch")
+    scratch_rows = SLAB_LEVELS * (tile_rows + SLAB_LEVELS * nt) + 1  # SLAB_LEVELS blocks per tile (tiles.cl)
+    scratch = _rows_buffer(context, scratch_rows, TAPE_OP_DTYPE, "slab scratch")
 
     def run_slabs(caps):
         arena = _rows_buffer(context, caps[0], TAPE_OP_DTYPE, "slab tapes")
         qlist = _rows_buffer(context, caps[1], np.int32, "slab quadric lists")
         cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
         ev = kernel(prg, "prune_slabs")(q, (work,), (64,), scene.quadrics, tile_arena, tiles, tile_z, view_buf,
-                                        *bound, np.int32(nt), scratch, np.uint32(tile_rows + nt + 1), arena,
+                                        *bound, np.int32(nt), scratch, np.uint32(scratch_rows), arena,
                                         np.uint32(caps[0]), qlist, np.uint32(caps[1]), cbuf, slabs)
         cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
         return (arena, qlist, ev), [int(counters[0]), int(counters[1])]
@@ -201,7 +207,8 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     cull_buf = upload(context, cull_boxes(packed, accelerate))
     t_build = time.perf_counter()
     bufs, nq_max, prune_events, prune_stats = prune_tiles(context, scene, view_buf, bound, W, H, real)
-    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "LOCAL_QUADRICS": local_quadrics(nq_max),
+    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "SLAB_LEVELS": SLAB_LEVELS,
+               "LOCAL_QUADRICS": local_quadrics(nq_max),
                "RAY_PRUNE": int(bool(accelerate))}
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()

@@ -11,6 +11,9 @@
 #ifndef SLABS
 #error "SLABS (depth slabs per tile) is set by the driver, clcsg/rendering/raytracer.py"
 #endif
+#if !defined(SLAB_LEVELS) || (1 << SLAB_LEVELS) != SLABS
+#error "SLAB_LEVELS (log2 of SLABS) is set by the driver, clcsg/rendering/raytracer.py"
+#endif
 
 /* Depth range [za, zb] of slab s of a tile's range z = [z0, z1] (equal slabs; the last ends
  * at z1 exactly, so the slabs cover the range). */
