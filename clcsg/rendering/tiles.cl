@@ -2,6 +2,10 @@
  * pruned per screen tile, then per depth slab of each tile, so a ray meets only the leaves near
  * the part of it being walked (far parts of the solid do not ride along with near ones).
  *
+ * prune_supertiles, prune_tiles: the tape pruned per super-tile of SUPER_TILE x SUPER_TILE
+ * tiles (as below, from the full tape), then per tile from its super-tile's tape, within the
+ * super-tile's depth range (so each tile prune reads a tape already cut to its neighbourhood).
+ *
  * prune_tiles: one work-item per TILE x TILE pixel tile.  The tile's rays, between the depths
  * z0, z1 (along the view's forward axis) at which they can meet the scene bound (the bound's
  * corner depths narrowed per axis to the tile's frustum, tile_depths), fill the
@@ -20,15 +24,21 @@
  * only below the capacity; the host grows the buffers and re-runs.
  */
 #include "tiles.h"
+#ifndef SUPER_TILE
+#error "SUPER_TILE (tiles per super-tile side) is set by the driver, clcsg/rendering/raytracer.py"
+#endif
 
-__kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
-                          __global const view_rec *view, real3 blo, real3 bhi,
-                          __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
-                          __global int2 *tiles, __global real2 *tile_z)
+/* Super-tile (sx, sy) of SUPER_TILE x SUPER_TILE tiles: its depth range (the bound's corner
+ * depths narrowed to its frustum) and the full tape pruned over its frustum box, into the
+ * super-tile arena. */
+__kernel void prune_supertiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
+                               __global const view_rec *view, real3 blo, real3 bhi,
+                               __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
+                               __global int2 *sup, __global real2 *sup_z)
 {
-    int tx = get_global_id(0), ty = get_global_id(1);
-    int ntx = (view->width + TILE - 1) / TILE, nty = (view->height + TILE - 1) / TILE;
-    if (tx >= ntx || ty >= nty) return;
+    int sx = get_global_id(0), sy = get_global_id(1), span = TILE * SUPER_TILE;
+    int nsx = (view->width + span - 1) / span, nsy = (view->height + span - 1) / span;
+    if (sx >= nsx || sy >= nsy) return;
     real3 e = view_eye(view), fw = vload3(0, view->forward);
     real z0 = INFINITY, z1 = -INFINITY; /* depth range of the bound along the forward axis */
     for (int m = 0; m < 8; ++m) {
@@ -38,16 +48,47 @@ __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op
         z1 = fmax(z1, z);
     }
     z0 = fmax(z0, (real)0);
-    int tile = ty * ntx + tx;
-    tiles[tile] = (int2)(0, 0);
-    tile_z[tile] = (real2)(z0, z1);
+    int st = sy * nsx + sx;
+    sup[st] = (int2)(0, 0);
+    sup_z[st] = (real2)(z0, z0 - 1);
     if (!(z1 > 0)) return;
-    real2 zt = tile_depths(view, tx, ty, z0, z1, blo, bhi);
-    z0 = zt.x;
-    z1 = zt.y;
+    real2 zt = tile_depths(view, sx, sy, span, z0, z1, blo, bhi);
     prune_region g;
-    if (!(z0 <= z1) || !tile_box(view, tx, ty, z0, z1, blo, bhi, &g)) return;
-    tile_z[tile] = (real2)(z0, z1);
+    if (!(zt.x <= zt.y) || !tile_box(view, sx, sy, span, zt.x, zt.y, blo, bhi, &g)) return;
+    sup_z[st] = zt;
+    uint evals = 0;
+    uint base = atomic_add(&counters[0], (uint)(n + 1));
+    if (base + (uint)(n + 1) > cap_arena) return;
+    int first, count;
+    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
+    atomic_add(&counters[1], evals);
+    sup[st] = (int2)((int)base + first, count);
+}
+
+__kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *sup_arena,
+                          __global const int2 *sup, __global const real2 *sup_z,
+                          __global const view_rec *view, real3 blo, real3 bhi,
+                          __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
+                          __global int2 *tiles, __global real2 *tile_z)
+{
+    int tx = get_global_id(0), ty = get_global_id(1);
+    int ntx = (view->width + TILE - 1) / TILE, nty = (view->height + TILE - 1) / TILE;
+    if (tx >= ntx || ty >= nty) return;
+    int span = TILE * SUPER_TILE, nsx = (view->width + span - 1) / span;
+    int st = (ty / SUPER_TILE) * nsx + tx / SUPER_TILE;
+    int tile = ty * ntx + tx;
+    real2 zs = sup_z[st];
+    tiles[tile] = (int2)(0, 0);
+    tile_z[tile] = zs;
+    int2 rec = sup[st];
+    __global const tape_op *tape = sup_arena + rec.x;
+    int n = rec.y;
+    if (n == 0 || (n == 1 && tape[0].op == OP_CONST)) return;
+    /* within the super-tile's range, so the tile's box lies in the super-tile's */
+    real2 zt = tile_depths(view, tx, ty, TILE, zs.x, zs.y, blo, bhi);
+    prune_region g;
+    if (!(zt.x <= zt.y) || !tile_box(view, tx, ty, TILE, zt.x, zt.y, blo, bhi, &g)) return;
+    tile_z[tile] = zt;
     uint evals = 0;
     uint base = atomic_add(&counters[0], (uint)(n + 1));
     if (base + (uint)(n + 1) > cap_arena) return;
@@ -148,7 +189,7 @@ __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op
             if (np == 0) continue;
             real2 zn = slab_node_range(z, l, s >> (SLAB_LEVELS - l));
             prune_region g;
-            if (!tile_box(view, tx, ty, zn.x, zn.y, blo, bhi, &g)) continue;
+            if (!tile_box(view, tx, ty, TILE, zn.x, zn.y, blo, bhi, &g)) continue;
             uint evals = 0;
             int first, count;
             __global tape_op *out = work + (l - 1) * block;
@@ -162,7 +203,7 @@ __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op
         if (np == 0) continue;
         real2 zs = slab_range(z, s);
         prune_region g;
-        if (!tile_box(view, tx, ty, zs.x, zs.y, blo, bhi, &g)) continue;
+        if (!tile_box(view, tx, ty, TILE, zs.x, zs.y, blo, bhi, &g)) continue;
         slabs[tile * SLABS + s] = prune_slab(qs, node[SLAB_LEVELS - 1], np, &g, work + (SLAB_LEVELS - 1) * block,
                                              arena, cap_arena, qlist, cap_qlist, counters);
     }

@@ -24,17 +24,18 @@ inline real2 slab_range(real2 z, int s)
 }
 
 /* The depth range [z0, z1] (along the view's forward axis) narrowed to where the frustum of tile
- * (tx, ty) can meet the box [blo, bhi].  A point e + z d of the frustum (d affine in the pixel, so
+ * (tx, ty) of span x span pixels can meet the box [blo, bhi].  A point e + z d of the frustum (d affine in the pixel, so
  * each component d_k between its least and greatest value dmin_k, dmax_k at the tile's corner
  * pixels) is in the box only if, per axis, e_k + z [dmin_k, dmax_k] meets [lo_k, hi_k]:
  * e_k + z dmax_k >= lo_k and e_k + z dmin_k <= hi_k, each a half-line of z.  A relaxation (d_k
  * taken per axis), so a superset of the true range, widened by a relative 2^-20 for the
  * rounding of the divisions; z1 < z0 when no depth is left. */
-inline real2 tile_depths(__global const view_rec *view, int tx, int ty, real z0, real z1, real3 blo, real3 bhi)
+inline real2 tile_depths(__global const view_rec *view, int tx, int ty, int span, real z0, real z1, real3 blo,
+                         real3 bhi)
 {
     real3 e = view_eye(view);
-    int i0 = ty * TILE, i1 = min(i0 + TILE, view->height) - 1;
-    int j0 = tx * TILE, j1 = min(j0 + TILE, view->width) - 1;
+    int i0 = ty * span, i1 = min(i0 + span, view->height) - 1;
+    int j0 = tx * span, j1 = min(j0 + span, view->width) - 1;
     real3 dmin = (real3)(INFINITY), dmax = (real3)(-INFINITY);
     for (int m = 0; m < 4; ++m) {
         int i = (m & 1) ? i1 : i0, j = (m & 2) ? j1 : j0;
@@ -60,14 +61,14 @@ inline real2 tile_depths(__global const view_rec *view, int tx, int ty, real z0,
     return (real2)(fmax(z0, za - pad), fmin(z1, zb + pad));
 }
 
-/* The box around the frustum of tile (tx, ty) between depths z0 and z1, cut by [blo, bhi];
+/* The box around the frustum of tile (tx, ty) of span x span pixels between depths z0 and z1, cut by [blo, bhi];
  * false if they do not meet. */
-inline bool tile_box(__global const view_rec *view, int tx, int ty, real z0, real z1, real3 blo, real3 bhi,
-                     prune_region *g)
+inline bool tile_box(__global const view_rec *view, int tx, int ty, int span, real z0, real z1, real3 blo,
+                     real3 bhi, prune_region *g)
 {
     real3 e = view_eye(view);
-    int i0 = ty * TILE, i1 = min(i0 + TILE, view->height) - 1;
-    int j0 = tx * TILE, j1 = min(j0 + TILE, view->width) - 1;
+    int i0 = ty * span, i1 = min(i0 + span, view->height) - 1;
+    int j0 = tx * span, j1 = min(j0 + span, view->width) - 1;
     real3 lo = (real3)(INFINITY), hi = (real3)(-INFINITY);
     for (int m = 0; m < 4; ++m) {
         int i = (m & 1) ? i1 : i0, j = (m & 2) ? j1 : j0;
