@@ -130,8 +130,8 @@ def _rows_buffer(context, n: int, dtype, what: str):
 
 
 def prune_tiles(context, scene, view_buf, bound, width, height, real):
-    """The super-tile tapes, the tile tapes, then the depth-slab tapes of every tile (tiles.cl).  Returns the buffers
-    of the ray kernel (slab arena, quadric lists, tile depth ranges, slab records), the largest
+    """The super-tile tapes, the tile tapes, then the depth-slab tapes of every tile (tiles.cl).
+    Returns the buffers of the ray kernel (slab arena, quadric lists, tile depth ranges, slab records), the largest
     slab quadric list, the kernel events and counters."""
     import pyopencl as cl
 
