@@ -1,9 +1,11 @@
 """The exact CSG ray tracer on the tape (``tiles.cl``, ``raytrace.cl``): the reference renderer.
 
 :func:`raytrace` compiles a scene (or takes the tape of :class:`~clcsg.sampling.samples.Samples`)
-and traces one ray per pixel.  The tape is first pruned per 16 x 16 tile over the part of the
-tile's frustum inside the scene bound, then per depth slab of the tile (:data:`SLABS` equal
-slabs, each pruned from its tile's tape, its leaves renumbered to its own quadric list), so a
+and traces one ray per pixel.  The tape is first pruned per super-tile of :data:`SUPER_TILE`
+x :data:`SUPER_TILE` tiles, then per 16 x 16 tile from its super-tile's tape, each over the part
+of its frustum inside the scene bound, then per depth slab of the tile (:data:`SLABS` equal
+slabs, each pruned from the tape of the slab pair holding it, that from its pair's, and so on up
+to the tile's tape; its leaves renumbered to its own quadric list), so a
 ray meets only the leaves near the stretch it walks.  Per ray and slab, front to back, each
 listed quadric whose culling box (:mod:`~clcsg.rendering.ray_culling`) the ray's stretch meets
 is solved once (the others keep one known sign along it); its roots classify its sign along the
@@ -35,8 +37,14 @@ from .shading import Shading, pack_view
 from .supersample import supersample
 
 TILE = 16
-#: depth slabs per tile, each with its own pruned tape
+#: tiles per side of a super-tile: the tape is pruned per super-tile first, each tile from its
+#: super-tile's tape
+SUPER_TILE = 4
+#: depth slabs per tile, each with its own pruned tape: the leaves of a binary tree of depth
+#: ranges over the tile's (each node's tape pruned from its parent's), so a power of two
 SLABS = 8
+SLAB_LEVELS = SLABS.bit_length() - 1
+assert 1 << SLAB_LEVELS == SLABS
 #: fixed work-group shape of the per-pixel kernels (raytrace, resolve): PoCL compiles a kernel
 #: variant per work-group size, so one chosen by the runtime per image size would cost a
 #: compilation (about half a second) at every new size, e.g. each time a viewer window resizes
@@ -122,13 +130,14 @@ def _rows_buffer(context, n: int, dtype, what: str):
 
 
 def prune_tiles(context, scene, view_buf, bound, width, height, real):
-    """The tile tapes, then the depth-slab tapes of every tile (tiles.cl).  Returns the buffers
-    of the ray kernel (slab arena, quadric lists, tile depth ranges, slab records), the largest
+    """The super-tile tapes, the tile tapes, then the depth-slab tapes of every tile (tiles.cl).
+    Returns the buffers of the ray kernel (slab arena, quadric lists, tile depth ranges, slab records), the largest
     slab quadric list, the kernel events and counters."""
     import pyopencl as cl
 
     q = context.queue
-    prg = build(context, "rendering/tiles.cl", {"TAPE_REGS": scene.packed.n_regs, "TILE": TILE, "SLABS": SLABS},
+    prg = build(context, "rendering/tiles.cl", {"TAPE_REGS": scene.packed.n_regs, "TILE": TILE, "SLABS": SLABS,
+                                                  "SLAB_LEVELS": SLAB_LEVELS, "SUPER_TILE": SUPER_TILE},
                 real)
     ntx, nty = -(-width // TILE), -(-height // TILE)
     nt, n = ntx * nty, len(scene.packed.tape)
@@ -139,11 +148,29 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     slabs = upload(context, np.zeros(16 * nt * SLABS, np.uint8), writable=True, what="slab tapes")
     counters = np.zeros(6, dtype=np.uint32)
 
+    span = TILE * SUPER_TILE
+    nsx, nsy = -(-width // span), -(-height // span)
+    sup = upload(context, np.zeros(8 * nsx * nsy, np.uint8), writable=True, what="super-tile tapes")
+    sup_z = upload(context, np.zeros(2 * np.dtype(real).itemsize * nsx * nsy, np.uint8), writable=True,
+                   what="super-tile depths")
+
+    def run_super(caps):
+        arena = _rows_buffer(context, caps[0], TAPE_OP_DTYPE, "super-tile tapes")
+        cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
+        rng = ((-(-nsx // 4) * 4, -(-nsy // 4) * 4), (4, 4))
+        ev = kernel(prg, "prune_supertiles")(q, *rng, scene.quadrics, scene.tape, np.int32(n), view_buf, *bound,
+                                             arena, np.uint32(caps[0]), cbuf, sup, sup_z)
+        cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
+        return (arena, ev), [int(counters[0])]
+
+    (sup_arena, ev_super), _ = _grown(run_super, [nsx * nsy * (n + 1)])
+    super_evals = int(counters[1])
+
     def run_tiles(caps):
         arena = _rows_buffer(context, caps[0], TAPE_OP_DTYPE, "tile tapes")
         cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
         rng = ((-(-ntx // 4) * 4, -(-nty // 4) * 4), (4, 4))  # a fixed group shape, as PIXEL_GROUP
-        ev = kernel(prg, "prune_tiles")(q, *rng, scene.quadrics, scene.tape, np.int32(n), view_buf, *bound, arena,
+        ev = kernel(prg, "prune_tiles")(q, *rng, scene.quadrics, sup_arena, sup, sup_z, view_buf, *bound, arena,
                                         np.uint32(caps[0]), cbuf, tiles, tile_z)
         cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
         return (arena, ev), [int(counters[0])]
@@ -151,16 +178,17 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     (tile_arena, ev_tiles), _ = _grown(run_tiles, [max(nt * min(n + 1, 64), 4 * (n + 1))])
     tile_rows = int(counters[2])
     stats = {"tile_tape_mean": tile_rows / nt, "tile_leaves_max": int(counters[3]),
-             "prune_evaluations": int(counters[1])}
+             "prune_evaluations": super_evals + int(counters[1])}
     work = -(-nt // 64) * 64
-    scratch = _rows_buffer(context, tile_rows + nt + 1, TAPE_OP_DTYPE, "slab scratch")
+    scratch_rows = SLAB_LEVELS * (tile_rows + SLAB_LEVELS * nt) + 1  # SLAB_LEVELS blocks per tile (tiles.cl)
+    scratch = _rows_buffer(context, scratch_rows, TAPE_OP_DTYPE, "slab scratch")
 
     def run_slabs(caps):
         arena = _rows_buffer(context, caps[0], TAPE_OP_DTYPE, "slab tapes")
         qlist = _rows_buffer(context, caps[1], np.int32, "slab quadric lists")
         cbuf = upload(context, np.zeros(6, dtype=np.uint32), writable=True)
         ev = kernel(prg, "prune_slabs")(q, (work,), (64,), scene.quadrics, tile_arena, tiles, tile_z, view_buf,
-                                        *bound, np.int32(nt), scratch, np.uint32(tile_rows + nt + 1), arena,
+                                        *bound, np.int32(nt), scratch, np.uint32(scratch_rows), arena,
                                         np.uint32(caps[0]), qlist, np.uint32(caps[1]), cbuf, slabs)
         cl.enqueue_copy(q, counters, cbuf, wait_for=[ev])
         return (arena, qlist, ev), [int(counters[0]), int(counters[1])]
@@ -169,7 +197,7 @@ def prune_tiles(context, scene, view_buf, bound, width, height, real):
     (arena, qlist, ev_slabs), _ = _grown(run_slabs, [guess, guess])
     stats.update(slab_tape_mean=int(counters[3]) / (nt * SLABS), slab_quadrics_max=int(counters[4]),
                  prune_evaluations=stats["prune_evaluations"] + int(counters[2]))
-    return (arena, qlist, tile_z, slabs), int(counters[4]), (ev_tiles, ev_slabs), stats
+    return (arena, qlist, tile_z, slabs), int(counters[4]), (ev_super, ev_tiles, ev_slabs), stats
 
 
 def local_quadrics(n: int) -> int:
@@ -201,7 +229,8 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     cull_buf = upload(context, cull_boxes(packed, accelerate))
     t_build = time.perf_counter()
     bufs, nq_max, prune_events, prune_stats = prune_tiles(context, scene, view_buf, bound, W, H, real)
-    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "LOCAL_QUADRICS": local_quadrics(nq_max),
+    defines = {"TAPE_REGS": packed.n_regs, "TILE": TILE, "SLABS": SLABS, "SLAB_LEVELS": SLAB_LEVELS,
+               "LOCAL_QUADRICS": local_quadrics(nq_max),
                "RAY_PRUNE": int(bool(accelerate))}
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()

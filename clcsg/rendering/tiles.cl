@@ -2,15 +2,21 @@
  * pruned per screen tile, then per depth slab of each tile, so a ray meets only the leaves near
  * the part of it being walked (far parts of the solid do not ride along with near ones).
  *
+ * prune_supertiles, prune_tiles: the tape pruned per super-tile of SUPER_TILE x SUPER_TILE
+ * tiles (as below, from the full tape), then per tile from its super-tile's tape, within the
+ * super-tile's depth range (so each tile prune reads a tape already cut to its neighbourhood).
+ *
  * prune_tiles: one work-item per TILE x TILE pixel tile.  The tile's rays, between the depths
- * z0, z1 (along the view's forward axis) at which they can meet the scene bound, fill the
+ * z0, z1 (along the view's forward axis) at which they can meet the scene bound (the bound's
+ * corner depths narrowed per axis to the tile's frustum, tile_depths), fill the
  * frustum hull of 8 points (the tile's corner directions d, whose forward component is 1,
  * scaled to z0 and z1); the tape pruned over that box cut by the scene bound is written to the
  * tile arena, and [z0, z1] to the tile's depth range.
  *
- * prune_slabs: one work-item per tile: the tile's range split into SLABS equal depth slabs, the
- * tile's tape pruned over each slab's frustum box (in a scratch block) and copied compactly to
- * the slab arena; its leaves are renumbered to the slab's own quadric list (leaf row a = index
+ * prune_slabs: one work-item per tile: the tile's range split into SLABS equal depth slabs, each
+ * slab's tape pruned over its frustum box from the tape of the slab pair (quad, ...) holding it,
+ * down a binary tree from the tile's tape (in scratch blocks), and copied compactly to the slab
+ * arena; its leaves are renumbered to the slab's own quadric list (leaf row a = index
  * into that list), so the ray kernel can keep one ray-quadric solve per listed quadric in
  * private memory.
  *
@@ -18,15 +24,21 @@
  * only below the capacity; the host grows the buffers and re-runs.
  */
 #include "tiles.h"
+#ifndef SUPER_TILE
+#error "SUPER_TILE (tiles per super-tile side) is set by the driver, clcsg/rendering/raytracer.py"
+#endif
 
-__kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
-                          __global const view_rec *view, real3 blo, real3 bhi,
-                          __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
-                          __global int2 *tiles, __global real2 *tile_z)
+/* Super-tile (sx, sy) of SUPER_TILE x SUPER_TILE tiles: its depth range (the bound's corner
+ * depths narrowed to its frustum) and the full tape pruned over its frustum box, into the
+ * super-tile arena. */
+__kernel void prune_supertiles(__global const quadric_rec *qs, __global const tape_op *tape, int n,
+                               __global const view_rec *view, real3 blo, real3 bhi,
+                               __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
+                               __global int2 *sup, __global real2 *sup_z)
 {
-    int tx = get_global_id(0), ty = get_global_id(1);
-    int ntx = (view->width + TILE - 1) / TILE, nty = (view->height + TILE - 1) / TILE;
-    if (tx >= ntx || ty >= nty) return;
+    int sx = get_global_id(0), sy = get_global_id(1), span = TILE * SUPER_TILE;
+    int nsx = (view->width + span - 1) / span, nsy = (view->height + span - 1) / span;
+    if (sx >= nsx || sy >= nsy) return;
     real3 e = view_eye(view), fw = vload3(0, view->forward);
     real z0 = INFINITY, z1 = -INFINITY; /* depth range of the bound along the forward axis */
     for (int m = 0; m < 8; ++m) {
@@ -36,11 +48,47 @@ __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op
         z1 = fmax(z1, z);
     }
     z0 = fmax(z0, (real)0);
-    int tile = ty * ntx + tx;
-    tiles[tile] = (int2)(0, 0);
-    tile_z[tile] = (real2)(z0, z1);
+    int st = sy * nsx + sx;
+    sup[st] = (int2)(0, 0);
+    sup_z[st] = (real2)(z0, z0 - 1);
+    if (!(z1 > 0)) return;
+    real2 zt = tile_depths(view, sx, sy, span, z0, z1, blo, bhi);
     prune_region g;
-    if (!(z1 > 0) || !tile_box(view, tx, ty, z0, z1, blo, bhi, &g)) return;
+    if (!(zt.x <= zt.y) || !tile_box(view, sx, sy, span, zt.x, zt.y, blo, bhi, &g)) return;
+    sup_z[st] = zt;
+    uint evals = 0;
+    uint base = atomic_add(&counters[0], (uint)(n + 1));
+    if (base + (uint)(n + 1) > cap_arena) return;
+    int first, count;
+    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
+    atomic_add(&counters[1], evals);
+    sup[st] = (int2)((int)base + first, count);
+}
+
+__kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *sup_arena,
+                          __global const int2 *sup, __global const real2 *sup_z,
+                          __global const view_rec *view, real3 blo, real3 bhi,
+                          __global tape_op *arena, uint cap_arena, __global volatile uint *counters,
+                          __global int2 *tiles, __global real2 *tile_z)
+{
+    int tx = get_global_id(0), ty = get_global_id(1);
+    int ntx = (view->width + TILE - 1) / TILE, nty = (view->height + TILE - 1) / TILE;
+    if (tx >= ntx || ty >= nty) return;
+    int span = TILE * SUPER_TILE, nsx = (view->width + span - 1) / span;
+    int st = (ty / SUPER_TILE) * nsx + tx / SUPER_TILE;
+    int tile = ty * ntx + tx;
+    real2 zs = sup_z[st];
+    tiles[tile] = (int2)(0, 0);
+    tile_z[tile] = zs;
+    int2 rec = sup[st];
+    __global const tape_op *tape = sup_arena + rec.x;
+    int n = rec.y;
+    if (n == 0 || (n == 1 && tape[0].op == OP_CONST)) return;
+    /* within the super-tile's range, so the tile's box lies in the super-tile's */
+    real2 zt = tile_depths(view, tx, ty, TILE, zs.x, zs.y, blo, bhi);
+    prune_region g;
+    if (!(zt.x <= zt.y) || !tile_box(view, tx, ty, TILE, zt.x, zt.y, blo, bhi, &g)) return;
+    tile_z[tile] = zt;
     uint evals = 0;
     uint base = atomic_add(&counters[0], (uint)(n + 1));
     if (base + (uint)(n + 1) > cap_arena) return;
@@ -92,8 +140,21 @@ inline int4 prune_slab(__global const quadric_rec *qs, __global const tape_op *t
     return (int4)((int)base, count, (int)qbase, nq);
 }
 
-/* One work-item per tile: slabs[tile * SLABS + s] for its SLABS slabs (prune_slab), through a
- * scratch block of the tile tape's length + 1 rows reserved in `scratch`. */
+/* Depth range of node k of level l of a tile's slab tree (level SLAB_LEVELS: the slabs): the
+ * union of the slab ranges below it, so a node's frustum box holds its children's. */
+inline real2 slab_node_range(real2 z, int l, int k)
+{
+    int span = SLABS >> l;
+    return (real2)(slab_range(z, k * span).x, slab_range(z, (k + 1) * span - 1).y);
+}
+
+/* One work-item per tile: slabs[tile * SLABS + s] for its SLABS slabs.  The slabs are the leaves
+ * of a binary tree over the tile's depth range: each node's tape is pruned from its parent's
+ * (the root: the tile tape) over the node's frustum box, which lies in the parent's, so each
+ * prune reads a tape already cut to about twice its own region instead of the whole tile's.
+ * The tree is walked depth first; level l >= 1 keeps its current node's tape in block l - 1 of
+ * SLAB_LEVELS scratch blocks of the tile tape's length + SLAB_LEVELS rows reserved in `scratch` (a
+ * pruned tape is at most its parent's rows + 1), the slabs go through the last block (prune_slab). */
 __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op *tile_arena,
                           __global const int2 *tiles, __global const real2 *tile_z,
                           __global const view_rec *view, real3 blo, real3 bhi, int n_tiles,
@@ -106,16 +167,44 @@ __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op
     for (int s = 0; s < SLABS; ++s) slabs[tile * SLABS + s] = (int4)(0);
     int ntx = (view->width + TILE - 1) / TILE;
     int2 tt = tiles[tile];
-    __global const tape_op *tape = tile_arena + tt.x;
     int n = tt.y;
-    if (n == 0 || (n == 1 && tape[0].op == OP_CONST)) return;
-    uint sbase = atomic_add(&counters[5], (uint)(n + 1));
-    if (sbase + (uint)(n + 1) > cap_scratch) return;
+    if (n == 0 || (n == 1 && tile_arena[tt.x].op == OP_CONST)) return;
+    uint block = (uint)(n + SLAB_LEVELS); /* each level's prune adds at most a root COPY */
+    uint sbase = atomic_add(&counters[5], SLAB_LEVELS * block);
+    if (sbase + SLAB_LEVELS * block > cap_scratch) return;
+    __global tape_op *work = scratch + sbase;
+    /* the current node's tape per level (level 0: the tile's); rows = 0: nothing below it */
+    __global const tape_op *node[SLAB_LEVELS];
+    int rows[SLAB_LEVELS];
+    node[0] = tile_arena + tt.x;
+    rows[0] = n;
+    real2 z = tile_z[tile];
+    int tx = tile % ntx, ty = tile / ntx;
     for (int s = 0; s < SLABS; ++s) {
-        real2 zs = slab_range(tile_z[tile], s);
+        /* levels whose node changes from slab s - 1 to s: below the highest flipped bit */
+        int l0 = s == 0 ? 1 : SLAB_LEVELS - (31 - clz(s & -s));
+        for (int l = l0; l < SLAB_LEVELS; ++l) {
+            rows[l] = 0;
+            int np = rows[l - 1];
+            if (np == 0) continue;
+            real2 zn = slab_node_range(z, l, s >> (SLAB_LEVELS - l));
+            prune_region g;
+            if (!tile_box(view, tx, ty, TILE, zn.x, zn.y, blo, bhi, &g)) continue;
+            uint evals = 0;
+            int first, count;
+            __global tape_op *out = work + (l - 1) * block;
+            tape_prune(node[l - 1], np, qs, &g, -1, out, &first, &count, &evals);
+            atomic_add(&counters[2], evals);
+            if (count == 1 && out[first].op == OP_CONST) continue;
+            node[l] = out + first;
+            rows[l] = count;
+        }
+        int np = rows[SLAB_LEVELS - 1];
+        if (np == 0) continue;
+        real2 zs = slab_range(z, s);
         prune_region g;
-        if (!tile_box(view, tile % ntx, tile / ntx, zs.x, zs.y, blo, bhi, &g)) continue;
-        slabs[tile * SLABS + s] = prune_slab(qs, tape, n, &g, scratch + sbase, arena, cap_arena, qlist, cap_qlist,
-                                             counters);
+        if (!tile_box(view, tx, ty, TILE, zs.x, zs.y, blo, bhi, &g)) continue;
+        slabs[tile * SLABS + s] = prune_slab(qs, node[SLAB_LEVELS - 1], np, &g, work + (SLAB_LEVELS - 1) * block,
+                                             arena, cap_arena, qlist, cap_qlist, counters);
     }
 }
