@@ -161,22 +161,8 @@ inline int ray_prune(__global const tape_op *t, int n, const ray_roots *rr, real
         if (m == RAY_ROWS) return -1;
         out[m++] = (tape_op){OP_COPY, root, root, 0};
     }
-    uchar needed[TAPE_REGS];
-    for (int r = 0; r < TAPE_REGS; ++r) needed[r] = 0;
-    needed[root] = 1;
-    int w = m;
-    for (int k = m - 1; k >= 0; --k) {
-        tape_op o = out[k];
-        if (!needed[o.out]) continue;
-        if (!(o.op == OP_COPY && o.a == o.out)) needed[o.out] = 0;
-        if (o.op == OP_AND || o.op == OP_OR) {
-            needed[o.a] = 1;
-            needed[o.b] = 1;
-        } else if (o.op == OP_COPY) {
-            needed[o.a] = 1;
-        }
-        out[--w] = o;
-    }
+    int w;
+    TAPE_KEEP_LIVE_ROWS(out, m, root, w);
     *first = w;
     return m - w;
 }

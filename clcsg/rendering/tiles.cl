@@ -28,6 +28,21 @@
 #error "SUPER_TILE (tiles per super-tile side) is set by the driver, clcsg/rendering/raytracer.py"
 #endif
 
+/* The tape t (n rows) pruned over region g into rows reserved in the arena: the record (first
+ * row, rows) in the arena, or (0, 0) where the arena is full (the host sees it in counters[0]
+ * and re-runs); counters[1] counts the prune's evaluations. */
+inline int2 prune_to_arena(__global const quadric_rec *qs, __global const tape_op *t, int n, const prune_region *g,
+                           __global tape_op *arena, uint cap_arena, __global volatile uint *counters)
+{
+    uint evals = 0;
+    uint base = atomic_add(&counters[0], (uint)(n + 1));
+    if (base + (uint)(n + 1) > cap_arena) return (int2)(0, 0);
+    int first, count;
+    tape_prune(t, n, qs, g, -1, arena + base, &first, &count, &evals);
+    atomic_add(&counters[1], evals);
+    return (int2)((int)base + first, count);
+}
+
 /* Super-tile (sx, sy) of SUPER_TILE x SUPER_TILE tiles: its depth range (the bound's corner
  * depths narrowed to its frustum) and the full tape pruned over its frustum box, into the
  * super-tile arena. */
@@ -56,13 +71,7 @@ __kernel void prune_supertiles(__global const quadric_rec *qs, __global const ta
     prune_region g;
     if (!(zt.x <= zt.y) || !tile_box(view, sx, sy, span, zt.x, zt.y, blo, bhi, &g)) return;
     sup_z[st] = zt;
-    uint evals = 0;
-    uint base = atomic_add(&counters[0], (uint)(n + 1));
-    if (base + (uint)(n + 1) > cap_arena) return;
-    int first, count;
-    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
-    atomic_add(&counters[1], evals);
-    sup[st] = (int2)((int)base + first, count);
+    sup[st] = prune_to_arena(qs, tape, n, &g, arena, cap_arena, counters);
 }
 
 __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op *sup_arena,
@@ -89,17 +98,13 @@ __kernel void prune_tiles(__global const quadric_rec *qs, __global const tape_op
     prune_region g;
     if (!(zt.x <= zt.y) || !tile_box(view, tx, ty, TILE, zt.x, zt.y, blo, bhi, &g)) return;
     tile_z[tile] = zt;
-    uint evals = 0;
-    uint base = atomic_add(&counters[0], (uint)(n + 1));
-    if (base + (uint)(n + 1) > cap_arena) return;
-    int first, count;
-    tape_prune(tape, n, qs, &g, -1, arena + base, &first, &count, &evals);
-    atomic_add(&counters[1], evals);
-    atomic_add(&counters[2], (uint)count);
+    int2 got = prune_to_arena(qs, tape, n, &g, arena, cap_arena, counters);
+    if (got.y == 0) return;
+    atomic_add(&counters[2], (uint)got.y);
     uint leaves = 0;
-    for (int k = 0; k < count; ++k) leaves += arena[base + first + k].op == OP_LEAF;
+    for (int k = 0; k < got.y; ++k) leaves += arena[got.x + k].op == OP_LEAF;
     atomic_max(&counters[3], leaves);
-    tiles[tile] = (int2)((int)base + first, count);
+    tiles[tile] = got;
 }
 
 /* Renumber the leaves of rows [0, n) to an own list of quadrics (written to qlist, at most n);

@@ -36,6 +36,29 @@ typedef struct {
 #define BITS_AND(x, y) ((x) & (y))
 #define BITS_OR(x, y) ((x) | (y))
 
+/* Dead-row elimination on rows out[0..m) of any address space whose result is register root:
+ * walking back from the last row, a row is kept only if a later kept row (or the result) reads
+ * its output; a COPY r <- r keeps r read.  The kept rows are packed at the end, out[w..m). */
+#define TAPE_KEEP_LIVE_ROWS(out, m, root, w)                              \
+    do {                                                                  \
+        uchar needed_[TAPE_REGS];                                         \
+        for (int r_ = 0; r_ < TAPE_REGS; ++r_) needed_[r_] = 0;           \
+        needed_[root] = 1;                                                \
+        (w) = (m);                                                        \
+        for (int k_ = (m) - 1; k_ >= 0; --k_) {                           \
+            tape_op o_ = (out)[k_];                                       \
+            if (!needed_[o_.out]) continue;                               \
+            if (!(o_.op == OP_COPY && o_.a == o_.out)) needed_[o_.out] = 0; \
+            if (o_.op == OP_AND || o_.op == OP_OR) {                      \
+                needed_[o_.a] = 1;                                        \
+                needed_[o_.b] = 1;                                        \
+            } else if (o_.op == OP_COPY) {                                \
+                needed_[o_.a] = 1;                                        \
+            }                                                             \
+            (out)[--(w)] = o_;                                            \
+        }                                                                 \
+    } while (0)
+
 inline real literal_distance(__global const quadric_rec *qs, int q, int sign, real3 p)
 {
     /* d(-Q, p) = -d(Q, p) */
@@ -352,22 +375,8 @@ inline int tape_prune_memo(__global const tape_op *t, int n, __global const quad
         return decided;
     }
     if (last != root) out[m++] = (tape_op){OP_COPY, root, root, 0};
-    uchar needed[TAPE_REGS];
-    for (int r = 0; r < TAPE_REGS; ++r) needed[r] = 0;
-    needed[root] = 1;
-    int w = m; /* rows are packed downwards from the end of the forward rows (w > k always) */
-    for (int k = m - 1; k >= 0; --k) {
-        tape_op o = out[k];
-        if (!needed[o.out]) continue;
-        if (!(o.op == OP_COPY && o.a == o.out)) needed[o.out] = 0;
-        if (o.op == OP_AND || o.op == OP_OR) {
-            needed[o.a] = 1;
-            needed[o.b] = 1;
-        } else if (o.op == OP_COPY) {
-            needed[o.a] = 1;
-        }
-        out[--w] = o;
-    }
+    int w; /* rows are packed downwards from the end of the forward rows (w > k always) */
+    TAPE_KEEP_LIVE_ROWS(out, m, root, w);
     *first = w;
     *count = m - w;
     return decided;
