@@ -181,6 +181,20 @@ def _wrapped_hash(wrapped: str, src_hash: str) -> str:
     return h
 
 
+#: on Oclgrind (21.10): its interpreter has no implementation of the scope intrinsic that LLVM's
+#: inliner emits into the splat kernel ("Undefined external function:
+#: llvm.experimental.noalias.scope.decl"), so the simulator gets the program unoptimized.
+OCLGRIND_OPTIONS = ["-cl-opt-disable"]
+
+
+def _device_options(context) -> list[str]:
+    """Build options of ``context``'s device beyond the shared ones (:data:`OCLGRIND_OPTIONS`)."""
+    devices = context.ctx.devices
+    if any("oclgrind" in d.platform.name.lower() for d in devices):
+        return list(OCLGRIND_OPTIONS)
+    return []
+
+
 def build(context, path: str, defines: dict | None = None, real=np.float64):
     """The built program at package path ``path`` for ``context`` (cached in the process and,
     as a binary, on disk).
@@ -189,7 +203,7 @@ def build(context, path: str, defines: dict | None = None, real=np.float64):
     """
     import pyopencl as cl
 
-    opts = build_options(defines, real)
+    opts = build_options(defines, real) + _device_options(context)
     folder = path.rpartition("/")[0]
     src, src_hash, headers = _source_and_hashes(path, folder)
     wrapped = _wrapped(context, src)
