@@ -91,15 +91,17 @@ def eye_inside(tape, eye) -> bool:
 OUTPUTS = ("depth", "ids", "primitives", "rgba")
 
 
-def _shading_tables(context, resolve_prg, scene, view_buf, hint):
+def _shading_tables(context, resolve_prg, scene, view_buf):
     """The per-view tables the resolve pass reads: each primitive's albedo (and the fallback's,
-    last) and the colour encoding over ``SHADE_BINS`` bins; (albedo, encoding, their events)."""
+    last) and the colour encoding over ``SHADE_BINS`` bins; (albedo, encoding, their events).
+    Both start from host zeros (a few kB), which Oclgrind's uninitialized-value check follows
+    into the kernels that fill them."""
     q = context.queue
     n_prims = len(scene.packed.prims)
-    albedo = device_buffer(context, (n_prims + 1) * 16, "albedo table", hint=hint)
+    albedo = upload(context, np.zeros((n_prims + 1) * 4, np.float32), writable=True, what="albedo table")
     ev_albedo = kernel(resolve_prg, "albedo")(q, (-(-(n_prims + 1) // 64) * 64,), (64,), scene.prims,
                                               np.int32(n_prims), view_buf, albedo)
-    encoding = device_buffer(context, (SHADE_BINS + 1) * 2, "encoding table", hint=hint)
+    encoding = upload(context, np.zeros(SHADE_BINS + 1, np.uint16), writable=True, what="encoding table")
     ev_encoding = kernel(resolve_prg, "encoding")(q, (-(-(SHADE_BINS + 1) // 64) * 64,), (64,), view_buf, encoding)
     return albedo, encoding, [ev_albedo, ev_encoding]
 
@@ -153,7 +155,7 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
             clip_buf, view_buf, fb, cnt_buf,
             wait_for=[ev_clear]))
     n_prims = len(scene.packed.prims)
-    albedo, encoding, table_events = _shading_tables(context, resolve_prg, scene, view_buf, hint)
+    albedo, encoding, table_events = _shading_tables(context, resolve_prg, scene, view_buf)
     ev_resolve = kernel(resolve_prg, "resolve")(
         q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, albedo,
         np.int32(n_prims), encoding, *outs, wait_for=events[-1:] + table_events)
