@@ -25,7 +25,7 @@ from hypothesis import given, settings, strategies as st
 
 from bench.load import write_csg, write_json
 from clcsg.errors import SceneError
-from clcsg.readers import scenefile
+from clcsg.readers import scene_stream, scenefile
 from clcsg.readers.openscad import _file_chunks, _read, load_csg, parse_csg
 from clcsg.readers.openscad_tokens import UNDEF, Parser, Source, chunks_of
 from clcsg.readers.scene_schema import scene_schema
@@ -197,13 +197,13 @@ def _loads(path):
 
 @pytest.mark.parametrize("path", JSON_FILES, ids=os.path.basename)
 def test_json_files_read_the_same_streamed_and_whole(path):
-    assert outcome(lambda: scenefile.load_json(path)) == outcome(lambda: _loads(path))
+    assert outcome(lambda: scene_stream.load_json(path)) == outcome(lambda: _loads(path))
 
 
 def test_generated_json_reads_the_same_streamed_and_whole(tmp_path):
     path = tmp_path / "g.json"
     write_json(str(path), 200_000)
-    assert outcome(lambda: scenefile.load_json(path)) == outcome(lambda: _loads(path))
+    assert outcome(lambda: scene_stream.load_json(path)) == outcome(lambda: _loads(path))
 
 
 GOOD_JSON = [
@@ -240,7 +240,7 @@ BAD_JSON = [
 def test_json_streamed_and_whole_agree_on_scenes_and_errors(tmp_path, text):
     path = tmp_path / "s.json"
     path.write_text(text)
-    streamed = outcome(lambda: scenefile.load_json(path))
+    streamed = outcome(lambda: scene_stream.load_json(path))
     assert streamed == outcome(lambda: scenefile.loads_json(text, str(path)))
     assert streamed[0][0] == ("ok" if text in GOOD_JSON else "error")
     if streamed[0][0] == "error":
@@ -250,7 +250,7 @@ def test_json_streamed_and_whole_agree_on_scenes_and_errors(tmp_path, text):
 def test_defs_shared_by_refs_stay_one_object_when_streamed(tmp_path):
     path = tmp_path / "s.json"
     path.write_text('{"clcsg": 1, "defs": {"a": {"sphere": {"radius": 1}}}, "root": {"union": [{"ref": "a"}, {"ref": "a"}]}}')
-    a, b = scenefile.load_json(path).shape.operands
+    a, b = scene_stream.load_json(path).shape.operands
     assert a is b
 
 
@@ -258,8 +258,8 @@ def test_a_large_json_file_loads_within_ten_times_its_size(tmp_path):
     path = str(tmp_path / "big.json")
     n = write_json(path, 3_000_000)
     scene_schema()
-    scenefile.load_json(HERE.parent / "examples" / "bracket.json")  # imports and validators
-    ratio, scene = _peak_ratio(scenefile.load_json, path)
+    scene_stream.load_json(HERE.parent / "examples" / "bracket.json")  # imports and validators
+    ratio, scene = _peak_ratio(scene_stream.load_json, path)
     assert ratio <= 10.0, f"peak {ratio:.1f} times the file's size"
     assert len(scene.shape.operands) == n
 
@@ -271,7 +271,7 @@ def test_an_invalid_file_too_large_to_read_whole_reports_what_the_stream_met(tmp
     path.write_text('{"clcsg": 1, "root": {"union": [{"box": {}}, {"sphere": {"radius": -1}}]}}' + " " * 10_000)
     monkeypatch.setattr(budget, "available_memory", lambda: 10_100 * budget.JSON_FACTOR)
     with pytest.raises(SceneError) as e:
-        scenefile.load_json(path)
+        scene_stream.load_json(path)
     msg = str(e.value)
     assert msg.startswith(f"{path}: $.root.union[1].sphere.radius: must be positive") and "\n" not in msg
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 import clcsg
 from clcsg.model import csg, solids
-from clcsg.readers import scenefile
+from clcsg.readers import scene_stream, scenefile
 from clcsg.errors import DnfLimitError, OutputError, SceneError
 from clcsg.model.scene import Scene
 from strategies import any_primitives, affine_maps, shapes, shared_nodes
@@ -108,7 +108,7 @@ def test_round_trip_through_files(tmp_path):
     assert_same_dnf(scene, loaded)
     assert np.array_equal(loaded.bound, scene.bound)
     scenefile.save_json(part, tmp_path / "bare.json")  # a bare Shape
-    assert scenefile.load_json(tmp_path / "bare.json").bound is None
+    assert scene_stream.load_json(tmp_path / "bare.json").bound is None
 
 
 def test_shared_nodes_stay_shared():

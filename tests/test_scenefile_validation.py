@@ -12,7 +12,7 @@ import pytest
 
 import clcsg
 from clcsg.model import csg, solids
-from clcsg.readers import scenefile
+from clcsg.readers import scene_stream, scenefile
 from clcsg.errors import SceneError, TransformError
 from test_scenefile import assert_same_graph
 
@@ -187,18 +187,18 @@ def test_unknown_kind_lists_every_kind():
 
 def test_file_level_errors(tmp_path):
     with pytest.raises(SceneError, match="no such file"):
-        scenefile.load_json(tmp_path / "nope.json")
+        scene_stream.load_json(tmp_path / "nope.json")
     bad = tmp_path / "latin1.json"
     bad.write_bytes(b'{"clcsg": 1, "comment": "\xe9", "root": {"box": {}}}')
     with pytest.raises(SceneError, match=r"latin1\.json: not UTF-8 text"):
-        scenefile.load_json(bad)
+        scene_stream.load_json(bad)
     bom = tmp_path / "bom.json"
     bom.write_bytes(b"\xef\xbb\xbf" + S(BOX).encode())
-    assert scenefile.load_json(bom).shape.kind == "box"
+    assert scene_stream.load_json(bom).shape.kind == "box"
     deep = tmp_path / "deep.json"
     deep.write_text(S('{"complement": ' * 5000 + BOX + "}" * 5000))
     with pytest.raises(SceneError, match="nesting too deep"):
-        scenefile.load_json(deep)
+        scene_stream.load_json(deep)
 
 
 def test_deep_chains_load_without_recursion():

@@ -61,6 +61,14 @@ class Shape:
         return ()
 
 
+def _literals(kind: str, params: dict):
+    """The quadric literals of a primitive of ``kind`` (the registry lives in solids.py, which
+    imports this module)."""
+    from .solids import literals
+
+    return literals(kind, params)
+
+
 class Primitive(Shape):
     """A named solid (box, sphere, ...) with parameters and a color.
 
@@ -75,10 +83,8 @@ class Primitive(Shape):
     __slots__ = ("kind", "_names", "_values", "color", "_quadrics")
 
     def __init__(self, kind: str, params: dict, color=None):
-        from .solids import literals  # the registry lives in solids.py
-
         params = dict(params)
-        literals(kind, params)  # raises the solid's own errors now, not when it is compiled
+        _literals(kind, params)  # raises the solid's own errors now, not when it is compiled
         self.kind = kind
         names = tuple(params)
         self._names = _NAMES.setdefault(names, names)
@@ -94,9 +100,7 @@ class Primitive(Shape):
     def quadrics(self) -> tuple[Quadric, ...]:
         q = self._quadrics
         if q is None:
-            from .solids import literals
-
-            q = self._quadrics = tuple(literals(self.kind, self.params))
+            q = self._quadrics = tuple(_literals(self.kind, self.params))
         return q
 
     def __repr__(self) -> str:

@@ -18,15 +18,17 @@ exactly as before (or, for a file too large to read whole, the problem met here)
 from __future__ import annotations
 
 import math
+import os
 import sys
 
 import ijson
 
-from ..errors import SceneError
+from ..errors import LimitError, SceneError
 from ..model.csg import Shape
 from ..model.scene import Scene
+from .budget import JSON_FACTOR, WHOLE_JSON_FACTOR, check_file
 from .scene_schema import CONSTRUCTIONS, key
-from .scenefile import OPERATIONS, _Loader, _Object
+from .scenefile import OPERATIONS, _Loader, _Object, _one_line, loads_json
 from .trampoline import run
 
 #: node keys whose value is a list of nodes, and the one whose value is a node
@@ -160,3 +162,38 @@ class StreamLoader(_Loader):
         if k in c:
             raise Restart(f"duplicate key {k!r}")
         c[k] = value
+
+
+def load_json(path) -> Scene:
+    """Load and validate a ``.json`` scene file.
+
+    A valid file is read as a stream, node by node (:class:`StreamLoader`: memory
+    holds the model, not the document); a file with a problem is then read whole, so
+    that the first problem in document order is the one reported."""
+    p = os.fspath(path)
+    check_file(p, JSON_FACTOR)
+    try:
+        with open(p, "rb") as f:
+            if f.read(3) != b"\xef\xbb\xbf":
+                f.seek(0)
+            return StreamLoader(p).load(f)
+    except Restart as e:
+        restart = e.reason
+    except FileNotFoundError:
+        raise SceneError(f"{p}: no such file") from None
+    except OSError as e:
+        raise SceneError(f"{p}: cannot read: {e.strerror or e}") from None
+    try:
+        check_file(p, WHOLE_JSON_FACTOR)
+    except LimitError:  # too large to read whole: what the stream met is the message
+        raise SceneError(_one_line(restart if restart.startswith(p) else f"{p}: {restart}")) from None
+    try:
+        with open(p, encoding="utf-8-sig") as f:
+            text = f.read()
+    except FileNotFoundError:
+        raise SceneError(f"{p}: no such file") from None
+    except UnicodeDecodeError as e:
+        raise SceneError(f"{p}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    except OSError as e:
+        raise SceneError(f"{p}: cannot read: {e.strerror or e}") from None
+    return loads_json(text, p)

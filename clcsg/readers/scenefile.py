@@ -51,14 +51,13 @@ from __future__ import annotations
 import json
 import math
 import numbers
-import os
 import re
 from typing import Any
 
 import numpy as np
 
 from ..atomic import atomic_open
-from ..errors import LimitError, SceneError, TransformError
+from ..errors import SceneError, TransformError
 from ..model import solids
 from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.construction import Construction, first_color
@@ -68,7 +67,7 @@ from ..model.polyhedron import polyhedron
 from ..model.revolve import revolve
 from ..model.scene import Scene
 from ..model.colors import ColorError, parse_color
-from .budget import JSON_FACTOR, WHOLE_JSON_FACTOR, check_file, check_input
+from .budget import WHOLE_JSON_FACTOR, check_input
 from .mesh_files import load_mesh, resolve
 from ..model.surfels import Surfels
 from .profile_json import profile_from_json
@@ -80,7 +79,7 @@ OPERATIONS = {"union": Union, "intersection": Intersection, "difference": Differ
 NODE_EXTRA_KEYS = ("transform", "color", "comment")
 
 __all__ = ["FORMAT_VERSION", "OPERATIONS", "CONSTRUCTIONS", "UNARY", "TRANSFORM_STEPS", "TOP_KEYS", "NODE_EXTRA_KEYS", "WIDTH",
-           "SAVE_DEPTH", "load_json", "loads_json", "parse_json", "scene_from_dict", "scene_to_dict", "dumps",
+           "SAVE_DEPTH", "loads_json", "parse_json", "scene_from_dict", "scene_to_dict", "dumps",
            "save_json"]
 
 #: line width of :func:`dumps`
@@ -94,43 +93,6 @@ SAVE_DEPTH = 100
 
 
 # -- public API ---------------------------------------------------------------------------------
-def load_json(path) -> Scene:
-    """Load and validate a ``.json`` scene file.
-
-    A valid file is read as a stream, node by node (:mod:`clcsg.readers.scene_stream`:
-    memory holds the model, not the document); a file with a problem is then read whole, so
-    that the first problem in document order is the one reported."""
-    from .scene_stream import Restart, StreamLoader
-
-    p = os.fspath(path)
-    check_file(p, JSON_FACTOR)
-    try:
-        with open(p, "rb") as f:
-            if f.read(3) != b"\xef\xbb\xbf":
-                f.seek(0)
-            return StreamLoader(p).load(f)
-    except Restart as e:
-        restart = e.reason
-    except FileNotFoundError:
-        raise SceneError(f"{p}: no such file") from None
-    except OSError as e:
-        raise SceneError(f"{p}: cannot read: {e.strerror or e}") from None
-    try:
-        check_file(p, WHOLE_JSON_FACTOR)
-    except LimitError:  # too large to read whole: what the stream met is the message
-        raise SceneError(_one_line(restart if restart.startswith(p) else f"{p}: {restart}")) from None
-    try:
-        with open(p, encoding="utf-8-sig") as f:
-            text = f.read()
-    except FileNotFoundError:
-        raise SceneError(f"{p}: no such file") from None
-    except UnicodeDecodeError as e:
-        raise SceneError(f"{p}: not UTF-8 text ({e.reason} at byte {e.start})") from None
-    except OSError as e:
-        raise SceneError(f"{p}: cannot read: {e.strerror or e}") from None
-    return loads_json(text, p)
-
-
 def loads_json(text: str, source: str = "<string>") -> Scene:
     """Parse and validate scene JSON text; ``source`` names it in error messages."""
     return scene_from_dict(parse_json(text, source), source)

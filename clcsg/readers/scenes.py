@@ -15,7 +15,8 @@ from ..model.csg import Shape
 from ..model.scene import Scene
 from .openscad import load_csg
 from .scad import load_scad
-from .scenefile import load_json, save_json
+from .scene_stream import load_json
+from .scenefile import save_json
 
 
 def as_scene(obj, bound=None) -> Scene:
