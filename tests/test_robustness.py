@@ -168,7 +168,7 @@ CLI_ERRORS = [
 ARGPARSE_ERRORS = [
     ("nosuch", "invalid choice"),
     ("info", "required"),
-    ("sample {d}/ok.json -o {o}/x.ply", "--radius"),
+    ("sample {d}/ok.json -r 0.1", "--output"),
     ("info {d}/ok.json --term-limit 0", "--term-limit"),
     ("sample {d}/ok.json -r 0.1 -o {o}/x.ply --max-samples 0", "--max-samples"),
     ("render {d}/ok.json -o {o}/x.png --method nope", "--method"),
