@@ -30,9 +30,8 @@ def scenes(W, H):
 
     from . import zoo
     from .common import fit_to_silhouette
-    from .render import many_leaf_scenes
 
-    out = [(name, tape, cam.resized(W, H)) for name, tape, cam in many_leaf_scenes()]
+    out = [(name, tape, cam.resized(W, H)) for name, tape, cam in zoo.many_leaf_scenes()]
     m = next(x for x in zoo.MODELS if x.name == "gear")
     tree = clcsg.Scene(m.build(), source=m.name).compile("tree")
     out.append(("gear", tree, fit_to_silhouette(tree, W, H, m.direction)))

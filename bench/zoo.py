@@ -263,3 +263,30 @@ def plate(n: int, size: float = 200.0, thick: float = 5.0):
             parts.append(clcsg.cylinder(thick + 2, r, (x, y, 0)))
             parts.append(clcsg.cone(0.6 * r + 0.01, 1.5 * r, r - 0.01, (x, y, thick / 2 - 0.3 * r)))
     return Difference(parts)
+
+
+def sphere_column(n=220, seed=3):
+    """n spheres of radius 0.5 along the z axis (0.35 apart, centers within 0.25 of it) minus a
+    bore of radius 0.12 along the axis."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    spheres = [clcsg.sphere(0.5, center=(*rng.uniform(-0.25, 0.25, 2), 0.35 * k)) for k in range(n)]
+    return clcsg.union(*spheres) - clcsg.cylinder(200, 0.12, center=(0, 0, 40))
+
+
+def many_leaf_scenes(quick=False):
+    """(name, tape, camera at 64x36) of the many-leaf scenes."""
+    import numpy as np
+
+    from clcsg.rendering.camera import Camera
+
+    out = []
+    for n in (16,) if quick else (16, 50):
+        tape = clcsg.Scene(plate(n)).compile()
+        c = 0.5 * (tape.bound[0] + tape.bound[1])
+        cam = Camera.look_at(c + np.array([0, -160, 40]), c + np.array([0, 20, 0]), fov=60, width=64, height=36)
+        out.append((f"plate_{n * n}_holes_oblique", tape, cam))
+    tape = clcsg.Scene(sphere_column()).compile()
+    out.append(("sphere_column_inside", tape, Camera.look_at((0.3, 0, 10), (0.3, 0.5, 14), fov=70, width=64, height=36)))
+    return out
