@@ -48,3 +48,23 @@ def test_a_quadric_with_no_csg_surface_measures_zero():
 
 def test_the_measurement_is_the_same_every_run():
     np.testing.assert_array_equal(_area(clcsg.box(2) - clcsg.sphere(1.3)), _area(clcsg.box(2) - clcsg.sphere(1.3)))
+
+
+@pytest.mark.parametrize("seed", [0, 7])
+def test_the_lines_are_isotropic_and_cross_the_ball_uniformly(seed):
+    """isotropic_lines: unit directions with the sphere's moments (mean 0, E[d d^T] = I / 3),
+    points in the disc across the center orthogonal to their direction, spread uniformly in it
+    (E[rho^2] = R^2 / 2), and the Crofton count of a centered sphere of radius r: E[n] = 2 r^2 / R^2."""
+    from clcsg.compile.bounds.surface_area import isotropic_lines
+
+    c, R, n = np.array([1.0, -2.0, 0.5]), 3.0, 4096
+    d, o = isotropic_lines(c, R, n, seed)
+    assert np.allclose(np.linalg.norm(d, axis=1), 1)
+    assert np.abs(d.mean(axis=0)).max() < 0.02 and np.abs(d.T @ d / n - np.eye(3) / 3).max() < 0.02
+    w = o - c
+    assert np.abs(np.sum(w * d, axis=1)).max() < 1e-12 and np.linalg.norm(w, axis=1).max() <= R * (1 + 1e-12)
+    assert abs(np.mean(np.sum(w * w, axis=1)) / (R * R / 2) - 1) < 0.02
+    r = 1.2
+    b = np.sum(w * d, axis=1)
+    crossings = 2 * (np.sum(w * w, axis=1) - b * b < r * r)
+    assert abs(crossings.mean() / (2 * r * r / (R * R)) - 1) < 0.05

@@ -8,8 +8,8 @@ on average, so area(S) = 2 pi R^2 E[n].  Per quadric u: the ball around the box 
 (:func:`clcsg.compile.bounds.regions.quadric_regions`, where u can carry CSG surface), LINES
 lines, their (at most two) crossings of Q_u = 0 inside the regions, and per crossing the tape
 run with u substituted on its two sides: a point is on the CSG surface exactly where the two
-memberships differ.  The estimate is unbiased with a relative error of about
-1 / sqrt(crossings on the surface); the random lines are seeded, so it is the same every run.
+memberships differ.  The estimate has a relative error of about
+1 / sqrt(crossings on the surface) or better: the lines are quasi-random (:func:`isotropic_lines`), the same every run.
 
 A measurement, not a bound: the resource guard keeps its upper bounds
 (:mod:`clcsg.compile.bounds.estimates`).  It runs the tape once over all crossings; scenes
@@ -32,6 +32,32 @@ LINES = 256
 MAX_WORK = 5e7
 
 
+#: the generalized golden ratio of dimension 4 (the real root of x^5 = x + 1): the steps
+#: 1 / PHI4^k of the R4 low-discrepancy sequence
+PHI4 = 1.2207440846057596
+R4_STEPS = np.array([PHI4 ** -k for k in range(1, 5)])
+
+
+def isotropic_lines(center, R: float, n: int, seed: int = 0):
+    """``n`` isotropic uniform lines meeting the ball (center, R) as (directions, points), from
+    the 4-D R4 sequence u_i = frac(s + i a) (quasi-random: the same every run, and spread more
+    evenly than random numbers): the direction from (u_1, u_2) (z = 1 - 2 u_1 uniform, azimuth
+    2 pi u_2), the point uniform in the disc of radius R across the center orthogonal to it, from
+    (u_3, u_4) (radius R sqrt(u_3), angle 2 pi u_4).  ``seed`` shifts the sequence."""
+    i = np.arange(n, dtype=np.float64)[:, None]
+    u = np.mod(0.5 + seed * R4_STEPS[::-1] + (i + 1) * R4_STEPS, 1.0)
+    z, phi = 1.0 - 2.0 * u[:, 0], 2.0 * math.pi * u[:, 1]
+    s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    d = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+    ref = np.where(np.abs(d[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    a1 = np.cross(d, ref)
+    a1 /= np.linalg.norm(a1, axis=1)[:, None]
+    a2 = np.cross(d, a1)
+    rho, ang = R * np.sqrt(u[:, 2]), 2.0 * math.pi * u[:, 3]
+    o = np.asarray(center, dtype=np.float64) + (rho * np.cos(ang))[:, None] * a1 + (rho * np.sin(ang))[:, None] * a2
+    return d, o
+
+
 def surface_areas(tape, regions, lines: int = LINES, seed: int = 0):
     """Per quadric of ``tape`` the measured area of the CSG surface on it (an array of
     ``len(tape.quadrics)``), or None past :data:`MAX_WORK`.  ``regions``: per quadric the
@@ -40,7 +66,6 @@ def surface_areas(tape, regions, lines: int = LINES, seed: int = 0):
     used = [u for u in used if len(regions[u])]
     if len(tape.ops) * lines * len(used) > 20 * MAX_WORK:  # most lines miss the regions, not this many
         return None
-    rng = np.random.default_rng(seed)
     pts, owner, weight = [], [], []
     for u in used:
         reg = np.asarray(regions[u], dtype=np.float64)
@@ -48,12 +73,7 @@ def surface_areas(tape, regions, lines: int = LINES, seed: int = 0):
         center, R = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
         if not (R > 0 and math.isfinite(R)):
             continue
-        d = rng.normal(size=(lines, 3))
-        d /= np.linalg.norm(d, axis=1)[:, None]
-        a = rng.normal(size=(lines, 3))
-        a -= np.sum(a * d, axis=1)[:, None] * d
-        a /= np.linalg.norm(a, axis=1)[:, None]
-        o = center + (R * np.sqrt(rng.uniform(size=lines)))[:, None] * a
+        d, o = isotropic_lines(center, R, lines, seed + u)
         # crossings on a region's face (a plane's regions are flat boxes) count as inside
         tol = 1e-9 * (1.0 + np.abs(reg).max())
         for t in Quadric(tape.quadrics[u]).intersect_line(o, d):
