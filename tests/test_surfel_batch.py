@@ -14,8 +14,6 @@ from clcsg.compile.tape import QuadricTable
 from clcsg.sampling.surfel_clips import ClipPrograms
 from clcsg.sampling.surfel_csg import marker_tape
 
-pytest.importorskip("scipy.spatial")
-
 
 def sphere_cloud(n):
     i = np.arange(n) + 0.5
