@@ -34,8 +34,9 @@ ROUNDING_ULPS = 64
 #: instance program needs more falls back to the first instance whose boundary holds a point
 INSTANCE_REGS = 32
 
-#: bins of the colour encoding's table over [0, 1] (rendering/shade.h; a power of two)
-SHADE_BINS = 8192
+#: pixels of a row per work-item of the splat resolve pass (rendering/resolve.cl): their
+#: shading runs as one float8 vector
+RESOLVE_LANES = 8
 
 #: the framebuffer word of a pixel no fragment reached (depth bits << 32 | index)
 EMPTY_KEY = 0xFFFFFFFFFFFFFFFF
@@ -53,6 +54,6 @@ def defines() -> dict:
     d.update(_slots("PC", "SPLAT_COUNTERS", SPLAT_COUNTERS))
     d["ROUNDING_ULPS"] = ROUNDING_ULPS
     d["INSTANCE_REGS"] = INSTANCE_REGS
-    d["SHADE_BINS"] = SHADE_BINS
+    d["RESOLVE_LANES"] = RESOLVE_LANES
     d["EMPTY_KEY"] = f"0x{EMPTY_KEY:016x}UL"
     return d

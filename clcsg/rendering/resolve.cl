@@ -1,9 +1,10 @@
-/* Resolve pass of the splat renderer, one work-item per pixel.  The framebuffer word holds
+/* Resolve pass of the splat renderer, one work-item per RESOLVE_LANES pixels of a row.  The framebuffer word holds
  * (float depth bits << 32 | sample index) of the nearest accepted fragment (splat.cl).  Outputs
  * the depth (distance along the unit view ray), the quadric and primitive ids and the colour of
  * the primitive whose boundary holds the hit (primitives.h), shaded with shade.h (the
- * primitives' albedos computed once per view by the albedo kernel, the encoding through the
- * table of the encoding kernel): the same shading as the ray tracer.
+ * primitives' albedos computed once per view by the albedo kernel; the lighting and encoding
+ * as float8 over the lanes, one body with the ray tracer's scalar shade_light): the same
+ * shading as the ray tracer.
  *
  * Where the sample's splat_primitive is set (the colour rule gives one primitive over its whole
  * ball), the depth is the stored float z and the shaded point e + z v: the splat pass computed
@@ -15,6 +16,9 @@
  * whose depth (s - e).v + tau is nearest the stored depth, for the colour rule at the exact
  * point.  EMPTY_KEY comes from clcsg/cl/constants.py. */
 #include "pixel.h"
+#if RESOLVE_LANES != 8
+#error "the resolve pass shades RESOLVE_LANES pixels as one float8"
+#endif
 
 /* Per primitive k < n (and the grey of "none" at k = n): its albedo (shade_albedo) for this view. */
 __kernel void albedo(__global const prim_rec *prims, int n, __global const view_rec *view, __global float4 *out)
@@ -23,35 +27,18 @@ __kernel void albedo(__global const prim_rec *prims, int n, __global const view_
     if (k <= n) out[k] = shade_albedo(view, pixel_color(prims, k < n ? k : -1));
 }
 
-/* Entry b <= SHADE_BINS of the colour encoding's table for this view (shade_table_entry). */
-__kernel void encoding(__global const view_rec *view, __global ushort *out)
+/* The hit of framebuffer word key (not EMPTY_KEY) on the view ray e + t v: its depth, point p,
+ * quadric and primitive (see the file's comment). */
+inline int resolve_hit(__global const quadric_rec *quadrics, __global const sample_rec *samples, PRIMITIVE_TABLE,
+                       ulong key, real3 e, real3 v, real *depth, real3 *p, int *qid)
 {
-    int b = get_global_id(0);
-    if (b <= SHADE_BINS) out[b] = shade_table_entry(view, b);
-}
-
-__kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
-                      PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
-                      __global const float4 *albedo, int n_prims, __global const ushort *encoding,
-                      PIXEL_OUTPUTS)
-{
-    int i, j;
-    int pix = pixel_index(view, &i, &j);
-    if (pix < 0) return;
-    ulong key = framebuffer[pix];
-    pixel_out out = PIXEL_OUT;
-    if (key == EMPTY_KEY) {
-        pixel_miss(out, view, pix);
-        return;
-    }
     uint idx = (uint)(key & 0xffffffffUL);
     real stored = (real)as_float((uint)(key >> 32));
     __global const sample_rec *sp = &samples[idx];
-    real3 e = view_eye(view);
-    real3 v = view_ray(view, i, j);
     int prim = sp->splat_primitive;
-    real depth = stored;
-    real3 p = e + stored * v;
+    *qid = sp->quadric;
+    *depth = stored;
+    *p = e + stored * v;
     if (prim < 0) { /* the colour rule at the exact root */
         quadric q = quadric_load(quadrics, sp->quadric);
         real tc = dot(vload3(0, sp->pos) - e, v);
@@ -63,11 +50,92 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
             t = tau[0];
             if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
         }
-        p = o + t * v;
-        depth = tc + t;
-        prim = primitive_at(PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, p);
+        *p = o + t * v;
+        *depth = tc + t;
+        prim = primitive_at(PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, *p);
     }
-    float4 alb = albedo[prim >= 0 ? prim : n_prims];
-    float3 c = shade_light(view, alb, pixel_normal(quadrics, sp->quadric, p), convert_float3(v));
-    pixel_write(out, pix, prim, sp->quadric, depth, shade_encode_table(view, encoding, c, alb.w));
+    return prim;
+}
+
+/* Lane l (vector component c) of the resolve pass's gather: the framebuffer word, a miss
+ * written at once, else the winning sample's depth, quadric coefficients and albedo (and,
+ * where the colour rule needs the exact root, resolve_hit's point).  A macro over constant
+ * components keeps the vectors in registers (OpenCL has no dynamic component index). */
+#define RESOLVE_GATHER(l, c)                                                                        \
+    if ((l) < lanes) {                                                                              \
+        int pix = i * W + j0 + (l);                                                                 \
+        ulong key = framebuffer[pix];                                                               \
+        if (key == EMPTY_KEY) {                                                                     \
+            pixel_miss(out, view, pix);                                                             \
+        } else {                                                                                    \
+            __global const sample_rec *sp = &samples[(uint)(key & 0xffffffffUL)];                  \
+            int qid = sp->quadric, prim = sp->splat_primitive;                                      \
+            real depth = (real)as_float((uint)(key >> 32));                                         \
+            if (prim < 0) {                                                                         \
+                real3 p;                                                                            \
+                prim = resolve_hit(quadrics, samples, PRIMITIVE_TABLE_ARGS, key, e,                 \
+                                   view_ray(view, i, j0 + (l)), &depth, &p, &qid);                  \
+                PX.c = p.x; PY.c = p.y; PZ.c = p.z;                                                 \
+                exact |= 1 << (l);                                                                  \
+            }                                                                                       \
+            Z.c = depth;                                                                            \
+            __global const real *q = quadrics[qid].coef;                                            \
+            XX.c = q[0]; XY.c = q[1]; XZ.c = q[2]; BX.c = q[3];                                     \
+            YY.c = q[4]; YZ.c = q[5]; BY.c = q[6]; ZZ.c = q[7]; BZ.c = q[8];                        \
+            out.depth[pix] = (float)depth;                                                          \
+            out.quadric[pix] = qid;                                                                 \
+            out.primitive[pix] = prim;                                                              \
+            float4 alb = albedo[prim >= 0 ? prim : n_prims];                                        \
+            AX.c = alb.x; AY.c = alb.y; AZ.c = alb.z; AW.c = alb.w;                                 \
+            hits |= 1 << (l);                                                                       \
+        }                                                                                           \
+    }
+
+/* One work-item per RESOLVE_LANES pixels of a row: RESOLVE_GATHER per pixel, then, as real8 /
+ * float8 vectors over the pixels, the view rays, the shaded points e + depth v, the normals
+ * (grad Q / |grad Q|, eq. 4), the lighting (shade_light8) and the encoding (shade_encode8). */
+__kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
+                      PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
+                      __global const float4 *albedo, int n_prims,
+                      PIXEL_OUTPUTS)
+{
+    int i = get_global_id(1), j0 = get_global_id(0) * RESOLVE_LANES;
+    int W = view->width;
+    if (i >= view->height || j0 >= W) return;
+    int lanes = min(RESOLVE_LANES, W - j0);
+    pixel_out out = PIXEL_OUT;
+    real3 e = view_eye(view);
+    /* the lanes not shown keep a unit sphere at the origin: harmless */
+    real8 Z = 0, PX = 0, PY = 0, PZ = 0, XX = 1, XY = 0, XZ = 0, YY = 1, YZ = 0, ZZ = 1, BX = 0, BY = 0, BZ = 0;
+    float8 AX = 0, AY = 0, AZ = 0, AW = 0;
+    int hits = 0, exact = 0;
+    RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
+    RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
+    if (!hits) return;
+    /* the view rays of the lanes (view_ray), the points e + z v or the exact ones */
+    real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+    real8 dX = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
+    real8 dY = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
+    real8 dZ = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
+    real8 il = 1 / sqrt(dX * dX + dY * dY + dZ * dZ);
+    real8 vX = dX * il, vY = dY * il, vZ = dZ * il;
+    realmask8 use = (((realmask8)(exact) >> (realmask8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
+    real8 pX = select(e.x + Z * vX, PX, use);
+    real8 pY = select(e.y + Z * vY, PY, use);
+    real8 pZ = select(e.z + Z * vZ, PZ, use);
+    /* grad Q / 2 = A p - b (layout.h: the w column holds -b) */
+    real8 gX = XX * pX + XY * pY + XZ * pZ + BX;
+    real8 gY = XY * pX + YY * pY + YZ * pZ + BY;
+    real8 gZ = XZ * pX + YZ * pY + ZZ * pZ + BZ;
+    real8 gl = 1 / sqrt(gX * gX + gY * gY + gZ * gZ);
+    float8 cx, cy, cz;
+    shade_light8(view, AX, AY, AZ, convert_float8(gX * gl), convert_float8(gY * gl),
+                 convert_float8(gZ * gl), convert_float8(vX), convert_float8(vY), convert_float8(vZ), &cx, &cy, &cz);
+    uchar8 rx = shade_encode8(view, cx), ry = shade_encode8(view, cy), rz = shade_encode8(view, cz);
+    uchar8 ra = convert_uchar8_sat(AW * 255.0f + 0.5f);
+#define RESOLVE_STORE(l, c) \
+    if (hits & (1 << (l))) out.rgba[i * W + j0 + (l)] = (uchar4)(rx.c, ry.c, rz.c, ra.c);
+    RESOLVE_STORE(0, s0) RESOLVE_STORE(1, s1) RESOLVE_STORE(2, s2) RESOLVE_STORE(3, s3)
+    RESOLVE_STORE(4, s4) RESOLVE_STORE(5, s5) RESOLVE_STORE(6, s6) RESOLVE_STORE(7, s7)
+#undef RESOLVE_STORE
 }

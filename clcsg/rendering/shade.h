@@ -51,7 +51,6 @@ inline real3 view_ray(__global const view_rec *vw, int i, int j)
 
 /* x^y for x >= 0 as exp2(y log2 x): several times faster than pow() on CPU devices, and
  * plenty for 8-bit output (x = 0 gives 0 for y > 0). */
-inline float shade_pow(float x, float y) { return exp2(y * log2(x)); }
 inline float3 shade_pow3(float3 x, float y) { return exp2(y * log2(x)); }
 
 /* The default look (clcsg.rendering.view.Shading), in linear light:
@@ -75,29 +74,53 @@ inline float4 shade_albedo(__global const view_rec *vw, float4 base)
     return (float4)(shade_pow3(clamp(base.xyz, 0.0f, 1.0f), vw->gamma), clamp(base.w, 0.0f, 1.0f));
 }
 
-/* The lit colour in linear light, clamped to [0, 1], from the linear albedo of shade_albedo.
- * The highlight (n.h)^shininess is skipped where n.h <= spec_cut (pack_view: at most 2^-64,
- * under the rounding of any lit colour). */
+/* The lit colour in linear light, clamped to [0, 1], from the linear albedo (ax, ay, az) of
+ * shade_albedo, on separate components: T is float (one pixel) or float8 (RESOLVE_LANES pixels of
+ * the resolve pass), and both widths expand this one body, so a pixel gets the same arithmetic
+ * in either.  The highlight (n.h)^shininess counts only where n.h > spec_cut (pack_view: at
+ * most 2^-64, under the rounding of any lit colour) and the key light reaches the face;
+ * selects instead of branches keep the body straight-line for the vector width. */
+#define SHADE_LIGHT_BODY(T)                                                                          \
+    {                                                                                                \
+        T flip = select((T)1.0f, (T)-1.0f, nx * vx + ny * vy + nz * vz > 0.0f);                     \
+        nx *= flip; ny *= flip; nz *= flip;                                                          \
+        T hx = -vx, hy = -vy, hz = -vz; /* towards the eye: the headlight */                        \
+        T facing = fmax(nx * hx + ny * hy + nz * hz, 0.0f);                                          \
+        T up = 0.5f + 0.5f * (nx * vw->sky[0] + ny * vw->sky[1] + nz * vw->sky[2]);                 \
+        T hemi = vw->ambient * (vw->ground + (1.0f - vw->ground) * up);                              \
+        T d_key = fmax(nx * vw->key[0] + ny * vw->key[1] + nz * vw->key[2], 0.0f);                  \
+        T d_fill = fmax(nx * vw->fill[0] + ny * vw->fill[1] + nz * vw->fill[2], 0.0f);              \
+        T edge = 1.0f - facing;                                                                      \
+        T light = hemi + vw->diffuse * (vw->headlight * facing + vw->key_light * d_key              \
+                                        + vw->fill_light * d_fill) + vw->rim * edge * edge * edge;   \
+        T kx = vw->key[0] + hx, ky = vw->key[1] + hy, kz = vw->key[2] + hz; /* half vector */       \
+        T nh = fmax((nx * kx + ny * ky + nz * kz) / sqrt(kx * kx + ky * ky + kz * kz), 0.0f);      \
+        T s_key = select((T)0.0f, exp2(vw->shininess * log2(nh)), (d_key > 0.0f) & (nh > vw->spec_cut)); \
+        *cx = clamp(ax * light + vw->specular * s_key, 0.0f, 1.0f);                                  \
+        *cy = clamp(ay * light + vw->specular * s_key, 0.0f, 1.0f);                                  \
+        *cz = clamp(az * light + vw->specular * s_key, 0.0f, 1.0f);                                  \
+    }
+
+inline void shade_light1(__global const view_rec *vw, float ax, float ay, float az, float nx, float ny, float nz,
+                         float vx, float vy, float vz, float *cx, float *cy, float *cz)
+SHADE_LIGHT_BODY(float)
+
+inline void shade_light8(__global const view_rec *vw, float8 ax, float8 ay, float8 az, float8 nx, float8 ny,
+                         float8 nz, float8 vx, float8 vy, float8 vz, float8 *cx, float8 *cy, float8 *cz)
+SHADE_LIGHT_BODY(float8)
+
+/* The channel bytes of shade_encode for RESOLVE_LANES linear channel values c in [0, 1]. */
+inline uchar8 shade_encode8(__global const view_rec *vw, float8 c)
+{
+    return convert_uchar8_sat(exp2((1.0f / vw->gamma) * log2(c)) * 255.0f + 0.5f);
+}
+
+/* shade_light1 on vectors: the lit colour of one pixel (n: the unit normal, v: the unit view ray). */
 inline float3 shade_light(__global const view_rec *vw, float4 albedo, float3 n, float3 v)
 {
-    if (dot(n, v) > 0.0f) n = -n;
-    float3 key = vload3(0, vw->key);
-    float3 head = -v;
-    float facing = fmax(dot(n, head), 0.0f);
-    float up = 0.5f + 0.5f * dot(n, vload3(0, vw->sky));
-    float hemi = vw->ambient * (vw->ground + (1.0f - vw->ground) * up);
-    float d_key = fmax(dot(n, key), 0.0f);
-    float d_fill = fmax(dot(n, vload3(0, vw->fill)), 0.0f);
-    float edge = 1.0f - facing;
-    float light = hemi + vw->diffuse * (vw->headlight * facing + vw->key_light * d_key + vw->fill_light * d_fill)
-                + vw->rim * edge * edge * edge;
-    float s_key = 0.0f;
-    if (d_key > 0.0f) {
-        float nh = fmax(dot(n, normalize(key + head)), 0.0f);
-        if (nh > vw->spec_cut) s_key = shade_pow(nh, vw->shininess);
-    }
-    float3 c = albedo.xyz * light + vw->specular * s_key;
-    return clamp(c, 0.0f, 1.0f);
+    float cx, cy, cz;
+    shade_light1(vw, albedo.x, albedo.y, albedo.z, n.x, n.y, n.z, v.x, v.y, v.z, &cx, &cy, &cz);
+    return (float3)(cx, cy, cz);
 }
 
 /* 8-bit RGBA of linear colour c in [0, 1] and alpha: c^(1 / gamma) and alpha, rounded. */
@@ -113,29 +136,6 @@ inline uchar4 shade_encode(__global const view_rec *vw, float3 c, float alpha)
 inline uchar4 shade_lit(__global const view_rec *vw, float4 albedo, float3 n, float3 v)
 {
     return shade_encode(vw, shade_light(vw, albedo, n, v), albedo.w);
-}
-
-/* The encoding as a table over SHADE_BINS bins of [0, 1]: bin b holds c in [b, b + 1) / SHADE_BINS
- * (exact: SHADE_BINS is a power of two), and entry b is the channel byte of every c in the bin
- * where its two ends encode alike (the encoding is monotone), else SHADE_SPLIT.  Entry
- * SHADE_BINS is c = 1.  Built once per view by shade_table_entry. */
-#define SHADE_SPLIT 0x100
-
-inline ushort shade_table_entry(__global const view_rec *vw, int b)
-{
-    float lo = (float)b / SHADE_BINS, hi = fmin((float)(b + 1) / SHADE_BINS, 1.0f);
-    uchar4 e = shade_encode(vw, (float3)(lo, hi, lo), 1.0f);
-    return e.x == e.y ? e.x : SHADE_SPLIT;
-}
-
-/* shade_encode through the table: the same bytes, with the power functions only for channels
- * in split bins. */
-inline uchar4 shade_encode_table(__global const view_rec *vw, __global const ushort *table, float3 c, float alpha)
-{
-    int3 b = convert_int3_sat(c * (float)SHADE_BINS);
-    ushort ex = table[min(b.x, SHADE_BINS)], ey = table[min(b.y, SHADE_BINS)], ez = table[min(b.z, SHADE_BINS)];
-    if (((ex | ey | ez) & SHADE_SPLIT) || any(isnan(c))) return shade_encode(vw, c, alpha);
-    return (uchar4)((uchar)ex, (uchar)ey, (uchar)ez, convert_uchar_sat(alpha * 255.0f + 0.5f));
 }
 
 inline uchar4 shade(__global const view_rec *vw, float4 base, float3 n, float3 v)

@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from ..cl.constants import EMPTY_KEY, SHADE_BINS, SPLAT_COUNTERS
+from ..cl.constants import EMPTY_KEY, RESOLVE_LANES, SPLAT_COUNTERS
 from ..cl.device import choose_real, context_of, require_int64_atomics
 from ..cl.programs import build, event_seconds, kernel
 from ..cl.memory import device_buffer, upload
@@ -91,19 +91,16 @@ def eye_inside(tape, eye) -> bool:
 OUTPUTS = ("depth", "ids", "primitives", "rgba")
 
 
-def _shading_tables(context, resolve_prg, scene, view_buf):
-    """The per-view tables the resolve pass reads: each primitive's albedo (and the fallback's,
-    last) and the colour encoding over ``SHADE_BINS`` bins; (albedo, encoding, their events).
-    Both start from host zeros (a few kB), which Oclgrind's uninitialized-value check follows
-    into the kernels that fill them."""
+def _albedo_table(context, resolve_prg, scene, view_buf):
+    """The per-view table the resolve pass reads: each primitive's albedo (and the fallback's,
+    last); (albedo, its events).  It starts from host zeros (a few kB), which Oclgrind's
+    uninitialized-value check follows into the kernel that fills it."""
     q = context.queue
     n_prims = len(scene.packed.prims)
     albedo = upload(context, np.zeros((n_prims + 1) * 4, np.float32), writable=True, what="albedo table")
     ev_albedo = kernel(resolve_prg, "albedo")(q, (-(-(n_prims + 1) // 64) * 64,), (64,), scene.prims,
                                               np.int32(n_prims), view_buf, albedo)
-    encoding = upload(context, np.zeros(SHADE_BINS + 1, np.uint16), writable=True, what="encoding table")
-    ev_encoding = kernel(resolve_prg, "encoding")(q, (-(-(SHADE_BINS + 1) // 64) * 64,), (64,), view_buf, encoding)
-    return albedo, encoding, [ev_albedo, ev_encoding]
+    return albedo, [ev_albedo]
 
 
 def rasterize(context, samples, camera, shading=None, precision="auto", surface_aligned=True,
@@ -155,10 +152,10 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
             clip_buf, view_buf, fb, cnt_buf,
             wait_for=[ev_clear]))
     n_prims = len(scene.packed.prims)
-    albedo, encoding, table_events = _shading_tables(context, resolve_prg, scene, view_buf)
+    albedo, table_events = _albedo_table(context, resolve_prg, scene, view_buf)
     ev_resolve = kernel(resolve_prg, "resolve")(
-        q, *pixel_range(W, H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, albedo,
-        np.int32(n_prims), encoding, *outs, wait_for=events[-1:] + table_events)
+        q, *pixel_range(-(-W // RESOLVE_LANES), H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, albedo,
+        np.int32(n_prims), *outs, wait_for=events[-1:] + table_events)
     wanted = set(read) | {"ids", "rgba"}
     for name, a, b in zip(OUTPUTS, (depth, ids, prims, rgba), outs):
         if name in wanted:

@@ -15,6 +15,8 @@ typedef double real;
 typedef double2 real2;
 typedef double3 real3;
 typedef double4 real4;
+typedef double8 real8;
+typedef long8 realmask8; /* the mask type of select() on real8 */
 #define REAL_MAX DBL_MAX
 #define REAL_EPS DBL_EPSILON
 #else
@@ -22,6 +24,8 @@ typedef float real;
 typedef float2 real2;
 typedef float3 real3;
 typedef float4 real4;
+typedef float8 real8;
+typedef int8 realmask8;
 #define REAL_MAX FLT_MAX
 #define REAL_EPS FLT_EPSILON
 #endif
