@@ -225,23 +225,22 @@ inline rect splat_bound(__global const view_rec *view, quadric q, real lam_min, 
     return bound;
 }
 
-/* Step 2 on the unit view ray e + t v whose point nearest s is o = e + tc v (w0 = o - s): the
- * depth of the splat's fragment, 0 if none (nearer root first; radius, depth, clip and facing
- * tests).  word: the pixel's framebuffer word as read; a root whose key (with sample index idx)
- * is not below it loses, and so does the farther root. */
+/* Step 2 on the unit view ray e + t v whose point nearest s is o = e + tc v (w0 = o - s), given
+ * the nr roots tau0 <= tau1 of Q(o + tau v) = 0: the depth of the splat's fragment, 0 if none
+ * (nearer root first; radius, depth, clip and facing tests).  word: the pixel's framebuffer
+ * word as read; a root whose key (with sample index idx) is not below it loses, and so does
+ * the farther root. */
 inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op *clip, int nc,
-                           __global const quadric_rec *quadrics, real r, real3 e, real3 v, real tc, real3 w0,
-                           ulong word, int idx, ulong *cnt)
+                           __global const quadric_rec *quadrics, real r, real3 v, real tc, real3 w0, real3 o,
+                           int nr, real tau0, real tau1, ulong word, int idx, ulong *cnt)
 {
-    real3 o;
-    real tau[2];
-    int nr = quadric_intersect_near(q, e, v, tc, &o, &tau[0], &tau[1]);
-    for (int k = 0; k < nr; ++k) { /* tau[0] <= tau[1]: nearer the eye first */
-        real3 w = w0 + tau[k] * v; /* p - s */
-        real depth = tc + tau[k];
+    for (int k = 0; k < nr; ++k) { /* nearer the eye first */
+        real tau = k ? tau1 : tau0;
+        real3 w = w0 + tau * v; /* p - s */
+        real depth = tc + tau;
         if (dot(w, w) > r * r || !(depth > 0)) continue;
         if ((((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx) >= word) return 0; /* loses, as the far root */
-        real3 p = o + tau[k] * v;
+        real3 p = o + tau * v;
         int side = sign;
         if (nc > 0) {
             cnt[PC_CLIP_EVALUATIONS]++;
@@ -337,24 +336,41 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             last = max(last, max(max(hi.x, hi.y), max(hi.z, hi.w)));
         }
         cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
-        for (int x = first; x <= last; ++x) {
-            real3 v = normalize(d00 + (real)x * ddx + (real)y * ddy);
-            real tc = dot(a, v);
-            real3 w0 = tc * v - a; /* o - s: o = e + tc v, the ray point closest to s */
-            real m2 = r * r - dot(w0, w0);
-            if (m2 < 0) continue; /* the ray misses the ball */
-            cnt[PC_FRAGMENTS]++;
-            __global ulong *slot = &framebuffer[y * W + x];
-            ulong word = *slot;
-            if (splat_occluded(tc - 16 * SLACK * (fabs(tc) + r), m2, word)) {
-                cnt[PC_FRAGMENTS_OCCLUDED]++;
-                continue;
+        /* the span four pixels per step: the rays, the ball test and the quadric's roots
+         * (quadric_intersect4, eqs. 5, 6 from o = e + tc v) as vectors, then per pixel the
+         * depth tests, the clip and the facing (SPLAT_LANE) */
+        for (int x = first; x <= last; x += 4) {
+            real4 xs = (real)x + (real4)(0, 1, 2, 3);
+            real4 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
+            real4 il = 1 / sqrt(dX * dX + dY * dY + dZ * dZ);
+            real4 vX = dX * il, vY = dY * il, vZ = dZ * il;
+            real4 tc = a.x * vX + a.y * vY + a.z * vZ;
+            real4 wX = tc * vX - a.x, wY = tc * vY - a.y, wZ = tc * vZ - a.z; /* o - s */
+            real4 m2 = r * r - (wX * wX + wY * wY + wZ * wZ);
+            int4 meet = convert_int4(m2 >= 0) & (x + (int4)(0, 1, 2, 3) <= last);
+            if (!any(meet)) continue; /* the rays miss the ball */
+            real4 oX = e.x + tc * vX, oY = e.y + tc * vY, oZ = e.z + tc * vZ;
+            real4 t1, t2;
+            int4 nr = quadric_intersect4(q, oX, oY, oZ, vX, vY, vZ, &t1, &t2);
+#define SPLAT_LANE(l, c)                                                                                    \
+            if (meet.c) {                                                                                   \
+                cnt[PC_FRAGMENTS]++;                                                                        \
+                __global ulong *slot = &framebuffer[y * W + x + (l)];                                       \
+                ulong word = *slot;                                                                         \
+                if (splat_occluded(tc.c - 16 * SLACK * (fabs(tc.c) + r), m2.c, word)) {                     \
+                    cnt[PC_FRAGMENTS_OCCLUDED]++;                                                           \
+                } else if (nr.c) {                                                                          \
+                    real depth = splat_fragment(q, sign, qid, cp, nc, quadrics, r, (real3)(vX.c, vY.c, vZ.c), \
+                                                tc.c, (real3)(wX.c, wY.c, wZ.c), (real3)(oX.c, oY.c, oZ.c), \
+                                                nr.c, t1.c, t2.c, word, idx, cnt);                          \
+                    if (depth > 0) {                                                                        \
+                        cnt[PC_FRAGMENTS_PASSED]++;                                                         \
+                        splat_depth_test(slot, depth, idx, cnt);                                            \
+                    }                                                                                       \
+                }                                                                                           \
             }
-            real depth = splat_fragment(q, sign, qid, cp, nc, quadrics, r, e, v, tc, w0, word, idx, cnt);
-            if (depth > 0) {
-                cnt[PC_FRAGMENTS_PASSED]++;
-                splat_depth_test(slot, depth, idx, cnt);
-            }
+            SPLAT_LANE(0, x) SPLAT_LANE(1, y) SPLAT_LANE(2, z) SPLAT_LANE(3, w)
+#undef SPLAT_LANE
         }
     }
 #if CLCSG_STATS

@@ -16,7 +16,8 @@ typedef double2 real2;
 typedef double3 real3;
 typedef double4 real4;
 typedef double8 real8;
-typedef long8 realmask8; /* the mask type of select() on real8 */
+typedef long4 realmask4; /* the mask types of select() on real4, real8 */
+typedef long8 realmask8;
 #define REAL_MAX DBL_MAX
 #define REAL_EPS DBL_EPSILON
 #else
@@ -25,6 +26,7 @@ typedef float2 real2;
 typedef float3 real3;
 typedef float4 real4;
 typedef float8 real8;
+typedef int4 realmask4;
 typedef int8 realmask8;
 #define REAL_MAX FLT_MAX
 #define REAL_EPS FLT_EPSILON
