@@ -269,6 +269,51 @@ inline bool splat_occluded(real zc, real m2, ulong word)
     return u > 0 && u * u > m2;
 }
 
+/* splat_occluded on four pixels (words: their framebuffer words): a lane mask. */
+inline int4 splat_occluded4(real4 zc, real4 m2, ulong4 word)
+{
+    uint4 hi = convert_uint4(word >> 32);
+    real4 u = zc - convert_real4(as_float4(hi + 1));
+    return (hi < 0x7f800000u) & convert_int4(u > 0) & convert_int4(u * u > m2);
+}
+
+/* The 64-bit keys (float depth bits << 32 | idx) of four depths. */
+inline ulong4 splat_keys4(real4 depth, int idx)
+{
+    return (convert_ulong4(as_uint4(convert_float4(depth))) << 32) | (ulong4)((ulong)(uint)idx);
+}
+
+/* splat_fragment on four rays of a splat without a clip tape (nc = 0, side = sign), as vectors:
+ * per lane the depth of the fragment, 0 if none.  The nearer root tau0 wins if it passes
+ * the radius, depth and facing tests and its key is below the word; one that passes the
+ * first two but whose key is not below the word ends the lane (the farther root cannot win
+ * either); else the farther root tau1 (nr = 2) under the same tests. */
+inline real4 splat_fragment4(quadric q, int sign, real r, real4 vX, real4 vY, real4 vZ, real4 tc, real4 wX,
+                             real4 wY, real4 wZ, real4 oX, real4 oY, real4 oZ, int4 nr, real4 tau0, real4 tau1,
+                             ulong4 word, int idx)
+{
+    int4 ok[2], loses[2], faces[2];
+    real4 depth[2];
+    for (int k = 0; k < 2; ++k) {
+        real4 tau = k ? tau1 : tau0;
+        real4 pX = wX + tau * vX, pY = wY + tau * vY, pZ = wZ + tau * vZ; /* p - s */
+        depth[k] = tc + tau;
+        ok[k] = (nr > k) & convert_int4(pX * pX + pY * pY + pZ * pZ <= r * r) & convert_int4(depth[k] > 0);
+        loses[k] = convert_int4(splat_keys4(depth[k], idx) >= word);
+#if BACKFACE_CULLING
+        real4 px = oX + tau * vX, py = oY + tau * vY, pz = oZ + tau * vZ;
+        real4 gX = q.xx * px + q.xy * py + q.xz * pz + q.xw, gY = q.xy * px + q.yy * py + q.yz * pz + q.yw,
+              gZ = q.xz * px + q.yz * py + q.zz * pz + q.zw; /* grad Q / 2 (eq. 4) */
+        faces[k] = convert_int4(sign * (gX * vX + gY * vY + gZ * vZ) <= 0);
+#else
+        faces[k] = (int4)(-1);
+#endif
+    }
+    int4 win0 = ok[0] & ~loses[0] & faces[0];
+    int4 win1 = (~ok[0] | (~loses[0] & ~faces[0])) & ok[1] & ~loses[1] & faces[1];
+    return select(select((real4)(0), depth[1], convert_realmask4(win1)), depth[0], convert_realmask4(win0));
+}
+
 /* Step 3: the 64-bit depth test, after a plain read that skips atomics which cannot win. */
 inline void splat_depth_test(__global ulong *slot, real depth, int idx, ulong *cnt)
 {
@@ -369,8 +414,30 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
                     }                                                                                       \
                 }                                                                                           \
             }
-            SPLAT_LANE(0, x) SPLAT_LANE(1, y) SPLAT_LANE(2, z) SPLAT_LANE(3, w)
+            if (nc > 0) {
+                SPLAT_LANE(0, x) SPLAT_LANE(1, y) SPLAT_LANE(2, z) SPLAT_LANE(3, w)
+                continue;
+            }
 #undef SPLAT_LANE
+            /* no clip tape: the tests as vectors too, then the depth test per pixel */
+            __global ulong *row = &framebuffer[y * W + x];
+            ulong4 word = (ulong4)(EMPTY_KEY);
+            if (meet.x) word.x = row[0];
+            if (meet.y) word.y = row[1];
+            if (meet.z) word.z = row[2];
+            if (meet.w) word.w = row[3];
+            int4 occluded = meet & splat_occluded4(tc - 16 * SLACK * (fabs(tc) + r), m2, word);
+            int4 live = meet & ~occluded & (nr > 0);
+            cnt[PC_FRAGMENTS] -= meet.x + meet.y + meet.z + meet.w;
+            cnt[PC_FRAGMENTS_OCCLUDED] -= occluded.x + occluded.y + occluded.z + occluded.w;
+            if (!any(live)) continue;
+            real4 depth = splat_fragment4(q, sign, r, vX, vY, vZ, tc, wX, wY, wZ, oX, oY, oZ, nr, t1, t2, word, idx);
+            int4 pass = live & convert_int4(depth > 0);
+            cnt[PC_FRAGMENTS_PASSED] -= pass.x + pass.y + pass.z + pass.w;
+            if (pass.x) splat_depth_test(row, depth.x, idx, cnt);
+            if (pass.y) splat_depth_test(row + 1, depth.y, idx, cnt);
+            if (pass.z) splat_depth_test(row + 2, depth.z, idx, cnt);
+            if (pass.w) splat_depth_test(row + 3, depth.w, idx, cnt);
         }
     }
 #if CLCSG_STATS

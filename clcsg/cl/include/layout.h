@@ -18,6 +18,8 @@ typedef double4 real4;
 typedef double8 real8;
 typedef long4 realmask4; /* the mask types of select() on real4, real8 */
 typedef long8 realmask8;
+#define convert_real4 convert_double4
+#define convert_realmask4 convert_long4
 #define REAL_MAX DBL_MAX
 #define REAL_EPS DBL_EPSILON
 #else
@@ -27,6 +29,8 @@ typedef float3 real3;
 typedef float4 real4;
 typedef float8 real8;
 typedef int4 realmask4;
+#define convert_real4 convert_float4
+#define convert_realmask4 convert_int4
 typedef int8 realmask8;
 #define REAL_MAX FLT_MAX
 #define REAL_EPS FLT_EPSILON
