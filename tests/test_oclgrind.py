@@ -74,11 +74,10 @@ CHECKS = {
 BENIGN = {
     "api-probe": "pyopencl asks every device for CL_DEVICE_COMPUTE_CAPABILITY_MAJOR_NV (0x4000) when it "
                  "creates a kernel; Oclgrind answers CL_INVALID_VALUE, which pyopencl expects",
-    "splat-pre-read": "splat.cl reads the framebuffer slot with a plain load before its atom_min "
-                      "(`if (key < *slot) atom_min(slot, key);`, documented in the kernel), and once per "
-                      "fragment for its early depth rejection (`ulong word = *slot;`): the slot only "
-                      "decreases, so a stale read only costs an extra solve or atomic; reported to the "
-                      "renderer's owner (docs/robustness.md)",
+    "splat-pre-read": "splat.cl reads a framebuffer slot with a plain load (`return *slot;` in "
+                      "splat_peek, documented in the kernel) before its atom_min and for its early depth "
+                      "rejection: the slot only decreases, so a stale read only costs an extra solve or "
+                      "atomic (docs/robustness.md)",
 }
 
 
@@ -289,7 +288,7 @@ def classify(block: str) -> str:
         src = {ln.strip() for ln in block.splitlines()[1:]
                if ln.strip() and not re.match(r"(Kernel|First entity|Second entity|At line|%|store|load)", ln.strip())
                and "addrspace" not in ln}
-        if src and src <= {"if (key < *slot) {", "atom_min(slot, key);", "ulong word = *slot;"}:
+        if src and src <= {"return *slot;", "atom_min(slot, key);"}:
             return "splat-pre-read"
     return "error"
 
@@ -402,7 +401,7 @@ Read-write data race at global memory address 0x3000000000ea8
 \tFirst entity:  Global(2,0,0) Local(0,0,0) Group(2,0,0)
 \t  %167 = load i64, i64 addrspace(1)* %166, align 8, !dbg !403
 \tAt line 292 (column 27) of input.cl:
-\t  if (key < *slot) {
+\t  return *slot;
 \t
 \tSecond entity: Global(0,0,0) Local(0,0,0) Group(0,0,0)
 \t  %call268 = call spir_func i64 @_Z8atom_minPU3AS1Vmm(i64 addrspace(1)* noundef %169, i64 noundef %170)

@@ -256,6 +256,14 @@ inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op 
     return 0;
 }
 
+/* The plain read of a framebuffer slot before any atomic on it (early depth rejection and
+ * the skipped atomics): a slot only decreases, so a stale word costs at most an extra solve
+ * or atomic.  All such reads go through here, on a line of their own. */
+inline ulong splat_peek(__global const ulong *slot)
+{
+    return *slot;
+}
+
 /* Early depth rejection: can no fragment of depth >= zc - m (m = sqrt(m2): the ball's chord
  * starts there) beat the pixel's word?  float rounding is monotone, so such a fragment's key
  * is at least as_uint((float)(zc - m)) << 32, above the word if zc - m exceeds the next float
@@ -318,7 +326,7 @@ inline real4 splat_fragment4(quadric q, int sign, real r, real4 vX, real4 vY, re
 inline void splat_depth_test(__global ulong *slot, real depth, int idx, ulong *cnt)
 {
     ulong key = ((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx;
-    if (key < *slot) {
+    if (key < splat_peek(slot)) {
         cnt[PC_ATOMICS]++;
         atom_min(slot, key);
     }
@@ -401,7 +409,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             if (meet.c) {                                                                                   \
                 cnt[PC_FRAGMENTS]++;                                                                        \
                 __global ulong *slot = &framebuffer[y * W + x + (l)];                                       \
-                ulong word = *slot;                                                                         \
+                ulong word = splat_peek(slot);                                                              \
                 if (splat_occluded(tc.c - 16 * SLACK * (fabs(tc.c) + r), m2.c, word)) {                     \
                     cnt[PC_FRAGMENTS_OCCLUDED]++;                                                           \
                 } else if (nr.c) {                                                                          \
@@ -422,10 +430,10 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             /* no clip tape: the tests as vectors too, then the depth test per pixel */
             __global ulong *row = &framebuffer[y * W + x];
             ulong4 word = (ulong4)(EMPTY_KEY);
-            if (meet.x) word.x = row[0];
-            if (meet.y) word.y = row[1];
-            if (meet.z) word.z = row[2];
-            if (meet.w) word.w = row[3];
+            if (meet.x) word.x = splat_peek(row + 0);
+            if (meet.y) word.y = splat_peek(row + 1);
+            if (meet.z) word.z = splat_peek(row + 2);
+            if (meet.w) word.w = splat_peek(row + 3);
             int4 occluded = meet & splat_occluded4(tc - 16 * SLACK * (fabs(tc) + r), m2, word);
             int4 live = meet & ~occluded & (nr > 0);
             cnt[PC_FRAGMENTS] -= meet.x + meet.y + meet.z + meet.w;
