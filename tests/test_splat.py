@@ -108,6 +108,21 @@ def test_splats_match_raytracer(cl_context, name):
             check(img, ref)
 
 
+@pytest.mark.parametrize("size", [(93, 61), (7, 5), (1, 9)])
+def test_rows_that_are_not_whole_resolve_lanes(cl_context, size):
+    """Widths that are not a multiple of the resolve pass's RESOLVE_LANES pixels per
+    work-item (and narrower than one): every pixel of the row's last lanes is written."""
+    from clcsg.cl.constants import RESOLVE_LANES
+
+    assert size[0] % RESOLVE_LANES
+    S = samples_of("box_minus_3_cylinders", 0.12)
+    for cam in views(S.tape, *size)[:2]:
+        ref = raytrace(S.tape, cam, device=cl_context)
+        img = render(S, cam, device=cl_context)
+        check(img, ref, frac=0.99 if min(size) < 10 else 0.999)
+        assert img.mask[:, -1].any() or not ref.mask[:, -1].any()
+
+
 @pytest.mark.parametrize("radius", [0.02, 0.8])
 def test_tiny_and_large_radii(cl_context, radius):
     """Tiny splats (many samples, few clip literals) and large ones (heavy clipping: splats

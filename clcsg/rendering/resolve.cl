@@ -57,17 +57,15 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
     return prim;
 }
 
-/* Lane l (vector component c) of the resolve pass's gather: the framebuffer word, a miss
- * written at once, else the winning sample's depth, quadric coefficients and albedo (and,
+/* Lane l (vector component c) of the resolve pass's gather: the framebuffer word and, unless
+ * it is a miss, the winning sample's depth, quadric and primitive, coefficients and albedo (and,
  * where the colour rule needs the exact root, resolve_hit's point).  A macro over constant
  * components keeps the vectors in registers (OpenCL has no dynamic component index). */
 #define RESOLVE_GATHER(l, c)                                                                        \
     if ((l) < lanes) {                                                                              \
         int pix = i * W + j0 + (l);                                                                 \
         ulong key = framebuffer[pix];                                                               \
-        if (key == EMPTY_KEY) {                                                                     \
-            pixel_miss(out, view, pix);                                                             \
-        } else {                                                                                    \
+        if (key != EMPTY_KEY) {                                                                     \
             __global const sample_rec *sp = &samples[(uint)(key & 0xffffffffUL)];                  \
             int qid = sp->quadric, prim = sp->splat_primitive;                                      \
             real depth = (real)as_float((uint)(key >> 32));                                         \
@@ -82,9 +80,7 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
             __global const real *q = quadrics[qid].coef;                                            \
             XX.c = q[0]; XY.c = q[1]; XZ.c = q[2]; BX.c = q[3];                                     \
             YY.c = q[4]; YZ.c = q[5]; BY.c = q[6]; ZZ.c = q[7]; BZ.c = q[8];                        \
-            out.depth[pix] = (float)depth;                                                          \
-            out.quadric[pix] = qid;                                                                 \
-            out.primitive[pix] = prim;                                                              \
+            DEPTH.c = (float)depth; QID.c = qid; PRIM.c = prim;                                     \
             float4 alb = albedo[prim >= 0 ? prim : n_prims];                                        \
             AX.c = alb.x; AY.c = alb.y; AZ.c = alb.z; AW.c = alb.w;                                 \
             hits |= 1 << (l);                                                                       \
@@ -108,33 +104,59 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     /* the lanes not shown keep a unit sphere at the origin: harmless */
     real8 Z = 0, PX = 0, PY = 0, PZ = 0, XX = 1, XY = 0, XZ = 0, YY = 1, YZ = 0, ZZ = 1, BX = 0, BY = 0, BZ = 0;
     float8 AX = 0, AY = 0, AZ = 0, AW = 0;
+    float8 DEPTH = INFINITY; /* the outputs, as pixel_miss where no fragment reached */
+    int8 QID = -1, PRIM = -1;
     int hits = 0, exact = 0;
     RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
     RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
-    if (!hits) return;
-    /* the view rays of the lanes (view_ray), the points e + z v or the exact ones */
-    real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
-    real8 dX = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
-    real8 dY = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
-    real8 dZ = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
-    real8 il = 1 / sqrt(dX * dX + dY * dY + dZ * dZ);
-    real8 vX = dX * il, vY = dY * il, vZ = dZ * il;
-    realmask8 use = (((realmask8)(exact) >> (realmask8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
-    real8 pX = select(e.x + Z * vX, PX, use);
-    real8 pY = select(e.y + Z * vY, PY, use);
-    real8 pZ = select(e.z + Z * vZ, PZ, use);
-    /* grad Q / 2 = A p - b (layout.h: the w column holds -b) */
-    real8 gX = XX * pX + XY * pY + XZ * pZ + BX;
-    real8 gY = XY * pX + YY * pY + YZ * pZ + BY;
-    real8 gZ = XZ * pX + YZ * pY + ZZ * pZ + BZ;
-    real8 gl = 1 / sqrt(gX * gX + gY * gY + gZ * gZ);
-    float8 cx, cy, cz;
-    shade_light8(view, AX, AY, AZ, convert_float8(gX * gl), convert_float8(gY * gl),
-                 convert_float8(gZ * gl), convert_float8(vX), convert_float8(vY), convert_float8(vZ), &cx, &cy, &cz);
-    uchar8 rx = shade_encode8(view, cx), ry = shade_encode8(view, cy), rz = shade_encode8(view, cz);
-    uchar8 ra = convert_uchar8_sat(AW * 255.0f + 0.5f);
-#define RESOLVE_STORE(l, c) \
-    if (hits & (1 << (l))) out.rgba[i * W + j0 + (l)] = (uchar4)(rx.c, ry.c, rz.c, ra.c);
+    uchar4 bg = shade_background(view);
+    uchar8 rx = bg.x, ry = bg.y, rz = bg.z, ra = bg.w;
+    if (hits) {
+        /* the view rays of the lanes (view_ray), the points e + z v or the exact ones */
+        real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+        real8 dX = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
+        real8 dY = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
+        real8 dZ = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
+        real8 il = 1 / sqrt(dX * dX + dY * dY + dZ * dZ);
+        real8 vX = dX * il, vY = dY * il, vZ = dZ * il;
+        realmask8 use = (((realmask8)(exact) >> (realmask8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
+        real8 pX = select(e.x + Z * vX, PX, use);
+        real8 pY = select(e.y + Z * vY, PY, use);
+        real8 pZ = select(e.z + Z * vZ, PZ, use);
+        /* grad Q / 2 = A p - b (layout.h: the w column holds -b) */
+        real8 gX = XX * pX + XY * pY + XZ * pZ + BX;
+        real8 gY = XY * pX + YY * pY + YZ * pZ + BY;
+        real8 gZ = XZ * pX + YZ * pY + ZZ * pZ + BZ;
+        real8 gl = 1 / sqrt(gX * gX + gY * gY + gZ * gZ);
+        float8 cx, cy, cz;
+        shade_light8(view, AX, AY, AZ, convert_float8(gX * gl), convert_float8(gY * gl),
+                     convert_float8(gZ * gl), convert_float8(vX), convert_float8(vY), convert_float8(vZ), &cx, &cy, &cz);
+        char8 hit = (((char8)((char)hits) >> (char8)(0, 1, 2, 3, 4, 5, 6, 7)) & (char8)(1)) != (char8)(0);
+        rx = select(rx, shade_encode8(view, cx), hit);
+        ry = select(ry, shade_encode8(view, cy), hit);
+        rz = select(rz, shade_encode8(view, cz), hit);
+        ra = select(ra, convert_uchar8_sat(AW * 255.0f + 0.5f), hit);
+    }
+    /* the row's eight pixels at once, or the lanes one by one at the row's end */
+    int pix = i * W + j0;
+    if (lanes == RESOLVE_LANES) {
+        vstore8(DEPTH, 0, out.depth + pix);
+        vstore8(QID, 0, out.quadric + pix);
+        vstore8(PRIM, 0, out.primitive + pix);
+        __global uchar *rgba = (__global uchar *)(out.rgba + pix);
+        vstore16((uchar16)(rx.s0, ry.s0, rz.s0, ra.s0, rx.s1, ry.s1, rz.s1, ra.s1,
+                           rx.s2, ry.s2, rz.s2, ra.s2, rx.s3, ry.s3, rz.s3, ra.s3), 0, rgba);
+        vstore16((uchar16)(rx.s4, ry.s4, rz.s4, ra.s4, rx.s5, ry.s5, rz.s5, ra.s5,
+                           rx.s6, ry.s6, rz.s6, ra.s6, rx.s7, ry.s7, rz.s7, ra.s7), 0, rgba + 16);
+        return;
+    }
+#define RESOLVE_STORE(l, c)                                                                         \
+    if ((l) < lanes) {                                                                              \
+        out.depth[pix + (l)] = DEPTH.c;                                                             \
+        out.quadric[pix + (l)] = QID.c;                                                             \
+        out.primitive[pix + (l)] = PRIM.c;                                                          \
+        out.rgba[pix + (l)] = (uchar4)(rx.c, ry.c, rz.c, ra.c);                                     \
+    }
     RESOLVE_STORE(0, s0) RESOLVE_STORE(1, s1) RESOLVE_STORE(2, s2) RESOLVE_STORE(3, s3)
     RESOLVE_STORE(4, s4) RESOLVE_STORE(5, s5) RESOLVE_STORE(6, s6) RESOLVE_STORE(7, s7)
 #undef RESOLVE_STORE
