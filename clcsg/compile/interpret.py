@@ -286,43 +286,114 @@ def _signed_leaf_values(quadrics, used, lo, hi):
     return v, spread
 
 
-#: three-valued AND / OR of states (_F, _T, _LIVE) as tables indexed by 3 x + y
-_AND3 = np.array([_F, _F, _F, _F, _T, _LIVE, _F, _LIVE, _LIVE], dtype=np.int8)
-_OR3 = np.array([_F, _T, _LIVE, _T, _T, _T, _LIVE, _T, _LIVE], dtype=np.int8)
+#: the states as ordered values FALSE < LIVE < TRUE: three-valued (Kleene) AND is the min,
+#: OR the max, and two-valued logic is the same on FALSE and TRUE alone
+_KF, _KL, _KT = 0, 1, 2
+#: the most (program rows x boxes or points) a tape run holds at once: the work is split in
+#: chunks of columns to keep its arrays to a few tens of MiB
+CHUNK_ENTRIES = 1 << 23
+
+
+def minmax_program(ops):
+    """The tape as a straight-line program over rows of values: (keys, steps, root).
+
+    ``keys`` (k, 2): the distinct leaf literals (quadric, sign), rows 0..k-1; rows k and k+1
+    hold the constants FALSE and TRUE; ``steps`` (m, 4) rows [is_or, out, a, b] with
+    row out = max (OR) or min (AND) of rows a and b, one new row per AND / OR.  Registers are
+    renamed (each result its own row), COPY is an alias, and the steps and leaves whose result
+    does not reach the root are dropped; ``root``: the row of the last instruction's register.
+    """
+    ops = np.asarray(ops).reshape(-1, 4)
+    leaf_rows: dict = {}
+    reg: dict = {}
+    raw = []  # (is_or, a, b) with operands as ("k", key) / ("c", 0|1) / ("s", step)
+    for op, out, a, b in ops.tolist():
+        if op == OP_LEAF:
+            reg[out] = ("k", leaf_rows.setdefault((a, b), len(leaf_rows)))
+        elif op == OP_AND or op == OP_OR:
+            raw.append((int(op == OP_OR), reg[a], reg[b]))
+            reg[out] = ("s", len(raw) - 1)
+        elif op == OP_COPY:
+            reg[out] = reg[a]
+        elif op == OP_CONST:
+            reg[out] = ("c", int(bool(a)))
+    root = reg[int(ops[-1][1])]
+    live_steps = np.zeros(len(raw), dtype=bool)
+    live_keys = np.zeros(len(leaf_rows), dtype=bool)
+    mark = {"s": live_steps, "k": live_keys, "c": np.zeros(2, dtype=bool)}
+    mark[root[0]][root[1]] = True
+    for i in range(len(raw) - 1, -1, -1):
+        if live_steps[i]:
+            for kind, j in raw[i][1:]:
+                mark[kind][j] = True
+    keys = np.array(list(leaf_rows), dtype=np.int64).reshape(-1, 2)[live_keys]
+    k = len(keys)
+    key_row = np.cumsum(live_keys) - 1
+    step_row = k + 2 + np.cumsum(live_steps) - 1
+
+    def row(ref):
+        kind, j = ref
+        return int(key_row[j]) if kind == "k" else k + j if kind == "c" else int(step_row[j])
+
+    steps = [(is_or, int(step_row[i]), row(x), row(y)) for i, (is_or, x, y) in enumerate(raw) if live_steps[i]]
+    return keys, np.array(steps, dtype=np.int64).reshape(-1, 4), row(root)
+
+
+def _run_minmax(steps, values) -> None:
+    """Run ``steps`` of :func:`minmax_program` in place over ``values`` (rows, ...)."""
+    lo, hi = np.minimum, np.maximum
+    for is_or, out, a, b in steps:
+        (hi if is_or else lo)(values[a], values[b], out=values[out])
+
+
+def _substitute_own(values, keys, own) -> None:
+    """Put the substituted constants in the leaf rows of ``values`` (rows, 2, n): where column j
+    belongs to quadric own[j], its literal (own[j], s) is TRUE on the negative side (index 0)
+    and FALSE on the positive side when s = +1, the opposite when s = -1."""
+    order = np.argsort(keys[:, 0], kind="stable")
+    kq = keys[order, 0]
+    first = np.searchsorted(kq, own, side="left")
+    count = np.searchsorted(kq, own, side="right") - first
+    col = np.repeat(np.arange(len(own)), count)
+    step = np.arange(len(col)) - np.repeat(np.cumsum(count) - count, count)
+    key = order[np.repeat(first, count) + step]
+    positive = keys[key, 1] > 0
+    values[key, 0, col] = np.where(positive, _KT, _KF)
+    values[key, 1, col] = np.where(positive, _KF, _KT)
+
+
+def _chunks(n: int, rows: int):
+    """Column ranges of at most :data:`CHUNK_ENTRIES` / ``rows`` columns covering range(n)."""
+    size = max(1, CHUNK_ENTRIES // max(rows, 1))
+    return [(s, min(n, s + size)) for s in range(0, n, size)]
 
 
 def surface_in_boxes(ops, quadrics, lo, hi, box_quadric) -> np.ndarray:
     """Mask of the boxes [lo, hi] (N, 3) in which quadric ``box_quadric[i]`` may carry CSG
     surface: False where pruning over the box decides that the two substituted sides of the
-    tape are the same constant (:func:`prune`'s ``decided`` = +1), for all boxes at once."""
+    tape are the same constant (:func:`prune`'s ``decided`` = +1), for all boxes at once.
+
+    The leaves' states over each box (:func:`leaf_states_over_boxes`) go through the tape
+    as a program of min / max (:func:`minmax_program`: three-valued AND / OR) on the two
+    sides at once, in chunks of boxes."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
-    own = np.asarray(box_quadric)
-    n = len(lo)
-    ops = np.asarray(ops)
-    leaves = ops[ops[:, 0] == OP_LEAF]
-    used = np.unique(leaves[:, 2])
-    row = {int(u): k for k, u in enumerate(used)}
-    v, spread = _signed_leaf_values(quadrics, used, lo, hi)
-    leaf_state: dict = {}
-    sides: dict = {}
-    for op, out, a, b in ops:
-        if op == OP_LEAF:
-            key = (a, b)
-            if key not in leaf_state:
-                sv = b * v[row[int(a)]]
-                leaf_state[key] = np.where(sv > spread[row[int(a)]], _F,
-                                           np.where(sv < -spread[row[int(a)]], _T, _LIVE)).astype(np.int8)
-            st = leaf_state[key]
-            mine = own == a
-            sides[out] = (np.where(mine, _T if b > 0 else _F, st), np.where(mine, _F if b > 0 else _T, st))
-        elif op in (OP_AND, OP_OR):
-            sa, sb = sides[a], sides[b]
-            table = _AND3 if op == OP_AND else _OR3
-            sides[out] = (table[3 * sa[0] + sb[0]], table[3 * sa[1] + sb[1]])
-        elif op == OP_COPY:
-            sides[out] = sides[a]
-        elif op == OP_CONST:
-            v0 = np.full(n, _T if a else _F, dtype=np.int8)
-            sides[out] = (v0, v0)
-    neg, pos = sides[int(np.asarray(ops)[-1][1])]
-    return ~((neg != _LIVE) & (neg == pos))
+    own = np.asarray(box_quadric).reshape(-1)
+    keys, steps, root = minmax_program(ops)
+    used, key_q = np.unique(keys[:, 0], return_inverse=True)
+    sign = keys[:, 1].astype(np.float64)[:, None]
+    rows = len(keys) + 2 + len(steps)
+    steps = steps.tolist()
+    mask = np.ones(len(lo), dtype=bool)
+    for s, e in _chunks(len(lo), rows):
+        values = np.empty((rows, 2, e - s), dtype=np.int8)
+        values[len(keys)] = _KF
+        values[len(keys) + 1] = _KT
+        if len(keys):
+            v, spread = _signed_leaf_values(quadrics, used, lo[s:e], hi[s:e])
+            sv, sp = sign * v[key_q], spread[key_q]
+            values[:len(keys)] = np.where(sv > sp, _KF, np.where(sv < -sp, _KT, _KL))[:, None]
+            _substitute_own(values, keys, own[s:e])
+        _run_minmax(steps, values)
+        neg, pos = values[root]
+        mask[s:e] = ~((neg != _KL) & (neg == pos))
+    return mask
