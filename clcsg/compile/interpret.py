@@ -108,23 +108,28 @@ def member(ops, quadrics, points, self_quadric: int = -1):
     return _run(ops, leaf, np.logical_and, np.logical_or, const)
 
 
-def member_per_point(ops, quadrics, points, self_quadrics):
+def member_per_point(ops, quadrics, points, self_quadrics, chunk_entries: int = None):
     """(m-, m+) as :func:`member`, with a substituted quadric per point (``self_quadrics``
-    (N,)): one run of the tape for points of many quadrics."""
+    (N,)): one run of the tape (as the min / max program of :func:`minmax_program`, in chunks
+    of at most ``chunk_entries`` program rows x points) for points of many quadrics."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     own = np.asarray(self_quadrics).reshape(-1)
-    value = _cached(lambda q: _values(quadrics[q], p))
-
-    def leaf(q, sign):
-        mine = own == q
-        v = sign * value(q) <= 0.0
-        return (np.where(mine, sign > 0, v), np.where(mine, sign < 0, v))
-
-    def const(a):
-        v = np.full(len(p), bool(a))
-        return (v, v)
-
-    return _run(ops, leaf, np.logical_and, np.logical_or, const)
+    keys, steps, root = minmax_program(ops)
+    used, key_q = np.unique(keys[:, 0], return_inverse=True)
+    sign = keys[:, 1][:, None]
+    k, rows = len(keys), len(keys) + 2 + len(steps)
+    steps = steps.tolist()
+    minus, plus = np.zeros(len(p), dtype=bool), np.zeros(len(p), dtype=bool)
+    for s, e in _chunks(len(p), rows, chunk_entries):
+        values = np.empty((rows, 2, e - s), dtype=np.int8)
+        values[k], values[k + 1] = _KF, _KT
+        if k:
+            inside = np.stack([_values(quadrics[q], p[s:e]) for q in used])[key_q] * sign <= 0.0
+            values[:k] = np.where(inside, _KT, _KF)[:, None]
+            _substitute_own(values, keys, own[s:e])
+        _run_minmax(steps, values)
+        minus[s:e], plus[s:e] = values[root] == _KT
+    return minus, plus
 
 
 def contains(ops, quadrics, points) -> np.ndarray:
@@ -362,20 +367,21 @@ def _substitute_own(values, keys, own) -> None:
     values[key, 1, col] = np.where(positive, _KF, _KT)
 
 
-def _chunks(n: int, rows: int):
-    """Column ranges of at most :data:`CHUNK_ENTRIES` / ``rows`` columns covering range(n)."""
-    size = max(1, CHUNK_ENTRIES // max(rows, 1))
+def _chunks(n: int, rows: int, entries: int = None):
+    """Column ranges of at most ``entries`` (default :data:`CHUNK_ENTRIES`) / ``rows`` columns
+    covering range(n)."""
+    size = max(1, (entries or CHUNK_ENTRIES) // max(rows, 1))
     return [(s, min(n, s + size)) for s in range(0, n, size)]
 
 
-def surface_in_boxes(ops, quadrics, lo, hi, box_quadric) -> np.ndarray:
+def surface_in_boxes(ops, quadrics, lo, hi, box_quadric, chunk_entries: int = None) -> np.ndarray:
     """Mask of the boxes [lo, hi] (N, 3) in which quadric ``box_quadric[i]`` may carry CSG
     surface: False where pruning over the box decides that the two substituted sides of the
     tape are the same constant (:func:`prune`'s ``decided`` = +1), for all boxes at once.
 
     The leaves' states over each box (:func:`leaf_states_over_boxes`) go through the tape
     as a program of min / max (:func:`minmax_program`: three-valued AND / OR) on the two
-    sides at once, in chunks of boxes."""
+    sides at once, in chunks of at most ``chunk_entries`` program rows x boxes."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     own = np.asarray(box_quadric).reshape(-1)
     keys, steps, root = minmax_program(ops)
@@ -384,7 +390,7 @@ def surface_in_boxes(ops, quadrics, lo, hi, box_quadric) -> np.ndarray:
     rows = len(keys) + 2 + len(steps)
     steps = steps.tolist()
     mask = np.ones(len(lo), dtype=bool)
-    for s, e in _chunks(len(lo), rows):
+    for s, e in _chunks(len(lo), rows, chunk_entries):
         values = np.empty((rows, 2, e - s), dtype=np.int8)
         values[len(keys)] = _KF
         values[len(keys) + 1] = _KT
