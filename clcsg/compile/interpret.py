@@ -265,6 +265,20 @@ def leaf_states_over_boxes(matrix, sign: int, lo, hi) -> np.ndarray:
     return np.where(v > spread, _F, np.where(v < -spread, _T, _LIVE))
 
 
+def _is_plane(matrices) -> np.ndarray:
+    """Per 4x4 matrix: True for a plane (no quadratic part)."""
+    return ~np.any(matrices[:, :3, :3] != 0, axis=(1, 2))
+
+
+def _planes_first(quadrics, used, key_q):
+    """(used, key_q) with the planes of ``used`` first (their values are then computed in
+    place) and ``key_q`` (rows into ``used``) following the new order."""
+    perm = np.argsort(~_is_plane(np.asarray(quadrics, dtype=np.float64)[used].reshape(-1, 4, 4)), kind="stable")
+    inverse = np.empty_like(perm)
+    inverse[perm] = np.arange(len(perm))
+    return used[perm], inverse[key_q]
+
+
 def _signed_leaf_values(quadrics, used, lo, hi):
     """Per quadric of ``used`` and box [lo, hi] (N, 3): (v, spread) with the literal (q, sign)
     FALSE over the box where sign v > spread, TRUE where sign v < -spread (the tests of
@@ -272,10 +286,17 @@ def _signed_leaf_values(quadrics, used, lo, hi):
     c, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     slack = PRUNE_SLACK * (np.linalg.norm(c, axis=1) + half.sum(axis=1))
     M = np.asarray(quadrics, dtype=np.float64)[np.asarray(used, dtype=np.int64)].reshape(-1, 4, 4)
-    v = np.zeros((len(M), len(c)))
-    spread = np.zeros((len(M), len(c)))
-    flat = ~np.any(M[:, :3, :3] != 0, axis=(1, 2))
-    if flat.any():
+    v = np.empty((len(M), len(c)))
+    spread = np.empty((len(M), len(c)))
+    flat = _is_plane(M)
+    nf = int(flat.sum())
+    if nf and flat[:nf].all():  # planes first (:func:`_planes_first`): written in place
+        g = 2.0 * M[:nf, :3, 3]
+        np.matmul(g, c.T, out=v[:nf])
+        v[:nf] += M[:nf, 3, 3][:, None]
+        np.matmul(np.abs(g), half.T, out=spread[:nf])
+        spread[:nf] += np.linalg.norm(g, axis=1)[:, None] * slack[None]
+    elif nf:
         g = 2.0 * M[flat, :3, 3]
         v[flat] = g @ c.T + M[flat, 3, 3][:, None]
         spread[flat] = np.abs(g) @ half.T + np.linalg.norm(g, axis=1)[:, None] * slack[None]
@@ -302,46 +323,52 @@ CHUNK_ENTRIES = 1 << 23
 def minmax_program(ops):
     """The tape as a straight-line program over rows of values: (keys, steps, root).
 
-    ``keys`` (k, 2): the distinct leaf literals (quadric, sign), rows 0..k-1; rows k and k+1
-    hold the constants FALSE and TRUE; ``steps`` (m, 4) rows [is_or, out, a, b] with
-    row out = max (OR) or min (AND) of rows a and b, one new row per AND / OR.  Registers are
-    renamed (each result its own row), COPY is an alias, and the steps and leaves whose result
-    does not reach the root are dropped; ``root``: the row of the last instruction's register.
+    ``keys`` (k, 2): the distinct leaf literals (quadric, sign) in sorted order, rows 0..k-1;
+    rows k and k+1 hold the constants FALSE and TRUE; ``steps`` (m, 4) rows [is_or, out, a, b]
+    with row out = max (OR) or min (AND) of rows a and b, one new row per AND / OR.  Registers
+    are renamed (each instruction's result is a value of its own: an operand is the last
+    value written to its register before), COPY is an alias, and the steps and leaves whose
+    result does not reach the root are dropped; ``root``: the row of the last instruction's
+    register.
     """
-    ops = np.asarray(ops).reshape(-1, 4)
-    leaf_rows: dict = {}
-    reg: dict = {}
-    raw = []  # (is_or, a, b) with operands as ("k", key) / ("c", 0|1) / ("s", step)
-    for op, out, a, b in ops.tolist():
-        if op == OP_LEAF:
-            reg[out] = ("k", leaf_rows.setdefault((a, b), len(leaf_rows)))
-        elif op == OP_AND or op == OP_OR:
-            raw.append((int(op == OP_OR), reg[a], reg[b]))
-            reg[out] = ("s", len(raw) - 1)
-        elif op == OP_COPY:
-            reg[out] = reg[a]
-        elif op == OP_CONST:
-            reg[out] = ("c", int(bool(a)))
-    root = reg[int(ops[-1][1])]
-    live_steps = np.zeros(len(raw), dtype=bool)
-    live_keys = np.zeros(len(leaf_rows), dtype=bool)
-    mark = {"s": live_steps, "k": live_keys, "c": np.zeros(2, dtype=bool)}
-    mark[root[0]][root[1]] = True
-    for i in range(len(raw) - 1, -1, -1):
-        if live_steps[i]:
-            for kind, j in raw[i][1:]:
-                mark[kind][j] = True
-    keys = np.array(list(leaf_rows), dtype=np.int64).reshape(-1, 2)[live_keys]
+    ops = np.asarray(ops, dtype=np.int64).reshape(-1, 4)
+    n = len(ops)
+    op, out, a, b = ops.T
+    index = np.arange(n)
+    order = np.lexsort((index, out))
+    written = out[order] * (n + 1) + order
+
+    def source(reg):
+        """Per instruction, the instruction that last wrote register ``reg`` before it."""
+        return order[np.maximum(np.searchsorted(written, reg * (n + 1) + index) - 1, 0)]
+
+    src_a, src_b = source(a), source(b)
+    alias = np.where(op == OP_COPY, src_a, index)
+    while True:  # copies of copies: at most log2(n) rounds
+        deeper = alias[alias]
+        if np.array_equal(deeper, alias):
+            break
+        alias = deeper
+    binary = (op == OP_AND) | (op == OP_OR)
+    child_a, child_b = alias[src_a], alias[src_b]
+    root = int(alias[n - 1])
+    live = bytearray(n)
+    live[root] = 1
+    is_step, ca, cb = binary.tolist(), child_a.tolist(), child_b.tolist()
+    for i in range(root, -1, -1):
+        if live[i] and is_step[i]:
+            live[ca[i]] = live[cb[i]] = 1
+    live = np.frombuffer(bytes(live), dtype=np.uint8).astype(bool)
+    leaf = live & (op == OP_LEAF)
+    keys, key_of = np.unique(np.stack([a[leaf], b[leaf]], axis=1), axis=0, return_inverse=True)
     k = len(keys)
-    key_row = np.cumsum(live_keys) - 1
-    step_row = k + 2 + np.cumsum(live_steps) - 1
-
-    def row(ref):
-        kind, j = ref
-        return int(key_row[j]) if kind == "k" else k + j if kind == "c" else int(step_row[j])
-
-    steps = [(is_or, int(step_row[i]), row(x), row(y)) for i, (is_or, x, y) in enumerate(raw) if live_steps[i]]
-    return keys, np.array(steps, dtype=np.int64).reshape(-1, 4), row(root)
+    step = np.flatnonzero(live & binary)
+    row = np.zeros(n, dtype=np.int64)
+    row[leaf] = key_of.reshape(-1)
+    row[op == OP_CONST] = k + (a[op == OP_CONST] != 0)
+    row[step] = k + 2 + np.arange(len(step))
+    steps = np.stack([op[step] == OP_OR, row[step], row[child_a[step]], row[child_b[step]]], axis=1)
+    return keys.reshape(-1, 2), steps.astype(np.int64).reshape(-1, 4), int(row[root])
 
 
 def _run_minmax(steps, values) -> None:
@@ -367,6 +394,29 @@ def _substitute_own(values, keys, own) -> None:
     values[key, 1, col] = np.where(positive, _KF, _KT)
 
 
+def _leaf_states(states, keys, key_q, v, spread) -> None:
+    """The states (k, n) of the literals ``keys`` (quadric row ``key_q``, sign) over n boxes
+    from :func:`_signed_leaf_values`: (q, s) is FALSE where s v > spread, else TRUE where
+    s v < -spread, else LIVE.  Negating v is exact, so for s = -1 the two tests are v < -spread
+    and v > spread: both signs come from the same two comparisons."""
+    above = v > spread
+    below = np.less(v, np.negative(spread, out=spread))
+    positive = keys[:, 1] > 0
+    for side, false, true in ((positive, above, below), (~positive, below, above)):
+        if side.all():
+            rows = key_q
+        elif side.any():
+            rows = key_q[side]
+        else:
+            continue
+        st = true[rows].view(np.int8) + np.int8(_KL)  # TRUE or LIVE ...
+        st *= ~false[rows]  # ... or FALSE
+        if side.all():
+            states[:] = st
+        else:
+            states[side] = st
+
+
 def _chunks(n: int, rows: int, entries: int = None):
     """Column ranges of at most ``entries`` (default :data:`CHUNK_ENTRIES`) / ``rows`` columns
     covering range(n)."""
@@ -385,8 +435,7 @@ def surface_in_boxes(ops, quadrics, lo, hi, box_quadric, chunk_entries: int = No
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     own = np.asarray(box_quadric).reshape(-1)
     keys, steps, root = minmax_program(ops)
-    used, key_q = np.unique(keys[:, 0], return_inverse=True)
-    sign = keys[:, 1].astype(np.float64)[:, None]
+    used, key_q = _planes_first(quadrics, *np.unique(keys[:, 0], return_inverse=True))
     rows = len(keys) + 2 + len(steps)
     steps = steps.tolist()
     mask = np.ones(len(lo), dtype=bool)
@@ -395,9 +444,8 @@ def surface_in_boxes(ops, quadrics, lo, hi, box_quadric, chunk_entries: int = No
         values[len(keys)] = _KF
         values[len(keys) + 1] = _KT
         if len(keys):
-            v, spread = _signed_leaf_values(quadrics, used, lo[s:e], hi[s:e])
-            sv, sp = sign * v[key_q], spread[key_q]
-            values[:len(keys)] = np.where(sv > sp, _KF, np.where(sv < -sp, _KT, _KL))[:, None]
+            _leaf_states(values[:len(keys), 0], keys, key_q, *_signed_leaf_values(quadrics, used, lo[s:e], hi[s:e]))
+            values[:len(keys), 1] = values[:len(keys), 0]
             _substitute_own(values, keys, own[s:e])
         _run_minmax(steps, values)
         neg, pos = values[root]
