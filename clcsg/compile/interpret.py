@@ -424,17 +424,18 @@ def _chunks(n: int, rows: int, entries: int = None):
     return [(s, min(n, s + size)) for s in range(0, n, size)]
 
 
-def surface_in_boxes(ops, quadrics, lo, hi, box_quadric, chunk_entries: int = None) -> np.ndarray:
+def surface_in_boxes(ops, quadrics, lo, hi, box_quadric, chunk_entries: int = None, program=None) -> np.ndarray:
     """Mask of the boxes [lo, hi] (N, 3) in which quadric ``box_quadric[i]`` may carry CSG
     surface: False where pruning over the box decides that the two substituted sides of the
     tape are the same constant (:func:`prune`'s ``decided`` = +1), for all boxes at once.
 
     The leaves' states over each box (:func:`leaf_states_over_boxes`) go through the tape
     as a program of min / max (:func:`minmax_program`: three-valued AND / OR) on the two
-    sides at once, in chunks of at most ``chunk_entries`` program rows x boxes."""
+    sides at once, in chunks of at most ``chunk_entries`` program rows x boxes.  ``program``:
+    the :func:`minmax_program` of ``ops`` if already made (the same tape over many calls)."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     own = np.asarray(box_quadric).reshape(-1)
-    keys, steps, root = minmax_program(ops)
+    keys, steps, root = minmax_program(ops) if program is None else program
     used, key_q = _planes_first(quadrics, *np.unique(keys[:, 0], return_inverse=True))
     rows = len(keys) + 2 + len(steps)
     steps = steps.tolist()
