@@ -68,3 +68,18 @@ def test_the_lines_are_isotropic_and_cross_the_ball_uniformly(seed):
     b = np.sum(w * d, axis=1)
     crossings = 2 * (np.sum(w * w, axis=1) - b * b < r * r)
     assert abs(crossings.mean() / (2 * r * r / (R * R)) - 1) < 0.05
+
+
+def test_the_lines_of_many_balls_at_once_are_those_of_each_ball():
+    """isotropic_lines with centers (k, 3), radii and seeds (k,): per ball the same lines, bit
+    for bit, as a call for that ball alone (surface_areas draws all quadrics' lines at once)."""
+    from clcsg.compile.bounds.surface_area import isotropic_lines
+
+    rng = np.random.default_rng(3)
+    c, R, seeds = rng.normal(size=(5, 3)), rng.uniform(0.1, 4.0, 5), np.array([0, 1, 2, 17, 300])
+    d, o = isotropic_lines(c, R, 64, seeds)
+    assert d.shape == o.shape == (5, 64, 3)
+    for j in range(5):
+        dj, oj = isotropic_lines(c[j], float(R[j]), 64, int(seeds[j]))
+        np.testing.assert_array_equal(d[j], dj)
+        np.testing.assert_array_equal(o[j], oj)

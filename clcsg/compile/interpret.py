@@ -108,23 +108,28 @@ def member(ops, quadrics, points, self_quadric: int = -1):
     return _run(ops, leaf, np.logical_and, np.logical_or, const)
 
 
-def member_per_point(ops, quadrics, points, self_quadrics):
+def member_per_point(ops, quadrics, points, self_quadrics, chunk_entries: int = None):
     """(m-, m+) as :func:`member`, with a substituted quadric per point (``self_quadrics``
-    (N,)): one run of the tape for points of many quadrics."""
+    (N,)): one run of the tape (as the min / max program of :func:`minmax_program`, in chunks
+    of at most ``chunk_entries`` program rows x points) for points of many quadrics."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     own = np.asarray(self_quadrics).reshape(-1)
-    value = _cached(lambda q: _values(quadrics[q], p))
-
-    def leaf(q, sign):
-        mine = own == q
-        v = sign * value(q) <= 0.0
-        return (np.where(mine, sign > 0, v), np.where(mine, sign < 0, v))
-
-    def const(a):
-        v = np.full(len(p), bool(a))
-        return (v, v)
-
-    return _run(ops, leaf, np.logical_and, np.logical_or, const)
+    keys, steps, root = minmax_program(ops)
+    used, key_q = np.unique(keys[:, 0], return_inverse=True)
+    sign = keys[:, 1][:, None]
+    k, rows = len(keys), len(keys) + 2 + len(steps)
+    steps = steps.tolist()
+    minus, plus = np.zeros(len(p), dtype=bool), np.zeros(len(p), dtype=bool)
+    for s, e in _chunks(len(p), rows, chunk_entries):
+        values = np.empty((rows, 2, e - s), dtype=np.int8)
+        values[k], values[k + 1] = _KF, _KT
+        if k:
+            inside = np.stack([_values(quadrics[q], p[s:e]) for q in used])[key_q] * sign <= 0.0
+            values[:k] = np.where(inside, _KT, _KF)[:, None]
+            _substitute_own(values, keys, own[s:e])
+        _run_minmax(steps, values)
+        minus[s:e], plus[s:e] = values[root] == _KT
+    return minus, plus
 
 
 def contains(ops, quadrics, points) -> np.ndarray:
@@ -260,6 +265,20 @@ def leaf_states_over_boxes(matrix, sign: int, lo, hi) -> np.ndarray:
     return np.where(v > spread, _F, np.where(v < -spread, _T, _LIVE))
 
 
+def _is_plane(matrices) -> np.ndarray:
+    """Per 4x4 matrix: True for a plane (no quadratic part)."""
+    return ~np.any(matrices[:, :3, :3] != 0, axis=(1, 2))
+
+
+def _planes_first(quadrics, used, key_q):
+    """(used, key_q) with the planes of ``used`` first (their values are then computed in
+    place) and ``key_q`` (rows into ``used``) following the new order."""
+    perm = np.argsort(~_is_plane(np.asarray(quadrics, dtype=np.float64)[used].reshape(-1, 4, 4)), kind="stable")
+    inverse = np.empty_like(perm)
+    inverse[perm] = np.arange(len(perm))
+    return used[perm], inverse[key_q]
+
+
 def _signed_leaf_values(quadrics, used, lo, hi):
     """Per quadric of ``used`` and box [lo, hi] (N, 3): (v, spread) with the literal (q, sign)
     FALSE over the box where sign v > spread, TRUE where sign v < -spread (the tests of
@@ -267,10 +286,17 @@ def _signed_leaf_values(quadrics, used, lo, hi):
     c, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     slack = PRUNE_SLACK * (np.linalg.norm(c, axis=1) + half.sum(axis=1))
     M = np.asarray(quadrics, dtype=np.float64)[np.asarray(used, dtype=np.int64)].reshape(-1, 4, 4)
-    v = np.zeros((len(M), len(c)))
-    spread = np.zeros((len(M), len(c)))
-    flat = ~np.any(M[:, :3, :3] != 0, axis=(1, 2))
-    if flat.any():
+    v = np.empty((len(M), len(c)))
+    spread = np.empty((len(M), len(c)))
+    flat = _is_plane(M)
+    nf = int(flat.sum())
+    if nf and flat[:nf].all():  # planes first (:func:`_planes_first`): written in place
+        g = 2.0 * M[:nf, :3, 3]
+        np.matmul(g, c.T, out=v[:nf])
+        v[:nf] += M[:nf, 3, 3][:, None]
+        np.matmul(np.abs(g), half.T, out=spread[:nf])
+        spread[:nf] += np.linalg.norm(g, axis=1)[:, None] * slack[None]
+    elif nf:
         g = 2.0 * M[flat, :3, 3]
         v[flat] = g @ c.T + M[flat, 3, 3][:, None]
         spread[flat] = np.abs(g) @ half.T + np.linalg.norm(g, axis=1)[:, None] * slack[None]
@@ -286,43 +312,143 @@ def _signed_leaf_values(quadrics, used, lo, hi):
     return v, spread
 
 
-#: three-valued AND / OR of states (_F, _T, _LIVE) as tables indexed by 3 x + y
-_AND3 = np.array([_F, _F, _F, _F, _T, _LIVE, _F, _LIVE, _LIVE], dtype=np.int8)
-_OR3 = np.array([_F, _T, _LIVE, _T, _T, _T, _LIVE, _T, _LIVE], dtype=np.int8)
+#: the states as ordered values FALSE < LIVE < TRUE: three-valued (Kleene) AND is the min,
+#: OR the max, and two-valued logic is the same on FALSE and TRUE alone
+_KF, _KL, _KT = 0, 1, 2
+#: the most (program rows x boxes or points) a tape run holds at once: the work is split in
+#: chunks of columns to keep its arrays to a few tens of MiB
+CHUNK_ENTRIES = 1 << 23
 
 
-def surface_in_boxes(ops, quadrics, lo, hi, box_quadric) -> np.ndarray:
+def minmax_program(ops):
+    """The tape as a straight-line program over rows of values: (keys, steps, root).
+
+    ``keys`` (k, 2): the distinct leaf literals (quadric, sign) in sorted order, rows 0..k-1;
+    rows k and k+1 hold the constants FALSE and TRUE; ``steps`` (m, 4) rows [is_or, out, a, b]
+    with row out = max (OR) or min (AND) of rows a and b, one new row per AND / OR.  Registers
+    are renamed (each instruction's result is a value of its own: an operand is the last
+    value written to its register before), COPY is an alias, and the steps and leaves whose
+    result does not reach the root are dropped; ``root``: the row of the last instruction's
+    register.
+    """
+    ops = np.asarray(ops, dtype=np.int64).reshape(-1, 4)
+    n = len(ops)
+    op, out, a, b = ops.T
+    index = np.arange(n)
+    order = np.lexsort((index, out))
+    written = out[order] * (n + 1) + order
+
+    def source(reg):
+        """Per instruction, the instruction that last wrote register ``reg`` before it."""
+        return order[np.maximum(np.searchsorted(written, reg * (n + 1) + index) - 1, 0)]
+
+    src_a, src_b = source(a), source(b)
+    alias = np.where(op == OP_COPY, src_a, index)
+    while True:  # copies of copies: at most log2(n) rounds
+        deeper = alias[alias]
+        if np.array_equal(deeper, alias):
+            break
+        alias = deeper
+    binary = (op == OP_AND) | (op == OP_OR)
+    child_a, child_b = alias[src_a], alias[src_b]
+    root = int(alias[n - 1])
+    live = bytearray(n)
+    live[root] = 1
+    is_step, ca, cb = binary.tolist(), child_a.tolist(), child_b.tolist()
+    for i in range(root, -1, -1):
+        if live[i] and is_step[i]:
+            live[ca[i]] = live[cb[i]] = 1
+    live = np.frombuffer(bytes(live), dtype=np.uint8).astype(bool)
+    leaf = live & (op == OP_LEAF)
+    keys, key_of = np.unique(np.stack([a[leaf], b[leaf]], axis=1), axis=0, return_inverse=True)
+    k = len(keys)
+    step = np.flatnonzero(live & binary)
+    row = np.zeros(n, dtype=np.int64)
+    row[leaf] = key_of.reshape(-1)
+    row[op == OP_CONST] = k + (a[op == OP_CONST] != 0)
+    row[step] = k + 2 + np.arange(len(step))
+    steps = np.stack([op[step] == OP_OR, row[step], row[child_a[step]], row[child_b[step]]], axis=1)
+    return keys.reshape(-1, 2), steps.astype(np.int64).reshape(-1, 4), int(row[root])
+
+
+def _run_minmax(steps, values) -> None:
+    """Run ``steps`` of :func:`minmax_program` in place over ``values`` (rows, ...)."""
+    lo, hi = np.minimum, np.maximum
+    for is_or, out, a, b in steps:
+        (hi if is_or else lo)(values[a], values[b], out=values[out])
+
+
+def _substitute_own(values, keys, own) -> None:
+    """Put the substituted constants in the leaf rows of ``values`` (rows, 2, n): where column j
+    belongs to quadric own[j], its literal (own[j], s) is TRUE on the negative side (index 0)
+    and FALSE on the positive side when s = +1, the opposite when s = -1."""
+    order = np.argsort(keys[:, 0], kind="stable")
+    kq = keys[order, 0]
+    first = np.searchsorted(kq, own, side="left")
+    count = np.searchsorted(kq, own, side="right") - first
+    col = np.repeat(np.arange(len(own)), count)
+    step = np.arange(len(col)) - np.repeat(np.cumsum(count) - count, count)
+    key = order[np.repeat(first, count) + step]
+    positive = keys[key, 1] > 0
+    values[key, 0, col] = np.where(positive, _KT, _KF)
+    values[key, 1, col] = np.where(positive, _KF, _KT)
+
+
+def _leaf_states(states, keys, key_q, v, spread) -> None:
+    """The states (k, n) of the literals ``keys`` (quadric row ``key_q``, sign) over n boxes
+    from :func:`_signed_leaf_values`: (q, s) is FALSE where s v > spread, else TRUE where
+    s v < -spread, else LIVE.  Negating v is exact, so for s = -1 the two tests are v < -spread
+    and v > spread: both signs come from the same two comparisons."""
+    above = v > spread
+    below = np.less(v, np.negative(spread, out=spread))
+    positive = keys[:, 1] > 0
+    for side, false, true in ((positive, above, below), (~positive, below, above)):
+        if side.all():
+            rows = key_q
+        elif side.any():
+            rows = key_q[side]
+        else:
+            continue
+        st = true[rows].view(np.int8) + np.int8(_KL)  # TRUE or LIVE ...
+        st *= ~false[rows]  # ... or FALSE
+        if side.all():
+            states[:] = st
+        else:
+            states[side] = st
+
+
+def _chunks(n: int, rows: int, entries: int = None):
+    """Column ranges of at most ``entries`` (default :data:`CHUNK_ENTRIES`) / ``rows`` columns
+    covering range(n)."""
+    size = max(1, (entries or CHUNK_ENTRIES) // max(rows, 1))
+    return [(s, min(n, s + size)) for s in range(0, n, size)]
+
+
+def surface_in_boxes(ops, quadrics, lo, hi, box_quadric, chunk_entries: int = None, program=None) -> np.ndarray:
     """Mask of the boxes [lo, hi] (N, 3) in which quadric ``box_quadric[i]`` may carry CSG
     surface: False where pruning over the box decides that the two substituted sides of the
-    tape are the same constant (:func:`prune`'s ``decided`` = +1), for all boxes at once."""
+    tape are the same constant (:func:`prune`'s ``decided`` = +1), for all boxes at once.
+
+    The leaves' states over each box (:func:`leaf_states_over_boxes`) go through the tape
+    as a program of min / max (:func:`minmax_program`: three-valued AND / OR) on the two
+    sides at once, in chunks of at most ``chunk_entries`` program rows x boxes.  ``program``:
+    the :func:`minmax_program` of ``ops`` if already made (the same tape over many calls)."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
-    own = np.asarray(box_quadric)
-    n = len(lo)
-    ops = np.asarray(ops)
-    leaves = ops[ops[:, 0] == OP_LEAF]
-    used = np.unique(leaves[:, 2])
-    row = {int(u): k for k, u in enumerate(used)}
-    v, spread = _signed_leaf_values(quadrics, used, lo, hi)
-    leaf_state: dict = {}
-    sides: dict = {}
-    for op, out, a, b in ops:
-        if op == OP_LEAF:
-            key = (a, b)
-            if key not in leaf_state:
-                sv = b * v[row[int(a)]]
-                leaf_state[key] = np.where(sv > spread[row[int(a)]], _F,
-                                           np.where(sv < -spread[row[int(a)]], _T, _LIVE)).astype(np.int8)
-            st = leaf_state[key]
-            mine = own == a
-            sides[out] = (np.where(mine, _T if b > 0 else _F, st), np.where(mine, _F if b > 0 else _T, st))
-        elif op in (OP_AND, OP_OR):
-            sa, sb = sides[a], sides[b]
-            table = _AND3 if op == OP_AND else _OR3
-            sides[out] = (table[3 * sa[0] + sb[0]], table[3 * sa[1] + sb[1]])
-        elif op == OP_COPY:
-            sides[out] = sides[a]
-        elif op == OP_CONST:
-            v0 = np.full(n, _T if a else _F, dtype=np.int8)
-            sides[out] = (v0, v0)
-    neg, pos = sides[int(np.asarray(ops)[-1][1])]
-    return ~((neg != _LIVE) & (neg == pos))
+    own = np.asarray(box_quadric).reshape(-1)
+    keys, steps, root = minmax_program(ops) if program is None else program
+    used, key_q = _planes_first(quadrics, *np.unique(keys[:, 0], return_inverse=True))
+    rows = len(keys) + 2 + len(steps)
+    steps = steps.tolist()
+    mask = np.ones(len(lo), dtype=bool)
+    for s, e in _chunks(len(lo), rows, chunk_entries):
+        values = np.empty((rows, 2, e - s), dtype=np.int8)
+        values[len(keys)] = _KF
+        values[len(keys) + 1] = _KT
+        if len(keys):
+            _leaf_states(values[:len(keys), 0], keys, key_q, *_signed_leaf_values(quadrics, used, lo[s:e], hi[s:e]))
+            values[:len(keys), 1] = values[:len(keys), 0]
+            _substitute_own(values, keys, own[s:e])
+        _run_minmax(steps, values)
+        neg, pos = values[root]
+        mask[s:e] = ~((neg != _KL) & (neg == pos))
+    return mask

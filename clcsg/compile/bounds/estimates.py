@@ -61,7 +61,7 @@ import numpy as np
 from ...errors import LimitError, UsageError
 from ...model.quadric import Quadric
 from .term_boxes import literal_box
-from ..interpret import surface_in_boxes
+from ..interpret import minmax_program, surface_in_boxes
 from ..root_tapes import box_tapes
 from .regions import quadric_regions
 from .surface_area import surface_areas
@@ -499,6 +499,7 @@ def refine_regions(tape, regions, levels: int = REFINE_LEVELS, max_boxes: int = 
     hi = np.concatenate([b[:, 1] for b in boxes])
     group, tapes = box_tapes(tape, lo, hi, q)
     corners = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], dtype=np.float64)
+    programs: dict = {}  # the groups' tapes are often the same rows (a convex mesh: one group of planes)
     for level in range(levels + 1):
         keep = np.zeros(len(q), dtype=bool)
         order = np.argsort(group, kind="stable")
@@ -506,7 +507,10 @@ def refine_regions(tape, regions, levels: int = REFINE_LEVELS, max_boxes: int = 
         for k, ops in enumerate(tapes):
             sel = order[cuts[k]:cuts[k + 1]]
             if len(sel):
-                keep[sel] = surface_in_boxes(ops, tape.quadrics, lo[sel], hi[sel], q[sel])
+                key = np.ascontiguousarray(ops).tobytes()
+                if key not in programs:
+                    programs[key] = minmax_program(ops)
+                keep[sel] = surface_in_boxes(ops, tape.quadrics, lo[sel], hi[sel], q[sel], program=programs[key])
         lo, hi, q, group = lo[keep], hi[keep], q[keep], group[keep]
         if level == levels or 8 * len(q) > max_boxes:
             break

@@ -38,23 +38,26 @@ PHI4 = 1.2207440846057596
 R4_STEPS = np.array([PHI4 ** -k for k in range(1, 5)])
 
 
-def isotropic_lines(center, R: float, n: int, seed: int = 0):
+def isotropic_lines(center, R, n: int, seed=0):
     """``n`` isotropic uniform lines meeting the ball (center, R) as (directions, points), from
     the 4-D R4 sequence u_i = frac(s + i a) (quasi-random: the same every run, and spread more
     evenly than random numbers): the direction from (u_1, u_2) (z = 1 - 2 u_1 uniform, azimuth
     2 pi u_2), the point uniform in the disc of radius R across the center orthogonal to it, from
-    (u_3, u_4) (radius R sqrt(u_3), angle 2 pi u_4).  ``seed`` shifts the sequence."""
+    (u_3, u_4) (radius R sqrt(u_3), angle 2 pi u_4).  ``seed`` shifts the sequence.  For many
+    balls at once: ``center`` (..., 3), ``R`` and ``seed`` (...) give lines (..., n, 3)."""
+    seed = np.asarray(seed)[..., None, None]
     i = np.arange(n, dtype=np.float64)[:, None]
     u = np.mod(0.5 + seed * R4_STEPS[::-1] + (i + 1) * R4_STEPS, 1.0)
-    z, phi = 1.0 - 2.0 * u[:, 0], 2.0 * math.pi * u[:, 1]
+    z, phi = 1.0 - 2.0 * u[..., 0], 2.0 * math.pi * u[..., 1]
     s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    d = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
-    ref = np.where(np.abs(d[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    d = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=-1)
+    ref = np.where(np.abs(d[..., :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     a1 = np.cross(d, ref)
-    a1 /= np.linalg.norm(a1, axis=1)[:, None]
+    a1 /= np.linalg.norm(a1, axis=-1)[..., None]
     a2 = np.cross(d, a1)
-    rho, ang = R * np.sqrt(u[:, 2]), 2.0 * math.pi * u[:, 3]
-    o = np.asarray(center, dtype=np.float64) + (rho * np.cos(ang))[:, None] * a1 + (rho * np.sin(ang))[:, None] * a2
+    rho, ang = np.asarray(R, dtype=np.float64)[..., None] * np.sqrt(u[..., 2]), 2.0 * math.pi * u[..., 3]
+    o = (np.asarray(center, dtype=np.float64)[..., None, :] + (rho * np.cos(ang))[..., None] * a1
+         + (rho * np.sin(ang))[..., None] * a2)
     return d, o
 
 
@@ -67,13 +70,17 @@ def surface_areas(tape, regions, lines: int = LINES, seed: int = 0):
     if len(tape.ops) * lines * len(used) > 20 * MAX_WORK:  # most lines miss the regions, not this many
         return None
     pts, owner, weight = [], [], []
+    balls, dirs, origins = [], (), ()
     for u in used:
         reg = np.asarray(regions[u], dtype=np.float64)
         lo, hi = reg[:, 0].min(axis=0), reg[:, 1].max(axis=0)
         center, R = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
-        if not (R > 0 and math.isfinite(R)):
-            continue
-        d, o = isotropic_lines(center, R, lines, seed + u)
+        if R > 0 and math.isfinite(R):
+            balls.append((u, reg, center, R))
+    if balls:  # all quadrics' lines at once
+        dirs, origins = isotropic_lines(np.array([b[2] for b in balls]), np.array([b[3] for b in balls]), lines,
+                                        seed + np.array([b[0] for b in balls]))
+    for (u, reg, center, R), d, o in zip(balls, dirs, origins):
         # crossings on a region's face (a plane's regions are flat boxes) count as inside
         tol = 1e-9 * (1.0 + np.abs(reg).max())
         for t in Quadric(tape.quadrics[u]).intersect_line(o, d):
