@@ -413,6 +413,14 @@ def test_page_in_headless_chromium(tmp_path, cl_context):
             turned = _wait_for(driver, lambda p: p["state"]["id"] > last_id and p["state"]["quality"] == "rest",
                                "a frame after dragging")
             assert turned["hash"] != first["hash"]
+            exact = driver.find_element("id", "exact")
+            exact.click()  # the first exact frame of the model: full size and supersampled (it is cheap)
+            traced = _wait_for(driver, lambda p: p["state"]["method"] == "raytrace", "an exact frame")
+            st, size = traced["state"], driver.execute_script("const c = document.getElementById('view'); "
+                                                               "return [c.width, c.height];")
+            assert [st["width"], st["height"]] == size and not st["reduced"] and st["aa"] >= 2, st
+            assert abs(traced["covered"] - turned["covered"]) < 0.1 * turned["covered"]
+            exact.click()
             clcsg.save(RED_BALL, scene)
             red = _wait_for(driver, lambda p: p["red"] > 50, "the edited model")
             assert red["version"] > 1
