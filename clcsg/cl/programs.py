@@ -28,6 +28,7 @@ from .constants import defines as shared
 
 _cache: dict = {}
 _lock = threading.Lock()
+_builds = 0
 _exit = contextlib.ExitStack()
 
 
@@ -203,6 +204,7 @@ def build(context, path: str, defines: dict | None = None, real=np.float64):
 
     ``defines`` become ``-DKEY=VALUE`` options; ``real`` selects double or float.
     """
+    global _builds
     import pyopencl as cl
 
     opts = build_options(defines, real) + _device_options(context, path)
@@ -223,7 +225,15 @@ def build(context, path: str, defines: dict | None = None, real=np.float64):
                 if binary_path is not None:
                     _store_binary(cl, prg, binary_path)
             _cache[key] = prg
+            _builds += 1
     return prg
+
+
+def builds() -> int:
+    """How many programs this process has built or loaded from the disk cache so far: work
+    during which it grew paid a one-off cost (a build, a kernel's first launch) that a timing
+    meant to predict the next run must leave out."""
+    return _builds
 
 
 _kernels: dict = {}

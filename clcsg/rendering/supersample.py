@@ -40,20 +40,25 @@ def check_aa(aa, width: int, height: int) -> int:
 
 def downsample(rgba: np.ndarray, n: int, gamma: float = 2.2) -> np.ndarray:
     """(H*n, W*n, 4) uint8 -> (H, W, 4) uint8: the box filter of n x n blocks in linear light
-    (colours decoded with ``gamma``, weighted by alpha)."""
-    hn, wn = rgba.shape[:2]
-    h, w = hn // n, wn // n
+    (colours decoded with ``gamma``, weighted by alpha): per pixel, with subpixel colours c_k
+    (0-255) and alphas a_k (0-255), colour = (sum lut(c_k) a_k / sum a_k)^(1/gamma) and
+    alpha = sum a_k / n^2, where lut(c) = (c / 255)^gamma.  The sums run over the n^2 strided
+    subpixel planes (one (H, W) plane at a time, no (H*n, W*n) float copy)."""
+    h, w = rgba.shape[0] // n, rgba.shape[1] // n
     lut = ((np.arange(256, dtype=np.float64) / 255.0) ** float(gamma)).astype(np.float32)
-    lin = lut[rgba[..., :3]]
-    alpha = rgba[..., 3:4].astype(np.float32) * (1.0 / 255.0)
-    lin *= alpha
-    lin = lin.reshape(h, n, w, n, 3).mean(axis=(1, 3))
-    a = alpha.reshape(h, n, w, n, 1).mean(axis=(1, 3))
+    lin = np.zeros((h, w, 3), np.float32)
+    a = np.zeros((h, w, 1), np.float32)
+    for i in range(n):
+        for j in range(n):
+            sub = rgba[i:h * n:n, j:w * n:n]
+            al = sub[..., 3:4].astype(np.float32)
+            lin += lut[sub[..., :3]] * al
+            a += al
     with np.errstate(divide="ignore", invalid="ignore"):
-        colour = np.where(a > 0, lin / a, 0.0)
+        colour = np.where(a > 0, lin / a, np.float32(0.0))
     out = np.empty((h, w, 4), dtype=np.uint8)
     out[..., :3] = np.clip(np.round(255.0 * np.clip(colour, 0.0, 1.0) ** (1.0 / float(gamma))), 0, 255)
-    out[..., 3] = np.clip(np.round(255.0 * a[..., 0]), 0, 255)
+    out[..., 3] = np.clip(np.round(a[..., 0] * (1.0 / (n * n))), 0, 255)
     return out
 
 

@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from ..cl import programs
 from ..errors import UsageError
 from ..rendering.camera import Camera
 from ..rendering.raytracer import trace
@@ -41,8 +42,8 @@ JPEG_QUALITY = 85
 REST_BUDGET = 1.0
 #: the resting frame's supersampling factors, tried from the largest
 REST_AA = (3, 2)
-#: seconds an exact ray traced frame may take: past it (predicted from the model's last exact
-#: frame) the frame is traced at a smaller size
+#: seconds an exact ray traced frame may take: past it (predicted from the model's last warm
+#: exact frame) the frame is traced at a smaller size
 RAYTRACE_BUDGET = 2.0
 #: a reduced exact frame keeps at least 1/MIN_SCALE of each side
 MIN_SCALE = 16
@@ -125,8 +126,8 @@ def render(context, model, camera, method: str = "splat", aa: int = 1, complete:
 
 def raytrace_camera(model, camera, budget: float = RAYTRACE_BUDGET) -> Camera:
     """``camera``, or the same view at the largest smaller size whose exact ray tracing should
-    fit ``budget`` seconds, predicted from the model's last exact frame (its seconds per
-    pixel); the first exact frame of a model is traced at full size."""
+    fit ``budget`` seconds, predicted from the model's last exact frame that built no program
+    (its seconds per pixel); the first exact frame of a model is traced at full size."""
     rate = getattr(model, "raytrace_rate", None)
     w, h = camera.width, camera.height
     if not rate or rate * w * h <= budget:
@@ -138,7 +139,8 @@ def raytrace_camera(model, camera, budget: float = RAYTRACE_BUDGET) -> Camera:
 
 
 def _exact_rest_aa(model, camera, budget: float = REST_BUDGET) -> int:
-    """The supersampling of a resting exact frame: :func:`rest_aa` of its predicted time."""
+    """The supersampling of a resting exact frame: :func:`rest_aa` of its predicted plain
+    time (1 while there is no prediction)."""
     rate = getattr(model, "raytrace_rate", None)
     aa = rest_aa(1e3 * rate * camera.width * camera.height, budget) if rate else 1
     return aa if camera.width * camera.height * aa * aa <= MAX_SUBPIXELS else 1
@@ -167,12 +169,11 @@ def frame(context, model, request: dict, aa: int = 1) -> tuple[bytes, dict]:
     full = (cam.width, cam.height)
     if method == "raytrace":
         cam = raytrace_camera(model, cam)
-        if aa == 1 and request.get("quality") == "rest" and (cam.width, cam.height) == full:
-            aa = _exact_rest_aa(model, cam)
-    img = render(context, model, cam, method, aa, complete=False)
+        rest = aa == 1 and request.get("quality") == "rest" and (cam.width, cam.height) == full
+        img, aa = _exact(context, model, cam, aa, rest)
+    else:
+        img = render(context, model, cam, method, aa, complete=False)
     t1 = time.perf_counter()
-    if method == "raytrace":
-        model.raytrace_rate = (t1 - t0) / (cam.width * cam.height * aa * aa)
     fmt = "jpeg" if request.get("quality") == "drag" else "png"
     data = encode(img.rgba, fmt)
     t2 = time.perf_counter()
@@ -182,6 +183,34 @@ def frame(context, model, request: dict, aa: int = 1) -> tuple[bytes, dict]:
               "render_ms": round(1e3 * (t1 - t0), 2),
               "encode_ms": round(1e3 * (t2 - t1), 2), "bytes": len(data)}
     return pack(header, data), header
+
+
+def _exact(context, model, camera, aa: int, rest: bool):
+    """(image, aa) of an exact frame.  ``rest``: a resting full-size frame, supersampled by
+    :func:`_exact_rest_aa`; when the model has no prediction yet, its plain render is the probe
+    that makes one (rendered again if it paid a one-off cost), and it is the frame unless a
+    supersampled one fits."""
+    img = None
+    if rest and not model.raytrace_rate:
+        img = _timed_trace(context, model, camera, 1)
+        if not model.raytrace_rate:
+            img = _timed_trace(context, model, camera, 1)
+    if rest:
+        aa = _exact_rest_aa(model, camera)
+    if img is None or aa > 1:
+        img = _timed_trace(context, model, camera, aa)
+    return img, aa
+
+
+def _timed_trace(context, model, camera, aa: int):
+    """The exact image of ``camera`` at ``aa``; ``model.raytrace_rate`` becomes its seconds per
+    traced pixel (of ``aa^2`` per pixel), unless it built a program (:func:`programs.builds`):
+    that time is not the next frame's."""
+    n, t0 = programs.builds(), time.perf_counter()
+    img = render(context, model, camera, "raytrace", aa, complete=False)
+    if programs.builds() == n:
+        model.raytrace_rate = (time.perf_counter() - t0) / (camera.width * camera.height * aa * aa)
+    return img
 
 
 def pack(header: dict, data: bytes) -> bytes:

@@ -43,7 +43,8 @@ class Model:
     radius: float
     auto: bool  # the radius is the automatic one
     times: dict = field(default_factory=dict)  # load_s, compile_s, sample_s, total_s
-    #: seconds per traced pixel of the last exact frame (the viewer's prediction), None before
+    #: seconds per traced pixel of the last exact frame that built no program (the viewer's
+    #: prediction), None before
     raytrace_rate: float | None = None
 
     @property
