@@ -33,6 +33,20 @@ def _values(matrices, points):
     return np.einsum("...i,ij,...j->...", xh, matrices, xh)
 
 
+#: the upper triangle of a symmetric 4x4 matrix, and the factor of each entry in x^T M x
+_TRIU = np.triu_indices(4)
+_TRIU_FACTOR = np.where(_TRIU[0] == _TRIU[1], 1.0, 2.0)
+
+
+def _values_many(matrices, points):
+    """Q_u(x) = x^T M_u x (x homogeneous) of matrices (U, 4, 4) at points (N, 3) as (U, N):
+    one product of the points' ten monomials x_i x_j (i <= j) with the matrices' upper
+    triangles (off-diagonal entries twice)."""
+    xh = np.concatenate([points, np.ones((len(points), 1))], axis=1)
+    mono = xh[:, _TRIU[0]] * xh[:, _TRIU[1]]
+    return (matrices[:, _TRIU[0], _TRIU[1]] * _TRIU_FACTOR) @ mono.T
+
+
 def distances(tape_quadrics, q: int, points) -> np.ndarray:
     """Conservative signed distance d_q (eqs. 10-12) of canonical quadric ``q`` at ``points``."""
     return Quadric(tape_quadrics[q]).distance(points)
@@ -124,7 +138,7 @@ def member_per_point(ops, quadrics, points, self_quadrics, chunk_entries: int = 
         values = np.empty((rows, 2, e - s), dtype=np.int8)
         values[k], values[k + 1] = _KF, _KT
         if k:
-            inside = np.stack([_values(quadrics[q], p[s:e]) for q in used])[key_q] * sign <= 0.0
+            inside = _values_many(np.asarray(quadrics)[used], p[s:e])[key_q] * sign <= 0.0
             values[:k] = np.where(inside, _KT, _KF)[:, None]
             _substitute_own(values, keys, own[s:e])
         _run_minmax(steps, values)
