@@ -77,13 +77,26 @@ def _incidences(tri, n):
     return order, start, count
 
 
+def _sample_points(corners):
+    """Homogeneous sample points (R, S, 4) of triangles (R, 3, 3): sum_k SAMPLES[s, k] c_k,
+    the terms added in k order from the first (einsum's sum, to the bit), written in place."""
+    ph = np.empty((len(corners), len(SAMPLES), 4))
+    ph[:, :, 3] = 1.0
+    pts = ph[:, :, :3]
+    tmp = np.empty_like(pts)
+    np.multiply(SAMPLES[None, :, 0, None], corners[:, None, 0], out=pts)
+    for k in (1, 2):
+        np.multiply(SAMPLES[None, :, k, None], corners[:, None, k], out=tmp)
+        pts += tmp
+    return ph
+
+
 def _chord_error(m, corners, sets, flat):
     """Per new triangle (corners (R, 3, 3)) the smallest over its shared quadrics (R, 3) of the
     largest first-order distance at :data:`SAMPLES`; inf where it shares none.  On a flat
     quadric (``flat`` (U,) bool: a plane or a slab's two planes) the centroid alone decides:
     zero if the corners lie on one plane, far off if on both."""
-    pts = np.einsum("sk,rkc->rsc", SAMPLES, corners)
-    ph = np.concatenate([pts, np.ones(pts.shape[:2] + (1,))], axis=2)
+    ph = _sample_points(corners)
     err = np.full(len(corners), np.inf)
     for k in range(sets.shape[1]):
         on = sets[:, k] >= 0
