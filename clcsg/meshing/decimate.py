@@ -143,9 +143,10 @@ def _geometry_ok(m, v, u, tol, flat):
     good = (l_new > 1e-6 * longest * longest) & (np.einsum("ri,ri->r", n_old, n_new) > MAX_TURN * l_old * l_new)
     s = m.sets[new]
     shared = common(common(s[:, 0], s[:, 1]), s[:, 2])
-    good[good] = _chord_error(m, c_new[good], shared[good], flat) <= CHORD_FRACTION * tol
-    bad = np.bincount(row[~good], minlength=len(v))
-    return bad == 0
+    ok = np.bincount(row[~good], minlength=len(v)) == 0
+    test = good & ok[row]  # a candidate already out needs no chord errors
+    ok[row[test][~(_chord_error(m, c_new[test], shared[test], flat) <= CHORD_FRACTION * tol)]] = False  # NaN fails
+    return ok
 
 
 def _independent(n, edges, tri, v, rounds=LUBY_ROUNDS):
