@@ -180,8 +180,8 @@ def _near(n, tri, seeds, rings=2):
     mark = np.zeros(n, dtype=bool)
     mark[seeds] = True
     for _ in range(rings):
-        hit = mark[tri].any(axis=1)
-        mark[tri[hit].ravel()] = True
+        m3 = mark[tri]
+        mark[tri[m3[:, 0] | m3[:, 1] | m3[:, 2]]] = True
     return mark
 
 
