@@ -45,13 +45,31 @@ SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0
                     [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
-def _contained(m, v, u):
-    """Rows where every quadric of vertex v is one of vertex u's."""
-    sv, su = m.sets[v], m.sets[u]
-    out = np.ones(len(v), dtype=bool)
-    for i in range(3):  # nine column comparisons: no (N, 3, 3) temporaries
-        svi = sv[:, i]
-        out &= (svi < 0) | (svi == su[:, 0]) | (svi == su[:, 1]) | (svi == su[:, 2])
+def _contained_both(m, edges):
+    """Per edge (a, b): (every quadric of a is one of b's, every quadric of b is one of a's),
+    from the nine comparisons of the two sets, made once for both directions."""
+    sa, sb = m.sets[edges[:, 0]], m.sets[edges[:, 1]]
+    eq = [[sa[:, i] == sb[:, j] for j in range(3)] for i in range(3)]
+    a_in_b = np.ones(len(edges), dtype=bool)
+    b_in_a = np.ones(len(edges), dtype=bool)
+    for i in range(3):
+        a_in_b &= (sa[:, i] < 0) | eq[i][0] | eq[i][1] | eq[i][2]
+        b_in_a &= (sb[:, i] < 0) | eq[0][i] | eq[1][i] | eq[2][i]
+    return a_in_b, b_in_a
+
+
+def _not_failed(edges, n, failed):
+    """Per directed edge (rows: edges (a, b), then (b, a)) False where its key v * n + u is in
+    ``failed``: the failed keys looked up among the sorted edge keys."""
+    out = np.ones(2 * len(edges), dtype=bool)
+    if not len(failed) or not len(edges):
+        return out
+    fv, fu = failed // n, failed % n
+    key = np.minimum(fv, fu) * n + np.maximum(fv, fu)
+    ekey = edges[:, 0] * n + edges[:, 1]  # sorted: edges_of's order
+    at = np.minimum(np.searchsorted(ekey, key), len(ekey) - 1)
+    hit = ekey[at] == key
+    out[(at + len(edges) * (fv > fu))[hit]] = False
     return out
 
 
@@ -193,11 +211,7 @@ def _one_pass(m, tol, failed, flat):
     edges, _ = edges_of(m.triangles)
     v = np.concatenate([edges[:, 0], edges[:, 1]])
     u = np.concatenate([edges[:, 1], edges[:, 0]])
-    sel = _contained(m, v, u)
-    if len(failed[0]):
-        key = v * n + u
-        at = np.minimum(np.searchsorted(failed[0], key), len(failed[0]) - 1)
-        sel &= failed[0][at] != key
+    sel = np.concatenate(_contained_both(m, edges)) & _not_failed(edges, n, failed[0])
     v, u = v[sel], u[sel]
     sel = _topology_ok(m, edges, v, u)
     v, u = v[sel], u[sel]
