@@ -97,15 +97,18 @@ def _incidences(tri, n):
 
 def _sample_points(corners):
     """Homogeneous sample points (R, S, 4) of triangles (R, 3, 3): sum_k SAMPLES[s, k] c_k,
-    the terms added in k order from the first (einsum's sum, to the bit), written in place."""
+    the terms added in k order from the first (einsum's sum, to the bit), one sample at a
+    time over contiguous (R, 3) corner arrays."""
+    ct = np.ascontiguousarray(corners.transpose(1, 0, 2))  # (3, R, 3): corner k of every row
     ph = np.empty((len(corners), len(SAMPLES), 4))
     ph[:, :, 3] = 1.0
-    pts = ph[:, :, :3]
-    tmp = np.empty_like(pts)
-    np.multiply(SAMPLES[None, :, 0, None], corners[:, None, 0], out=pts)
-    for k in (1, 2):
-        np.multiply(SAMPLES[None, :, k, None], corners[:, None, k], out=tmp)
-        pts += tmp
+    acc, tmp = np.empty_like(ct[0]), np.empty_like(ct[0])
+    for s, w in enumerate(SAMPLES):
+        np.multiply(w[0], ct[0], out=acc)
+        for k in (1, 2):
+            np.multiply(w[k], ct[k], out=tmp)
+            acc += tmp
+        ph[:, s, :3] = acc
     return ph
 
 
