@@ -28,9 +28,23 @@ from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
 PRUNE_SLACK = ROUNDING_ULPS * np.finfo(np.float64).eps
 
 
-def _values(matrices, points):
+def _values(matrix, points):
+    """x^T K x at homogeneous points x = (p, 1) (..., 3): the sum over i then j of
+    (x_i K_ij) x_j, accumulated from +0 in that order (einsum's, to the bit).  Zero entries of
+    K are skipped when every point is finite: their terms are +-0, and adding +-0 to a sum
+    that starts at +0 changes no bit, so a plane costs 7 terms instead of 16."""
     xh = np.concatenate([points, np.ones(points.shape[:-1] + (1,))], axis=-1)
-    return np.einsum("...i,ij,...j->...", xh, matrices, xh)
+    k = np.asarray(matrix, dtype=np.float64)
+    if not np.isfinite(xh).all():
+        return np.einsum("...i,ij,...j->...", xh, k, xh)
+    cols = [xh[..., i] for i in range(4)]
+    acc = np.zeros(xh.shape[:-1])
+    tmp = np.empty_like(acc)
+    for i, j in zip(*np.nonzero(k)):
+        np.multiply(cols[i], k[i, j], out=tmp)
+        tmp *= cols[j]
+        acc += tmp
+    return acc
 
 
 #: the upper triangle of a symmetric 4x4 matrix, and the factor of each entry in x^T M x

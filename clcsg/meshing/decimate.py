@@ -45,13 +45,31 @@ SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0], [0, 0.5, 0.5], [0.5, 0
                     [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
-def _contained(m, v, u):
-    """Rows where every quadric of vertex v is one of vertex u's."""
-    sv, su = m.sets[v], m.sets[u]
-    out = np.ones(len(v), dtype=bool)
-    for i in range(3):  # nine column comparisons: no (N, 3, 3) temporaries
-        svi = sv[:, i]
-        out &= (svi < 0) | (svi == su[:, 0]) | (svi == su[:, 1]) | (svi == su[:, 2])
+def _contained_both(m, edges):
+    """Per edge (a, b): (every quadric of a is one of b's, every quadric of b is one of a's),
+    from the nine comparisons of the two sets, made once for both directions."""
+    sa, sb = m.sets[edges[:, 0]], m.sets[edges[:, 1]]
+    eq = [[sa[:, i] == sb[:, j] for j in range(3)] for i in range(3)]
+    a_in_b = np.ones(len(edges), dtype=bool)
+    b_in_a = np.ones(len(edges), dtype=bool)
+    for i in range(3):
+        a_in_b &= (sa[:, i] < 0) | eq[i][0] | eq[i][1] | eq[i][2]
+        b_in_a &= (sb[:, i] < 0) | eq[0][i] | eq[1][i] | eq[2][i]
+    return a_in_b, b_in_a
+
+
+def _not_failed(edges, n, failed):
+    """Per directed edge (rows: edges (a, b), then (b, a)) False where its key v * n + u is in
+    ``failed``: the failed keys looked up among the sorted edge keys."""
+    out = np.ones(2 * len(edges), dtype=bool)
+    if not len(failed) or not len(edges):
+        return out
+    fv, fu = failed // n, failed % n
+    key = np.minimum(fv, fu) * n + np.maximum(fv, fu)
+    ekey = edges[:, 0] * n + edges[:, 1]  # sorted: edges_of's order
+    at = np.minimum(np.searchsorted(ekey, key), len(ekey) - 1)
+    hit = ekey[at] == key
+    out[(at + len(edges) * (fv > fu))[hit]] = False
     return out
 
 
@@ -77,13 +95,29 @@ def _incidences(tri, n):
     return order, start, count
 
 
+def _sample_points(corners):
+    """Homogeneous sample points (R, S, 4) of triangles (R, 3, 3): sum_k SAMPLES[s, k] c_k,
+    the terms added in k order from the first (einsum's sum, to the bit), one sample at a
+    time over contiguous (R, 3) corner arrays."""
+    ct = np.ascontiguousarray(corners.transpose(1, 0, 2))  # (3, R, 3): corner k of every row
+    ph = np.empty((len(corners), len(SAMPLES), 4))
+    ph[:, :, 3] = 1.0
+    acc, tmp = np.empty_like(ct[0]), np.empty_like(ct[0])
+    for s, w in enumerate(SAMPLES):
+        np.multiply(w[0], ct[0], out=acc)
+        for k in (1, 2):
+            np.multiply(w[k], ct[k], out=tmp)
+            acc += tmp
+        ph[:, s, :3] = acc
+    return ph
+
+
 def _chord_error(m, corners, sets, flat):
     """Per new triangle (corners (R, 3, 3)) the smallest over its shared quadrics (R, 3) of the
     largest first-order distance at :data:`SAMPLES`; inf where it shares none.  On a flat
     quadric (``flat`` (U,) bool: a plane or a slab's two planes) the centroid alone decides:
     zero if the corners lie on one plane, far off if on both."""
-    pts = np.einsum("sk,rkc->rsc", SAMPLES, corners)
-    ph = np.concatenate([pts, np.ones(pts.shape[:2] + (1,))], axis=2)
+    ph = _sample_points(corners)
     err = np.full(len(corners), np.inf)
     for k in range(sets.shape[1]):
         on = sets[:, k] >= 0
@@ -130,9 +164,10 @@ def _geometry_ok(m, v, u, tol, flat):
     good = (l_new > 1e-6 * longest * longest) & (np.einsum("ri,ri->r", n_old, n_new) > MAX_TURN * l_old * l_new)
     s = m.sets[new]
     shared = common(common(s[:, 0], s[:, 1]), s[:, 2])
-    good[good] = _chord_error(m, c_new[good], shared[good], flat) <= CHORD_FRACTION * tol
-    bad = np.bincount(row[~good], minlength=len(v))
-    return bad == 0
+    ok = np.bincount(row[~good], minlength=len(v)) == 0
+    test = good & ok[row]  # a candidate already out needs no chord errors
+    ok[row[test][~(_chord_error(m, c_new[test], shared[test], flat) <= CHORD_FRACTION * tol)]] = False  # NaN fails
+    return ok
 
 
 def _independent(n, edges, tri, v, rounds=LUBY_ROUNDS):
@@ -166,8 +201,8 @@ def _near(n, tri, seeds, rings=2):
     mark = np.zeros(n, dtype=bool)
     mark[seeds] = True
     for _ in range(rings):
-        hit = mark[tri].any(axis=1)
-        mark[tri[hit].ravel()] = True
+        m3 = mark[tri]
+        mark[tri[m3[:, 0] | m3[:, 1] | m3[:, 2]]] = True
     return mark
 
 
@@ -179,11 +214,7 @@ def _one_pass(m, tol, failed, flat):
     edges, _ = edges_of(m.triangles)
     v = np.concatenate([edges[:, 0], edges[:, 1]])
     u = np.concatenate([edges[:, 1], edges[:, 0]])
-    sel = _contained(m, v, u)
-    if len(failed[0]):
-        key = v * n + u
-        at = np.minimum(np.searchsorted(failed[0], key), len(failed[0]) - 1)
-        sel &= failed[0][at] != key
+    sel = np.concatenate(_contained_both(m, edges)) & _not_failed(edges, n, failed[0])
     v, u = v[sel], u[sel]
     sel = _topology_ok(m, edges, v, u)
     v, u = v[sel], u[sel]
