@@ -54,7 +54,7 @@ CSG_SEEDS = {**_read("examples/*.csg"), **_read("tests/data/openscad/*.csg")}
 #: ones (gear, flange, bracket: 0.1-0.7 s each) are only loaded
 SMALL = 1200
 
-TOTAL = int(os.environ.get("CLCSG_FUZZ_EXAMPLES", "2500"))
+TOTAL = int(os.environ.get("CLCSG_FUZZ_EXAMPLES", "1250"))
 PER_TEST = max(10, TOTAL // 4)
 SAMPLED = max(5, TOTAL // 40)
 

@@ -34,7 +34,8 @@ from image_check import compare
 from strategies import csg_programs
 from test_tree_pipeline import check_samples
 
-EXAMPLES = int(os.environ.get("CLCSG_RANDOM_PROGRAMS", "160"))
+#: random programs per run (the CI run: 80; CLCSG_RANDOM_PROGRAMS=160 or more for a longer sweep)
+EXAMPLES = int(os.environ.get("CLCSG_RANDOM_PROGRAMS", "80"))
 W, H = 48, 36
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
