@@ -23,6 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 import clcsg
+from clcsg.compile.bounds import tree as bounds_tree
 from clcsg.compile.bounds.tree import shape_bound, tree_bounds
 from clcsg.compile.bounds.exact_boxes import literals_box, primitive_box
 from clcsg.compile.bounds.regions import quadric_regions, unique_quadrics
@@ -275,6 +276,23 @@ def test_shape_bound_holds_and_is_tight_on_random_programs(prog):
     r = _ratio_of_program(prog)
     if r is not None:
         assert r.max() <= MAX_RATIO, (r, prog.csg)
+
+
+@settings(max_examples=min(EXAMPLES, 60), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(shapes(operations=("union",), max_depth=3))
+def test_unions_skip_the_distance_refinement_without_loosening_the_bound(shape):
+    """A union of positive primitives is not refined (its box is the union of the primitives'
+    exact boxes, which the solid touches on every face): the refinement, forced, finds the same
+    bound."""
+    tb = tree_bounds(shape)
+    assert tb.stats["distance_rounds"] == 0
+    forced = bounds_tree._refine_by_distance(bounds_tree._Leaves(bounds_tree._Graph(shape, "t"), "t").sparse_distance(),
+                                             (tb.bound[0], tb.bound[1]))[0]
+    size = float(np.max(tb.bound[1] - tb.bound[0]))
+    assert np.allclose(forced[0], tb.bound[0], rtol=0, atol=1e-9 * size), (forced, tb.bound)
+    assert np.allclose(forced[1], tb.bound[1], rtol=0, atol=1e-9 * size), (forced, tb.bound)
+    # an intersection or difference still is refined
+    assert tree_bounds(clcsg.difference(shape, clcsg.sphere(0.1))).stats["distance_rounds"] > 0
 
 
 def test_bound_ratio_distribution():

@@ -298,7 +298,8 @@ def tree_bounds(shape, user_bound=None, source: str = "scene") -> TreeBounds:
     if ub is not None:
         root_box = _norm_box(meet(root_box, ub))
     refine_rounds = 0
-    if not is_empty(root_box) and np.all(np.isfinite(root_box[0])) and np.all(np.isfinite(root_box[1])):
+    if (_refinable(g, ub) and not is_empty(root_box) and np.all(np.isfinite(root_box[0]))
+            and np.all(np.isfinite(root_box[1]))):
         root_box, refine_rounds = _refine_by_distance(leaves.sparse_distance(), root_box)
         box[0][g.root], box[1][g.root] = _norm_box(root_box)
     empty = is_empty(root_box)
@@ -573,6 +574,15 @@ REFINE_CELLS = 8
 REFINE_ROUNDS = 40
 REFINE_SPLIT = 32
 REFINE_MIN = 0.002
+
+
+def _refinable(g: _Graph, ub) -> bool:
+    """Whether the distance refinement can shrink the root box.  Not for a union of positive
+    primitives without a user bound: its box is the union of the primitives' own exact boxes,
+    and each face of it touches the primitive whose box reaches it, so no cell beyond the solid
+    is left to drop."""
+    return ub is not None or any(k == _AND for k in g.kind) or any(
+        g.neg[i] for i, k in enumerate(g.kind) if k == _LEAF)
 
 
 def _refine_by_distance(distance: SparseDistance, box):
