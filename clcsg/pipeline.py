@@ -18,18 +18,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .model.scene import Scene
 from .readers import scenes
-from .rendering.camera import Camera
-from .rendering.raytracer import raytrace
-from .rendering.splat import render
 from .sampling.radius import Radius
 from .errors import UsageError
 from .model.surfels import has_surfels
 from .sampling.surfel_csg import proxy_scene, sample
+
+if TYPE_CHECKING:
+    from .rendering.camera import Camera
 
 #: the radius when none is given: 1% of the diagonal of the scene's bound
 DEFAULT_RADIUS = Radius(0.01, relative=True)
@@ -95,6 +96,8 @@ class Pipeline:
     def camera(self, width: int, height: int, fov: float = 45.0, up=(0.0, 0.0, 1.0), tape=None) -> Camera:
         """The default view: the solid's silhouette fitted into the image (a probe ray trace of
         ``tape``, by default the pipeline's)."""
+        from .rendering.camera import Camera  # the renderers are not imported by sampling alone
+
         return Camera.fit_silhouette(self.tape if tape is None else tape, width, height, fov=fov, up=up,
                                      device=self.device)
 
@@ -102,6 +105,9 @@ class Pipeline:
         """The image of ``camera``: splats of ``samples`` (``method="splat"``) or the exact ray
         tracer of the tape (``"raytrace"``); ``options`` go to :func:`clcsg.render` /
         :func:`clcsg.raytrace` (background, aa, ...)."""
+        from .rendering.raytracer import raytrace
+        from .rendering.splat import render
+
         if method == "raytrace":
             if has_surfels(self.scene.shape):
                 raise UsageError(f"{self.scene.source}: the exact ray tracer needs quadric operands; a scene with point "

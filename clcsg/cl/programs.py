@@ -1,8 +1,8 @@
 """Building the OpenCL programs shipped in the package.
 
 A program is named by its path inside the package (``"sampling/sampler.cl"``), so each kernel
-sits next to the module that drives it.  Sources are read with importlib.resources (they work
-from an installed wheel); ``cl/include`` (headers shared by every stage) and the source's own
+sits next to the module that drives it.  Sources are read from the package's folder
+(through importlib.resources where the package is zipped); ``cl/include`` (headers shared by every stage) and the source's own
 folder are the include path.  Parameters are ``-D`` build options, and the constants that host
 and kernels share (:mod:`clcsg.cl.constants`) are passed as build options too, so they have one
 source.  Built programs are cached per (context, path, options, hash of the sources) in the
@@ -16,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
-import importlib.resources
 import os
 import platform
 import tempfile
@@ -32,24 +31,37 @@ _builds = 0
 _exit = contextlib.ExitStack()
 
 
+#: the clcsg package's folder
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
 @functools.lru_cache(maxsize=None)
 def package_dir(sub: str) -> str:
-    """A real directory for package folder ``sub`` (extracted if the package is zipped)."""
+    """A real directory for package folder ``sub``: in the package's folder (as pip installs
+    it), else extracted through importlib.resources (a zipped package)."""
+    d = os.path.join(_ROOT, *sub.split("/"))
+    if os.path.isdir(d):
+        return d
+    import importlib.resources
+
     res = importlib.resources.files("clcsg").joinpath(*sub.split("/"))
     return str(_exit.enter_context(importlib.resources.as_file(res)))
 
 
 def source(path: str) -> str:
-    return importlib.resources.files("clcsg").joinpath(*path.split("/")).read_text(encoding="utf-8")
+    folder, name = path.rpartition("/")[::2]
+    with open(os.path.join(package_dir(folder) if folder else _ROOT, name), encoding="utf-8") as f:
+        return f.read()
 
 
 def _headers_hash(folders) -> str:
     h = hashlib.sha256()
     for folder in folders:
-        d = importlib.resources.files("clcsg").joinpath(*folder.split("/"))
-        for f in sorted(d.iterdir(), key=lambda p: p.name):
-            if f.name.endswith(".h"):
-                h.update(f.read_bytes())
+        d = package_dir(folder)
+        for name in sorted(os.listdir(d)):
+            if name.endswith(".h"):
+                with open(os.path.join(d, name), "rb") as f:
+                    h.update(f.read())
     return h.hexdigest()
 
 

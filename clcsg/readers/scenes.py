@@ -13,10 +13,6 @@ import numpy as np
 from ..errors import SceneError
 from ..model.csg import Shape
 from ..model.scene import Scene
-from .openscad import load_csg
-from .scad import load_scad
-from .scene_stream import load_json
-from .scenefile import save_json
 
 
 def as_scene(obj, bound=None) -> Scene:
@@ -39,11 +35,18 @@ def load(path) -> Scene:
     if not os.path.exists(p):
         raise SceneError(f"{p}: no such file")
     ext = os.path.splitext(p)[1].lower()
+    # each reader imported when its format is read: a command pays only for its own
     if ext == ".json":
+        from .scene_stream import load_json
+
         return load_json(p)
     if ext == ".csg":
+        from .openscad import load_csg
+
         return load_csg(p)
     if ext == ".scad":
+        from .scad import load_scad
+
         return load_scad(p)
     raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json, .csg or .scad)")
 
@@ -53,4 +56,6 @@ def save(obj, path) -> None:
     p = os.fspath(path)
     if os.path.splitext(p)[1].lower() != ".json":
         raise SceneError(f"{p}: scenes are saved as .json")
+    from .scenefile import save_json
+
     save_json(as_scene(obj), p)
