@@ -330,6 +330,22 @@ def test_sample_writes_ply_and_stats(tmp_path):
     assert len(read_samples(out)["positions"]) == st["samples"]
 
 
+def test_program_flushes_everything_before_its_fast_exit(tmp_path):
+    """``python -m clcsg`` ends with os._exit (no interpreter teardown): its piped output, JSON
+    events and files are complete, and the exit code is the command's."""
+    from clcsg.writers.ply import read_samples
+
+    scene, out, stats = tmp_path / "scene.json", tmp_path / "s.ply", tmp_path / "s.json"
+    clcsg.save(clcsg.box(2) - clcsg.sphere(1.2), scene)
+    r = run_module("sample", str(scene), "-r", "0.1", "-o", str(out), "--stats", str(stats), "--progress", "json")
+    assert r.returncode == 0, r.stderr
+    events = [json.loads(line) for line in r.stderr.splitlines()]
+    assert events[-1]["samples"] == json.loads(stats.read_text())["samples"] == len(read_samples(out)["positions"]) > 0
+    assert r.stdout.endswith("\n") and f"{events[-1]['samples']:,} samples" in r.stdout
+    r = run_module("sample", str(tmp_path / "missing.csg"), "-o", str(out))
+    assert r.returncode != 0 and r.stderr.startswith("clcsg: error: ") and r.stderr.endswith("\n")
+
+
 def test_sample_rejects_bad_radius(tmp_path, capsys):
     from clcsg.cli import main as _main
 
