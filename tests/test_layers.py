@@ -4,7 +4,8 @@ Each folder of ``clcsg/`` is one node, each module at the package root its own; 
 module level of one of our modules is an edge.  The edges must go down :data:`LAYERS` (a folder
 may import itself and anything in a lower layer, never a higher one or one beside it), so there
 is no cycle between folders.  Imports inside functions are only for deferring heavy optional
-dependencies; at most :data:`MAX_DEFERRED_OWN` of them import our own modules.
+dependencies and what a command does not use; at most :data:`MAX_DEFERRED_OWN` of them import
+our own modules.
 """
 
 from __future__ import annotations
@@ -35,9 +36,10 @@ LAYERS = (
     ("viewer", "batching"),
     ("cli",),
 )
-#: imports of our own modules inside functions (each one defers a cycle the model's
-#: conveniences would otherwise make: Scene.compile, Primitive's registry, a probe ray trace)
-MAX_DEFERRED_OWN = 5
+#: imports of our own modules inside functions: each one defers a cycle the model's
+#: conveniences would otherwise make (Scene.compile, Primitive's registry, a probe ray trace)
+#: or keeps the sampling commands from loading the renderers (the pipeline's camera and image)
+MAX_DEFERRED_OWN = 8
 
 
 def module_name(path: pathlib.Path) -> str:

@@ -17,17 +17,15 @@ import math
 
 import numpy as np
 
-from typing import TYPE_CHECKING
-
 from ..errors import SceneError
+from ..model.extrude import extrude
+from ..model.hull import hull, minkowski
+from ..model.profile import Profile, circle, difference2d, intersection2d, polygon, square, union2d
+from ..model.profile_ops import hull2d_of, minkowski2d, offset
+from ..model.polyhedron import polyhedron
+from ..model.revolve import revolve
 from .openscad_tokens import fmt, is_num
-
-if TYPE_CHECKING:
-    from ..model.profile import Profile
-
-# The constructions' geometry (clcsg.model's extrude, revolve, hull, polyhedron, profile and
-# mesh_files modules) is imported in the handler that uses it: most files have none of these
-# nodes, and a small job's process would pay for them at every start.
+from .mesh_files import load_mesh, resolve
 
 #: positional and named-only parameters of the nodes read here
 PARAMS_2D = {
@@ -64,8 +62,6 @@ class Constructions:
 
     # -- 3-D nodes with a 2-D child ---------------------------------------------------------
     def n_linear_extrude(self, node, ctx):
-        from ..model.extrude import extrude
-
         p = self.bind(node)
         h = p.get("height", p.get("v", 100.0))
         if isinstance(h, list):  # v = [x, y, z]: OpenSCAD extrudes along the vector
@@ -92,8 +88,6 @@ class Constructions:
             self._fail(node, e)
 
     def n_rotate_extrude(self, node, ctx):
-        from ..model.revolve import revolve
-
         p = self.bind(node)
         angle = p.get("angle", 360.0)
         if not is_num(angle):
@@ -108,8 +102,6 @@ class Constructions:
 
     # -- 3-D hull and Minkowski sum -----------------------------------------------------------
     def n_hull(self, node, ctx):
-        from ..model.hull import hull
-
         self.bind(node)
         kids = [k for k in (yield ctx) if k is not None]
         if not kids:
@@ -120,8 +112,6 @@ class Constructions:
             self._fail(node, e)
 
     def n_minkowski(self, node, ctx):
-        from ..model.hull import minkowski
-
         self.bind(node)
         kids = [k for k in (yield ctx) if k is not None]
         if not kids:
@@ -132,8 +122,6 @@ class Constructions:
             self._fail(node, e)
 
     def n_polyhedron(self, node, ctx):
-        from ..model.polyhedron import polyhedron
-
         self._no_children(node)
         p = self.bind(node)
         pts, faces = p.get("points"), p.get("faces", p.get("triangles"))
@@ -148,8 +136,6 @@ class Constructions:
             raise SceneError(str(e)) from None
 
     def n_import(self, node, ctx):
-        from .mesh_files import load_mesh, resolve
-
         self._no_children(node)
         p = self.bind(node)
         name = p.get("file")
@@ -178,8 +164,6 @@ class Constructions:
 
     @staticmethod
     def _union2d(ps):
-        from ..model.profile import union2d
-
         ps = [p for p in ps if p is not None]
         return union2d(*ps) if ps else None
 
@@ -205,8 +189,6 @@ class Constructions:
     p_union = p_render = p_color = p_group
 
     def p_difference(self, node):
-        from ..model.profile import difference2d
-
         self.bind(node)
         kids = [self.profile(c) for c in node.children if not (c.disabled or c.background)]
         if not kids or kids[0] is None:
@@ -214,8 +196,6 @@ class Constructions:
         return difference2d(kids[0], *[k for k in kids[1:] if k is not None])
 
     def p_intersection(self, node):
-        from ..model.profile import intersection2d
-
         self.bind(node)
         kids = [self.profile(c) for c in node.children if not (c.disabled or c.background)]
         if not kids or any(k is None for k in kids):
@@ -244,8 +224,6 @@ class Constructions:
         return child.transform(m2)
 
     def p_square(self, node):
-        from ..model.profile import square
-
         p = self.bind(node)
         s = p.get("size", 1.0)
         if is_num(s):
@@ -256,8 +234,6 @@ class Constructions:
         return square(tuple(s), center=p.get("center", False) is True)
 
     def p_circle(self, node):
-        from ..model.profile import circle
-
         p = self.bind(node)
         r = self._radius(node, p, "d", "r")
         r = 1.0 if r is None else r
@@ -267,8 +243,6 @@ class Constructions:
         return circle(r)
 
     def p_polygon(self, node):
-        from ..model.profile import polygon
-
         p = self.bind(node)
         pts = p.get("points")
         if not (isinstance(pts, list) and all(isinstance(q, list) and len(q) >= 2 and all(is_num(v) for v in q[:2]) for q in pts)):
@@ -279,8 +253,6 @@ class Constructions:
         return polygon([q[:2] for q in pts], None if paths is None else [[int(v) for v in q] for q in paths])
 
     def p_offset(self, node):
-        from ..model.profile_ops import offset
-
         p = self.bind(node)
         child = self.profile_of(node)
         if child is None:
@@ -291,8 +263,6 @@ class Constructions:
         return offset(child, delta=delta if is_num(delta) else 1.0, chamfer=p.get("chamfer", False) is True)
 
     def p_hull(self, node):
-        from ..model.profile_ops import hull2d_of
-
         self.bind(node)
         kids = [self.profile(c) for c in node.children if not (c.disabled or c.background)]
         kids = [k for k in kids if k is not None]
@@ -301,8 +271,6 @@ class Constructions:
         return hull2d_of(*kids)
 
     def p_minkowski(self, node):
-        from ..model.profile_ops import minkowski2d
-
         self.bind(node)
         kids = [k for k in (self.profile(c) for c in node.children if not (c.disabled or c.background)) if k is not None]
         return minkowski2d(*kids) if kids else None

@@ -6,6 +6,7 @@ that takes "a Shape, a Scene or a path" calls."""
 
 from __future__ import annotations
 
+import importlib
 import os
 
 import numpy as np
@@ -13,6 +14,12 @@ import numpy as np
 from ..errors import SceneError
 from ..model.csg import Shape
 from ..model.scene import Scene
+from .scenefile import save_json
+
+#: file name extension -> (module of this folder, its loader): a reader is imported when its
+#: format is read, so a command pays only for its own (the JSON reader's streaming parser, the
+#: OpenSCAD tokenizer)
+READERS = {".json": ("scene_stream", "load_json"), ".csg": ("openscad", "load_csg"), ".scad": ("scad", "load_scad")}
 
 
 def as_scene(obj, bound=None) -> Scene:
@@ -35,20 +42,11 @@ def load(path) -> Scene:
     if not os.path.exists(p):
         raise SceneError(f"{p}: no such file")
     ext = os.path.splitext(p)[1].lower()
-    # each reader imported when its format is read: a command pays only for its own
-    if ext == ".json":
-        from .scene_stream import load_json
-
-        return load_json(p)
-    if ext == ".csg":
-        from .openscad import load_csg
-
-        return load_csg(p)
-    if ext == ".scad":
-        from .scad import load_scad
-
-        return load_scad(p)
-    raise SceneError(f"{p}: unknown scene format {ext!r} (expected .json, .csg or .scad)")
+    if ext not in READERS:
+        *first, last = READERS
+        raise SceneError(f"{p}: unknown scene format {ext!r} (expected {', '.join(first)} or {last})")
+    module, name = READERS[ext]
+    return getattr(importlib.import_module(f"{__package__}.{module}"), name)(p)
 
 
 def save(obj, path) -> None:
@@ -56,6 +54,4 @@ def save(obj, path) -> None:
     p = os.fspath(path)
     if os.path.splitext(p)[1].lower() != ".json":
         raise SceneError(f"{p}: scenes are saved as .json")
-    from .scenefile import save_json
-
     save_json(as_scene(obj), p)
