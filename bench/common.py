@@ -392,6 +392,7 @@ def surface_error(tape, points, chunk=20000):
     """First-order distance to the nearest unique quadric of ``tape`` (a compiled scene, or
     anything with ``quadrics`` (U, 4, 4)): min_u |Q_u(x)| / |grad Q_u(x)|."""
     Qs = np.asarray(tape.quadrics)  # (U, 4, 4)
+    chunk = max(16, min(chunk, 2_000_000 // max(len(Qs), 1)))  # (chunk, U, 4) values: at most 64 MB
     out = np.empty(len(points))
     for s in range(0, len(points), chunk):
         x = points[s:s + chunk]
