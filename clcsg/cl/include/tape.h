@@ -143,11 +143,16 @@ typedef struct {
     real2 sx, sy;
 } prune_region;
 
-#define ST_F 0
+/* a state is two bits: bit 0 "can be TRUE", bit 1 "can be FALSE" (over the region), so AND
+ * and OR of states are bitwise: an AND can be TRUE where both operands can, FALSE where either
+ * can (st_and6); an OR the other way round (st_or6) */
 #define ST_T 1
-#define ST_LIVE 2
+#define ST_F 2
+#define ST_LIVE 3
 /* register state: bits 0-1 the tape state, 2-3 side -, 4-5 side + (each ST_*) */
 #define ST_PACK(t, m, p) ((uchar)((t) | ((m) << 2) | ((p) << 4)))
+#define ST_CAN_T 0x15 /* the "can be TRUE" bits of the three fields */
+#define ST_CAN_F 0x2A
 #define ST_TAPE(s) ((s) & 3)
 #define ST_MINUS(s) (((s) >> 2) & 3)
 #define ST_PLUS(s) (((s) >> 4) & 3)
@@ -155,8 +160,9 @@ typedef struct {
  * at every point of the region (no surface of self_q there), even where the value is live */
 #define ST_SELF 64
 
-inline int st_and(int x, int y) { return (x == ST_F || y == ST_F) ? ST_F : (x == ST_T && y == ST_T) ? ST_T : ST_LIVE; }
-inline int st_or(int x, int y) { return (x == ST_T || y == ST_T) ? ST_T : (x == ST_F && y == ST_F) ? ST_F : ST_LIVE; }
+/* the three fields of two packed states combined (bit 6 dropped) */
+inline uchar st_and6(uchar a, uchar b) { return ((a & b) & ST_CAN_T) | ((a | b) & ST_CAN_F); }
+inline uchar st_or6(uchar a, uchar b) { return ((a | b) & ST_CAN_T) | ((a & b) & ST_CAN_F); }
 
 /* What the leaf tests need of a region that does not depend on the leaf, computed once per
  * pruning pass (prune_forward) instead of once per leaf. */
@@ -289,19 +295,20 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
             uchar sa = st[o.a], sb = st[o.b];
             bool is_and = o.op == OP_AND;
             int absorb = is_and ? ST_F : ST_T, neutral = is_and ? ST_T : ST_F;
-            int mm = is_and ? st_and(ST_MINUS(sa), ST_MINUS(sb)) : st_or(ST_MINUS(sa), ST_MINUS(sb));
-            int pp = is_and ? st_and(ST_PLUS(sa), ST_PLUS(sb)) : st_or(ST_PLUS(sa), ST_PLUS(sb));
-            if (ST_TAPE(sa) == absorb || ST_TAPE(sb) == absorb) {
-                st[o.out] = ST_PACK(absorb, mm, pp);
-            } else if (ST_TAPE(sa) == neutral || ST_TAPE(sb) == neutral) {
-                int src = ST_TAPE(sa) == neutral ? o.b : o.a;
-                int ts = ST_TAPE(st[src]);
-                kept = ts == ST_LIVE && src != o.out;
+            /* all three fields at once; the tape field is then absorb, the other operand's
+             * (one operand neutral) or live, as the cases below need */
+            uchar r = is_and ? st_and6(sa, sb) : st_or6(sa, sb);
+            int ta = ST_TAPE(sa), tb = ST_TAPE(sb);
+            if (ta == absorb || tb == absorb) {
+                st[o.out] = r;
+            } else if (ta == neutral || tb == neutral) {
+                int src = ta == neutral ? o.b : o.a;
+                kept = ST_TAPE(st[src]) == ST_LIVE && src != o.out;
                 keep = (tape_op){OP_COPY, o.out, src, 0};
-                st[o.out] = ST_PACK(ts, mm, pp) | (st[src] & ST_SELF);
+                st[o.out] = r | (st[src] & ST_SELF);
             } else {
                 kept = true;
-                st[o.out] = ST_PACK(ST_LIVE, mm, pp) | ((sa | sb) & ST_SELF);
+                st[o.out] = r | ((sa | sb) & ST_SELF);
             }
         } else if (o.op == OP_COPY) {
             st[o.out] = st[o.a];
