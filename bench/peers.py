@@ -55,7 +55,7 @@ import clcsg
 from clcsg.cl.device import get_context
 
 from . import zoo
-from .common import Load, Translator, Unsupported, diagonal, environment, fmt, surface_error, time_sampling, write
+from .common import Load, Translator, Unsupported, clcsg_command, diagonal, environment_for_runs, environment, fmt, surface_error, time_sampling, write
 
 TARGET = 1e-4  # relative to the bound's diagonal
 SEGMENTS = [16, 32, 64, 128, 256]
@@ -157,8 +157,6 @@ def run_cli(scad, repeats, timeout=900.0) -> dict:
     """Best wall time of the ``clcsg sample part.scad -o part.ply`` process (r = 1% of the
     diagonal, the default): what a user waits for, the ``openscad`` export and the start
     included; a first run warms the caches a user's second run finds."""
-    from .startup import clcsg_command, environment_for_runs
-
     best, rec = None, {}
     with tempfile.TemporaryDirectory(prefix="clcsg-bench-") as d:
         argv = clcsg_command() + ["sample", os.path.abspath(scad), "-o", os.path.join(d, "part.ply"), "--quiet"]
