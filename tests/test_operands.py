@@ -344,3 +344,52 @@ def test_a_rotated_l_prism_subtracted_from_a_sphere(cl_context):
     ref = clcsg.box((2, 1, 1), center=(1, 0.5, 0.5)) | clcsg.box((1, 2, 1), center=(0.5, 1, 0.5))
     ball = clcsg.sphere(1.2, (0.8, 0.8, 0.6))
     check_against(ball - clcsg.polyhedron(v, f).rotate((1, 1, 0), 25), ball - ref.rotate((1, 1, 0), 25), cl_context)
+
+
+def faceted_sphere(levels=3):
+    """An octahedron subdivided ``levels`` times onto the unit sphere: 8 * 4^levels outward
+    triangles, each on its own plane."""
+    v = [np.array(p, float) for p in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))]
+    faces = [(0, 2, 4), (2, 1, 4), (1, 3, 4), (3, 0, 4), (2, 0, 5), (1, 2, 5), (3, 1, 5), (0, 3, 5)]
+    for _ in range(levels):
+        mid, out = {}, []
+
+        def m(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in mid:
+                p = v[a] + v[b]
+                v.append(p / np.linalg.norm(p))
+                mid[key] = len(v) - 1
+            return mid[key]
+
+        for a, b, c in faces:
+            ab, bc, ca = m(a, b), m(b, c), m(c, a)
+            out += [(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)]
+        faces = out
+    return np.array(v), np.array(faces)
+
+
+def test_a_mesh_face_plane_is_sampled_only_over_its_triangles(cl_context):
+    """A faceted sphere of 512 face planes minus a cylinder: each face plane's sampling tasks
+    start from the box of its own triangles (a FacePlane's face_box), not from the mesh's box,
+    and the samples still lie on the solid's surface and cover it."""
+    from clcsg.model.polyhedron import FacePlane
+    from clcsg.sampling.sampler import quadric_boxes
+
+    v, f = faceted_sphere(3)
+    shape = clcsg.polyhedron(v, f) - clcsg.cylinder(3, 0.3)
+    tape = clcsg.Scene(shape).compile()
+    boxes = quadric_boxes(tape)
+    owners = tape.owners()
+    checked = 0
+    for q, (lo, hi) in boxes.items():
+        nodes = [tape.instances[i].node for i in owners[q]]
+        if not all(isinstance(n, FacePlane) for n in nodes):
+            continue
+        flo = np.min([n.face_box[0] for n in nodes], axis=0)
+        fhi = np.max([n.face_box[1] for n in nodes], axis=0)
+        assert np.all(lo >= flo - 1e-6) and np.all(hi <= fhi + 1e-6), (q, lo, hi, flo, fhi)
+        assert np.max(hi - lo) < 0.5  # a face's box, far below the mesh's (2 x 2 x 2)
+        checked += 1
+    assert checked >= 400
+    check_against(shape, shape, cl_context)

@@ -24,7 +24,7 @@ from ..errors import LimitError, SceneError
 from .bsp import bsp_expression, triangle_planes
 from .construction import Construction, plane
 from .mesh_intersections import first_bad_shell, first_intersection
-from .csg import Complement, Intersection, Union
+from .csg import Complement, Intersection, Primitive, Union
 
 
 class MeshError(SceneError):
@@ -199,13 +199,38 @@ def _planes(tri, scale):
     return normals, offsets, inverse, float(dev)
 
 
-def _shape(expr, normals, offsets, color):
-    """The nested tuple expression of :func:`bsp_expression` as Shapes (without recursion)."""
+class FacePlane(Primitive):
+    """A mesh's face plane: the half-space of :func:`~clcsg.model.construction.plane`, and
+    ``face_box`` (lo, hi), the box of the mesh's triangles on that plane.  The mesh's solid is
+    bounded by the plane only on those triangles, so the bounds take the plane's face there
+    (:func:`~clcsg.compile.bounds.exact_boxes.kind_face_boxes`): the sampler's tasks on the
+    plane start from that box, not from the mesh's, and their tapes hold only the face planes
+    near it.  Saved, it is a plain half-space (the mesh is saved as its points and faces)."""
+
+    __slots__ = ("face_box",)
+
+    def __init__(self, normal, offset, face_box, color=None):
+        base = plane(normal, offset, color)
+        super().__init__(base.kind, base.params, base.color)
+        self.face_box = (np.asarray(face_box[0], dtype=np.float64), np.asarray(face_box[1], dtype=np.float64))
+
+
+def _face_boxes(tri, owner, k, pad):
+    """(lo, hi) (k, 3) of the triangles on each of the k face planes, padded by ``pad``."""
+    lo, hi = np.full((k, 3), np.inf), np.full((k, 3), -np.inf)
+    np.minimum.at(lo, owner, tri.min(axis=1))
+    np.maximum.at(hi, owner, tri.max(axis=1))
+    return lo - pad, hi + pad
+
+
+def _shape(expr, normals, offsets, color, faces):
+    """The nested tuple expression of :func:`bsp_expression` as Shapes (without recursion);
+    ``faces`` ((k, 3), (k, 3)): each face plane's triangles' box."""
     leaves = {}
 
     def leaf(p):
         if p not in leaves:
-            leaves[p] = plane(normals[p], offsets[p], color)
+            leaves[p] = FacePlane(normals[p], offsets[p], (faces[0][p], faces[1][p]), color)
         return leaves[p]
 
     out: dict = {}
@@ -243,7 +268,7 @@ def polyhedron(vertices, faces, color=None, source: str = "polyhedron", label: s
                          "than their number): simplify or decimate the mesh")
     eps = max(PLANE_EPS * scale, 2.0 * dev)
     expr = bsp_expression(tri, owner, normals, offsets, eps)
-    body = _shape(expr, normals, offsets, color)
+    body = _shape(expr, normals, offsets, color, _face_boxes(tri, owner, len(normals), 2.0 * eps))
     lo, hi = v.min(axis=0), v.max(axis=0)
     what = label or f"mesh of {len(t)} triangles"
     c = Construction("mesh", what, body, v, (lo, hi))

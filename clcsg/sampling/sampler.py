@@ -121,15 +121,34 @@ def frame_records(frames, real) -> np.ndarray:
     return rec
 
 
+def _face_box(inst, q):
+    """The box of instance ``inst``'s face on quadric ``q`` (its face boxes, which bound the
+    part of its boundary on each literal; else its box); None if empty.  A plane's face box is
+    flat: it is padded by a relative 1e-9, so that cutting it by the scene bound (computed
+    apart, and rounded) cannot empty it."""
+    if inst.box is None:
+        return None
+    if inst.face_boxes is not None:
+        rows = [f for (u, _), f in zip(inst.literals, inst.face_boxes) if u == q and np.all(f[1] >= f[0])]
+        if not rows:
+            return None
+        lo, hi = np.min([f[0] for f in rows], axis=0), np.max([f[1] for f in rows], axis=0)
+        pad = 1e-9 * (1.0 + float(np.abs(np.where(np.isfinite(lo), lo, 0.0)).max())
+                      + float(np.abs(np.where(np.isfinite(hi), hi, 0.0)).max()))
+        return lo - pad, hi + pad
+    return inst.box
+
+
 def quadric_boxes(tape) -> dict:
-    """World box per sampled quadric: the union of the boxes of the primitive instances that
-    have it as a literal, cut by the scene bound (None where that is empty)."""
+    """World box per sampled quadric: the union of the boxes of the faces on it of the
+    primitive instances that have it as a literal (:func:`_face_box`), cut by the scene bound
+    (None where that is empty)."""
     used = set(int(q) for q in tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
     owners = tape.owners()
     lo_b, hi_b = tape.bound
     out = {}
     for q in sorted(used):
-        boxes = [tape.instances[i].box for i in owners[q] if tape.instances[i].box is not None]
+        boxes = [b for b in (_face_box(tape.instances[i], q) for i in owners[q]) if b is not None]
         if not boxes:
             continue
         lo = np.maximum(np.min([b[0] for b in boxes], axis=0), lo_b)

@@ -496,8 +496,20 @@ def kind_face_boxes(nodes, matrices, lo, hi, done):
             caps = np.array([(top - r2 * half, top + r2 * half), (bottom - r1 * half, bottom + r1 * half)])
             out[k] = np.concatenate([box[None], _padded(caps)])
         elif n_lits == 1:
-            out[k] = box[None]
+            out[k] = _hinted(box, getattr(node, "face_box", None), m)[None]
     return out
+
+
+def _hinted(box, face_box, m):
+    """``box`` met with the world box of a primitive's own ``face_box`` (lo, hi) under the affine
+    map ``m`` (None: no hint): where a mesh's face plane bounds the mesh (a
+    :class:`~clcsg.model.polyhedron.FacePlane`)."""
+    if face_box is None:
+        return box
+    lo, hi = face_box
+    corners = np.array([[(lo, hi)[(c >> i) & 1][i] for i in range(3)] for c in range(8)])
+    w = corners @ m[:3, :3].T + m[:3, 3]
+    return np.array([np.maximum(box[0], w.min(axis=0)), np.minimum(box[1], w.max(axis=0))])
 
 
 def _padded(boxes):
