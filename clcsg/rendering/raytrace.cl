@@ -30,7 +30,8 @@
  * quadric, a solve per quadric whose box the ray meets, and per visited root a pass over the
  * slab tape or, past the first few, over the rows the rest of the stretch leaves.
  *
- * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
+ * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.  Each work-item
+ * traces RAY_LANES pixels of a row, one after the other, and shades them together.
  */
 #include "tiles.h"
 #include "pixel.h"
@@ -43,6 +44,9 @@
 #endif
 #define RAY_PRUNE_AFTER 2
 
+#if TILE % RAY_LANES != 0
+#error "a work-item's RAY_LANES pixels lie in one tile"
+#endif
 #ifndef LOCAL_QUADRICS
 #error "LOCAL_QUADRICS is set by the driver, clcsg/rendering/raytracer.py"
 #endif
@@ -247,17 +251,12 @@ inline real refine_depth(quadric q, real3 e, real3 v, real t)
     return t;
 }
 
-__kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
-                       __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
-                       PRIMITIVE_TABLE, __global const view_rec *view, PIXEL_OUTPUTS)
+/* The hit of view ray e + t v (c = v.forward) through a pixel of tile `tile`, walking the tile's
+ * slabs front to back: the quadric id (-1: none) and, if there is one, the refined depth. */
+inline int trace_ray(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
+                     __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z,
+                     __global const int4 *slabs, int tile, real3 e, real3 v, real c, real slack, real *depth)
 {
-    int i, j;
-    int pix = pixel_index(view, &i, &j);
-    if (pix < 0) return;
-    int tile = (i / TILE) * ((view->width + TILE - 1) / TILE) + j / TILE;
-    real3 e = view_eye(view), v = view_ray(view, i, j);
-    real c = dot(v, vload3(0, view->forward));
-    real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
     real3 inv = 1 / v;
     real2 seg = ray_box_inv(e, inv, blo - slack, bhi + slack);
     seg.x = fmax(seg.x, (real)0);
@@ -275,11 +274,40 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, v, inv, slack, ta, tb, &rr, &best);
         if (m >= 0) best_q = qlist[sl.z + m];
     }
-    pixel_out out = PIXEL_OUT;
-    if (best_q < 0) {
-        pixel_miss(out, view, pix);
-        return;
+    if (best_q >= 0) *depth = refine_depth(quadric_load(qs, best_q), e, v, best);
+    return best_q;
+}
+
+/* One work-item per RAY_LANES pixels of a row (all in one tile: TILE is a multiple of RAY_LANES):
+ * each lane's ray is traced on its own (trace_ray), then the hits are shaded as float8 vectors
+ * over the lanes (pixel_shade8, the resolve pass's lighting and encoding). */
+__kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
+                       __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
+                       PRIMITIVE_TABLE, __global const view_rec *view, PIXEL_OUTPUTS)
+{
+    int i = get_global_id(1), j0 = get_global_id(0) * RAY_LANES;
+    int W = view->width;
+    if (i >= view->height || j0 >= W) return;
+    int lanes = min(RAY_LANES, W - j0);
+    int tile = (i / TILE) * ((W + TILE - 1) / TILE) + j0 / TILE;
+    real3 e = view_eye(view), forward = vload3(0, view->forward);
+    real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
+    pixel_lanes px;
+    pixel_lanes_clear(&px);
+    int last_prim = -2;
+    float4 albedo = 0;
+    for (int l = 0; l < lanes; ++l) {
+        real3 v = view_ray(view, i, j0 + l);
+        real t;
+        int q = trace_ray(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, v, dot(v, forward), slack, &t);
+        if (q < 0) continue;
+        real3 p = e + t * v;
+        int prim = primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
+        if (prim != last_prim) { /* neighbours mostly show one primitive */
+            albedo = shade_albedo(view, pixel_color(prims, prim));
+            last_prim = prim;
+        }
+        pixel_lanes_set(&px, l, (float)t, q, prim, albedo, pixel_normal(qs, q, p), convert_float3(v));
     }
-    best = refine_depth(quadric_load(qs, best_q), e, v, best);
-    pixel_hit(out, view, pix, PRIMITIVE_TABLE_ARGS, qs, best_q, e + best * v, best, v);
+    pixel_lanes_store(PIXEL_OUT, view, i * W + j0, lanes, &px);
 }

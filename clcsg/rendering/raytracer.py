@@ -25,6 +25,7 @@ import numpy as np
 
 from ..compile.tape import Tape
 from ..readers.scenes import as_scene
+from ..cl.constants import RAY_LANES
 from ..cl.device import choose_real, context_of
 from ..cl.programs import build, event_seconds, kernel
 from ..cl.memory import device_buffer, upload
@@ -235,7 +236,7 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()
     arena, qlist, tile_z, slabs = bufs
-    ev = kernel(prg, "raytrace")(q, *pixel_range(W, H), scene.quadrics, arena, qlist, cull_buf, *bound, tile_z, slabs,
+    ev = kernel(prg, "raytrace")(q, *pixel_range(-(-W // RAY_LANES), H), scene.quadrics, arena, qlist, cull_buf, *bound, tile_z, slabs,
                                  *scene.colour_args(), view_buf, *outs)
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev])
