@@ -26,21 +26,52 @@ inline float4 pixel_color(__global const prim_rec *prims, int prim)
     return prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
 }
 
-/* The unit normal grad Q(p) / |grad Q(p)| of the shading, in float. */
-inline float3 pixel_normal(__global const quadric_rec *qs, int qid, real3 p)
+/* normalize() of eight vectors (X[l], Y[l], Z[l]) in place, as one real8 computation where
+ * |p|^2 is a normal number: p (1 / sqrt((x x + y y) + z z)), the products rounded on their
+ * own (not fused), which is bit for bit what PoCL's normalize() does there; the other lanes
+ * (zero, tiny or huge vectors, where normalize() rescales first) take normalize() itself. */
+inline void pixel_normalize8(real *X, real *Y, real *Z)
 {
-    return convert_float3(normalize(quadric_gradient(quadric_load(qs, qid), p)));
+#pragma OPENCL FP_CONTRACT OFF
+    real8 x = vload8(0, X), y = vload8(0, Y), z = vload8(0, Z);
+    real8 xx = x * x, yy = y * y, zz = z * z;
+    real8 l2 = (xx + yy) + zz;
+    real8 inv = 1 / sqrt(l2);
+    x *= inv;
+    y *= inv;
+    z *= inv;
+    if (any(!(l2 >= REAL_MIN && l2 <= REAL_MAX))) {
+        real s[8], nx[8], ny[8], nz[8];
+        vstore8(l2, 0, s);
+        vstore8(x, 0, nx);
+        vstore8(y, 0, ny);
+        vstore8(z, 0, nz);
+        for (int l = 0; l < 8; ++l)
+            if (!(s[l] >= REAL_MIN && s[l] <= REAL_MAX)) {
+                real3 n = normalize((real3)(X[l], Y[l], Z[l]));
+                nx[l] = n.x;
+                ny[l] = n.y;
+                nz[l] = n.z;
+            }
+        x = vload8(0, nx);
+        y = vload8(0, ny);
+        z = vload8(0, nz);
+    }
+    vstore8(x, 0, X);
+    vstore8(y, 0, Y);
+    vstore8(z, 0, Z);
 }
 
 /* The outputs of RAY_LANES consecutive pixels of a row, gathered lane by lane (pixel_lanes_set)
  * and shaded together (pixel_lanes_store): per lane the depth, quadric and primitive ids (a miss
- * keeps pixel_lanes_clear's +inf, -1, -1), the linear albedo (shade_albedo), the unit normal
- * and the unit view ray, in float. */
+ * keeps pixel_lanes_clear's +inf, -1, -1), the linear albedo (shade_albedo), the gradient of
+ * the hit quadric at the hit (normalized in pixel_lanes_store) and the unit view ray, in float. */
 #if RAY_LANES != 8
 #error "the pixel lanes are shaded as one float8"
 #endif
 typedef struct {
-    float depth[8], ax[8], ay[8], az[8], aw[8], nx[8], ny[8], nz[8], vx[8], vy[8], vz[8];
+    real gx[8], gy[8], gz[8];
+    float depth[8], ax[8], ay[8], az[8], aw[8], vx[8], vy[8], vz[8];
     int quadric[8], primitive[8];
 } pixel_lanes;
 
@@ -50,39 +81,46 @@ inline void pixel_lanes_clear(pixel_lanes *px)
         px->depth[l] = INFINITY;
         px->quadric[l] = px->primitive[l] = -1;
         px->ax[l] = px->ay[l] = px->az[l] = px->aw[l] = 0.0f;
-        px->nx[l] = px->ny[l] = 0.0f;
-        px->nz[l] = 1.0f; /* a lane without a hit keeps a harmless normal and ray */
+        px->gx[l] = px->gy[l] = 0;
+        px->gz[l] = 1; /* a lane without a hit keeps a harmless normal and ray */
         px->vx[l] = px->vy[l] = 0.0f;
         px->vz[l] = -1.0f;
     }
 }
 
-inline void pixel_lanes_set(pixel_lanes *px, int l, float depth, int qid, int prim, float4 albedo, float3 n,
+/* Lane l: a hit at depth on quadric qid (gradient g there) shown as primitive prim, whose
+ * albedo is given, on the unit view ray v. */
+inline void pixel_lanes_set(pixel_lanes *px, int l, float depth, int qid, int prim, float4 albedo, real3 g,
                             float3 v)
 {
     px->depth[l] = depth;
     px->quadric[l] = qid;
     px->primitive[l] = prim;
     px->ax[l] = albedo.x; px->ay[l] = albedo.y; px->az[l] = albedo.z; px->aw[l] = albedo.w;
-    px->nx[l] = n.x; px->ny[l] = n.y; px->nz[l] = n.z;
+    px->gx[l] = g.x; px->gy[l] = g.y; px->gz[l] = g.z;
     px->vx[l] = v.x; px->vy[l] = v.y; px->vz[l] = v.z;
 }
 
-/* The lanes shaded (shade_light8, shade_encode8; misses: shade_background) and written to
- * pixels pix ... pix + lanes - 1. */
-inline void pixel_lanes_store(pixel_out out, __global const view_rec *view, int pix, int lanes, const pixel_lanes *px)
+/* The lanes shaded (shade_light8 with the unit normals g / |g| in float, shade_encode8;
+ * misses: shade_background) and written to pixels pix ... pix + lanes - 1. */
+inline void pixel_lanes_store(pixel_out out, __global const view_rec *view, int pix, int lanes, pixel_lanes *px)
 {
-    float8 cx, cy, cz;
-    shade_light8(view, vload8(0, px->ax), vload8(0, px->ay), vload8(0, px->az), vload8(0, px->nx),
-                 vload8(0, px->ny), vload8(0, px->nz), vload8(0, px->vx), vload8(0, px->vy), vload8(0, px->vz), &cx,
-                 &cy, &cz);
     int8 qid = vload8(0, px->quadric);
     char8 hit = convert_char8(qid >= 0);
     uchar4 bg = shade_background(view);
-    uchar8 rx = select((uchar8)bg.x, shade_encode8(view, cx), hit);
-    uchar8 ry = select((uchar8)bg.y, shade_encode8(view, cy), hit);
-    uchar8 rz = select((uchar8)bg.z, shade_encode8(view, cz), hit);
-    uchar8 ra = select((uchar8)bg.w, convert_uchar8_sat(vload8(0, px->aw) * 255.0f + 0.5f), hit);
+    uchar8 rx = bg.x, ry = bg.y, rz = bg.z, ra = bg.w;
+    if (any(hit)) {
+        pixel_normalize8(px->gx, px->gy, px->gz);
+        float8 cx, cy, cz;
+        shade_light8(view, vload8(0, px->ax), vload8(0, px->ay), vload8(0, px->az),
+                     convert_float8(vload8(0, px->gx)), convert_float8(vload8(0, px->gy)),
+                     convert_float8(vload8(0, px->gz)), vload8(0, px->vx), vload8(0, px->vy), vload8(0, px->vz),
+                     &cx, &cy, &cz);
+        rx = select(rx, shade_encode8(view, cx), hit);
+        ry = select(ry, shade_encode8(view, cy), hit);
+        rz = select(rz, shade_encode8(view, cz), hit);
+        ra = select(ra, convert_uchar8_sat(vload8(0, px->aw) * 255.0f + 0.5f), hit);
+    }
     if (lanes == 8) {
         vstore8(vload8(0, px->depth), 0, out.depth + pix);
         vstore8(qid, 0, out.quadric + pix);

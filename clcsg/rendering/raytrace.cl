@@ -296,8 +296,14 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     pixel_lanes_clear(&px);
     int last_prim = -2;
     float4 albedo = 0;
+    real vx[8], vy[8], vz[8]; /* the lanes' view rays (view_ray) */
+    for (int l = 0; l < 8; ++l) {
+        real3 d = l < lanes ? view_dir(view, i, j0 + l) : (real3)(0, 0, 1);
+        vx[l] = d.x; vy[l] = d.y; vz[l] = d.z;
+    }
+    pixel_normalize8(vx, vy, vz);
     for (int l = 0; l < lanes; ++l) {
-        real3 v = view_ray(view, i, j0 + l);
+        real3 v = (real3)(vx[l], vy[l], vz[l]);
         real t;
         int q = trace_ray(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, v, dot(v, forward), slack, &t);
         if (q < 0) continue;
@@ -307,7 +313,8 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
             albedo = shade_albedo(view, pixel_color(prims, prim));
             last_prim = prim;
         }
-        pixel_lanes_set(&px, l, (float)t, q, prim, albedo, pixel_normal(qs, q, p), convert_float3(v));
+        pixel_lanes_set(&px, l, (float)t, q, prim, albedo, quadric_gradient(quadric_load(qs, q), p),
+                        convert_float3(v));
     }
     pixel_lanes_store(PIXEL_OUT, view, i * W + j0, lanes, &px);
 }

@@ -21,6 +21,7 @@ typedef long8 realmask8;
 #define convert_real4 convert_double4
 #define convert_realmask4 convert_long4
 #define REAL_MAX DBL_MAX
+#define REAL_MIN DBL_MIN
 #define REAL_EPS DBL_EPSILON
 #else
 typedef float real;
@@ -33,6 +34,7 @@ typedef int4 realmask4;
 #define convert_realmask4 convert_int4
 typedef int8 realmask8;
 #define REAL_MAX FLT_MAX
+#define REAL_MIN FLT_MIN
 #define REAL_EPS FLT_EPSILON
 #endif
 
