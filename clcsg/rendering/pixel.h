@@ -26,40 +26,30 @@ inline float4 pixel_color(__global const prim_rec *prims, int prim)
     return prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
 }
 
-/* normalize() of eight vectors (X[l], Y[l], Z[l]) in place, as one real8 computation where
- * |p|^2 is a normal number: p (1 / sqrt((x x + y y) + z z)), the products rounded on their
- * own (not fused), which is bit for bit what PoCL's normalize() does there; the other lanes
- * (zero, tiny or huge vectors, where normalize() rescales first) take normalize() itself. */
-inline void pixel_normalize8(real *X, real *Y, real *Z)
+/* normalize() of eight vectors (x, y, z) in place, as one real8 computation where |p|^2 is a
+ * normal number: p (1 / sqrt((x x + y y) + z z)), the products rounded on their own (not
+ * fused), which is bit for bit what PoCL's normalize() does there; the other lanes (zero, tiny
+ * or huge vectors, where normalize() rescales first) take normalize() itself. */
+inline void pixel_normalize8(real8 *x, real8 *y, real8 *z)
 {
 #pragma OPENCL FP_CONTRACT OFF
-    real8 x = vload8(0, X), y = vload8(0, Y), z = vload8(0, Z);
-    real8 xx = x * x, yy = y * y, zz = z * z;
+    real8 xx = *x * *x, yy = *y * *y, zz = *z * *z;
     real8 l2 = (xx + yy) + zz;
     real8 inv = 1 / sqrt(l2);
-    x *= inv;
-    y *= inv;
-    z *= inv;
+    real8 nx = *x * inv, ny = *y * inv, nz = *z * inv;
     if (any(!(l2 >= REAL_MIN && l2 <= REAL_MAX))) {
-        real s[8], nx[8], ny[8], nz[8];
+        real s[8], px[8], py[8], pz[8], ox[8], oy[8], oz[8];
         vstore8(l2, 0, s);
-        vstore8(x, 0, nx);
-        vstore8(y, 0, ny);
-        vstore8(z, 0, nz);
+        vstore8(*x, 0, px); vstore8(*y, 0, py); vstore8(*z, 0, pz);
+        vstore8(nx, 0, ox); vstore8(ny, 0, oy); vstore8(nz, 0, oz);
         for (int l = 0; l < 8; ++l)
             if (!(s[l] >= REAL_MIN && s[l] <= REAL_MAX)) {
-                real3 n = normalize((real3)(X[l], Y[l], Z[l]));
-                nx[l] = n.x;
-                ny[l] = n.y;
-                nz[l] = n.z;
+                real3 n = normalize((real3)(px[l], py[l], pz[l]));
+                ox[l] = n.x; oy[l] = n.y; oz[l] = n.z;
             }
-        x = vload8(0, nx);
-        y = vload8(0, ny);
-        z = vload8(0, nz);
+        nx = vload8(0, ox); ny = vload8(0, oy); nz = vload8(0, oz);
     }
-    vstore8(x, 0, X);
-    vstore8(y, 0, Y);
-    vstore8(z, 0, Z);
+    *x = nx; *y = ny; *z = nz;
 }
 
 /* The outputs of RAY_LANES consecutive pixels of a row, gathered lane by lane (pixel_lanes_set)
@@ -110,12 +100,12 @@ inline void pixel_lanes_store(pixel_out out, __global const view_rec *view, int 
     uchar4 bg = shade_background(view);
     uchar8 rx = bg.x, ry = bg.y, rz = bg.z, ra = bg.w;
     if (any(hit)) {
-        pixel_normalize8(px->gx, px->gy, px->gz);
+        real8 gx = vload8(0, px->gx), gy = vload8(0, px->gy), gz = vload8(0, px->gz);
+        pixel_normalize8(&gx, &gy, &gz);
         float8 cx, cy, cz;
-        shade_light8(view, vload8(0, px->ax), vload8(0, px->ay), vload8(0, px->az),
-                     convert_float8(vload8(0, px->gx)), convert_float8(vload8(0, px->gy)),
-                     convert_float8(vload8(0, px->gz)), vload8(0, px->vx), vload8(0, px->vy), vload8(0, px->vz),
-                     &cx, &cy, &cz);
+        shade_light8(view, vload8(0, px->ax), vload8(0, px->ay), vload8(0, px->az), convert_float8(gx),
+                     convert_float8(gy), convert_float8(gz), vload8(0, px->vx), vload8(0, px->vy),
+                     vload8(0, px->vz), &cx, &cy, &cz);
         rx = select(rx, shade_encode8(view, cx), hit);
         ry = select(ry, shade_encode8(view, cy), hit);
         rz = select(rz, shade_encode8(view, cz), hit);

@@ -296,12 +296,18 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     pixel_lanes_clear(&px);
     int last_prim = -2;
     float4 albedo = 0;
-    real vx[8], vy[8], vz[8]; /* the lanes' view rays (view_ray) */
-    for (int l = 0; l < 8; ++l) {
-        real3 d = l < lanes ? view_dir(view, i, j0 + l) : (real3)(0, 0, 1);
-        vx[l] = d.x; vy[l] = d.y; vz[l] = d.z;
-    }
-    pixel_normalize8(vx, vy, vz);
+    /* the lanes' view rays: view_ray's arithmetic on real8 (lanes past the row's end: +z) */
+    real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+    real8 dx = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
+    real8 dy = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
+    real8 dz = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
+    realmask8 shown = convert_realmask8((int8)(0, 1, 2, 3, 4, 5, 6, 7) < (int8)(lanes));
+    dx = select((real8)0, dx, shown);
+    dy = select((real8)0, dy, shown);
+    dz = select((real8)1, dz, shown);
+    pixel_normalize8(&dx, &dy, &dz);
+    real vx[8], vy[8], vz[8];
+    vstore8(dx, 0, vx); vstore8(dy, 0, vy); vstore8(dz, 0, vz);
     for (int l = 0; l < lanes; ++l) {
         real3 v = (real3)(vx[l], vy[l], vz[l]);
         real t;
