@@ -60,6 +60,14 @@ typedef struct {
     short solved[LOCAL_QUADRICS];
 } ray_roots;
 
+/* A slab's quadrics (up to LANE_QUADRICS) classified on all eight lanes' rays at once
+ * (ray_classify8), for slab_hit to take instead of solving them lane by lane. */
+#define LANE_QUADRICS 16
+typedef struct {
+    real r1[LANE_QUADRICS][8], r2[LANE_QUADRICS][8];
+    uchar kind[LANE_QUADRICS][8];
+} lane_roots;
+
 inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
 {
     real a = dot(v, quadric_Ap(q, v));
@@ -72,6 +80,43 @@ inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
     }
     if (a == 0) return h != 0 ? (h < 0 ? 5 : 1) : 3;
     return a < 0 ? 6 : 2;
+}
+
+/* ray_classify of one quadric on the eight rays e + t (vx, vy, vz) of a work-item's lanes:
+ * per lane the arithmetic of quadric_Ap, dot and quadric_intersect, expression for expression
+ * (dot's products summed in order, unfused), with selects for their branches, so each lane
+ * gets ray_classify's bits.  Q(e) and A e - b are the same for all lanes. */
+inline real8 ray_dot8(real8 ax, real8 ay, real8 az, real8 bx, real8 by, real8 bz)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    real8 x = ax * bx, y = ay * by, z = az * bz;
+    return (x + y) + z;
+}
+
+inline int8 ray_classify8(quadric q, real3 e, real8 vx, real8 vy, real8 vz, real8 *r1, real8 *r2)
+{
+    real3 w = quadric_Ap(q, e) + quadric_minus_b(q);
+    real c = quadric_value(q, e);
+    real8 ax = q.xx * vx + q.xy * vy + q.xz * vz, ay = q.xy * vx + q.yy * vy + q.yz * vz,
+          az = q.xz * vx + q.yz * vy + q.zz * vz;
+    real8 a = ray_dot8(vx, vy, vz, ax, ay, az);
+    real8 h = ray_dot8(vx, vy, vz, (real8)w.x, (real8)w.y, (real8)w.z);
+    real8 disc = h * h - a * c;
+    real8 sq = sqrt(disc);
+    real8 qq = -(h + select(-sq, sq, h >= 0));
+    real8 t1 = select((real8)INFINITY, qq / a, a != 0);
+    real8 t2 = select((real8)INFINITY, c / qq, qq != 0);
+    realmask8 go = !(disc < 0);
+    realmask8 ok1 = go & isfinite(t1), ok2 = go & isfinite(t2), both = ok1 & ok2, none = !(ok1 | ok2);
+    real8 lo = select(select(t2, t1, ok1), fmin(t1, t2), both);
+    real8 hi = select(lo, fmax(t1, t2), both);
+    *r1 = select(lo, (real8)INFINITY, none);
+    *r2 = select(hi, (real8)INFINITY, none);
+    int8 ia = convert_int8(a != 0), na = convert_int8(a < 0), ih = convert_int8(h != 0), nh = convert_int8(h < 0);
+    int8 k0 = c != 0 ? (int8)(c < 0 ? 4 : 0) : select((int8)3, select((int8)0, (int8)4, na), ia);
+    int8 k1 = select((int8)3, select((int8)1, (int8)5, nh), ih);
+    int8 k2 = select((int8)2, (int8)6, na);
+    return select(select(k1, k2, ia), k0, convert_int8(none));
 }
 
 /* sign of Q_m(e + t v) from the classification */
@@ -185,7 +230,7 @@ inline real2 ray_box_inv(real3 e, real3 inv, real3 lo, real3 hi)
  * returns the listed index of its quadric (-1: none) and writes its depth. */
 inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, int n, __global const int *ql,
                     int nq, __global const real *cull, real3 e, real3 v, real3 inv, real slack, real ta, real tb,
-                    ray_roots *rr, real *depth)
+                    const lane_roots *lr, int lane, ray_roots *rr, real *depth)
 {
     int ns = 0; /* the solved quadrics, listed first in rr->solved */
     for (int m = 0; m < nq; ++m) {
@@ -199,7 +244,12 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
                 continue;
             }
         }
-        rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
+        if (lr) {
+            rr->r1[m] = lr->r1[m][lane];
+            rr->r2[m] = lr->r2[m][lane];
+            rr->kind[m] = lr->kind[m][lane];
+        } else
+            rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
         if (rr->r1[m] <= tb) rr->solved[ns++] = m;
     }
     if (ns == 0) return -1;
@@ -251,31 +301,69 @@ inline real refine_depth(quadric q, real3 e, real3 v, real t)
     return t;
 }
 
-/* The hit of view ray e + t v (c = v.forward) through a pixel of tile `tile`, walking the tile's
- * slabs front to back: the quadric id (-1: none) and, if there is one, the refined depth. */
-inline int trace_ray(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
-                     __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z,
-                     __global const int4 *slabs, int tile, real3 e, real3 v, real c, real slack, real *depth)
+/* The hits of a work-item's lanes (rays e + t v, v = (vx, vy, vz)[l], lanes l < n) through
+ * tile `tile`: per lane the tile's slabs are walked front to back until one holds a hit (a lane
+ * walks them as if alone; the lanes only share the slabs' classifications, ray_classify8).
+ * Writes each lane's quadric id (-1: none) and refined depth. */
+inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
+                        __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z,
+                        __global const int4 *slabs, int tile, real3 e, real3 forward, real slack, int n, real8 vx8,
+                        real8 vy8, real8 vz8, int *qid, real *depth)
 {
-    real3 inv = 1 / v;
-    real2 seg = ray_box_inv(e, inv, blo - slack, bhi + slack);
-    seg.x = fmax(seg.x, (real)0);
+    real vx[8], vy[8], vz[8], c[8], sx[8], sy[8], best[8];
+    real3 inv[8];
+    vstore8(vx8, 0, vx); vstore8(vy8, 0, vy); vstore8(vz8, 0, vz);
+    int walking = 0; /* lanes whose ray is in the bound and has no hit yet */
+    for (int l = 0; l < n; ++l) {
+        real3 v = (real3)(vx[l], vy[l], vz[l]);
+        c[l] = dot(v, forward);
+        inv[l] = 1 / v;
+        real2 seg = ray_box_inv(e, inv[l], blo - slack, bhi + slack);
+        sx[l] = fmax(seg.x, (real)0);
+        sy[l] = seg.y;
+        qid[l] = -1;
+        best[l] = INFINITY;
+        if (sx[l] <= sy[l]) walking |= 1 << l;
+    }
     ray_roots rr;
-    real best = INFINITY;
-    int best_q = -1;
-    for (int s = 0; s < SLABS && best_q < 0 && seg.x <= seg.y; ++s) {
+    lane_roots lr;
+    for (int s = 0; s < SLABS && walking; ++s) {
         int4 sl = slabs[tile * SLABS + s];
         if (sl.y == 0) continue;
         real2 zs = slab_range(tile_z[tile], s);
-        real ta = fmax(seg.x, zs.x / c), tb = fmin(seg.y, zs.y / c);
-        if (s == 0) ta = seg.x; /* the end slabs reach the eye or the bound's entry and exit */
-        if (s == SLABS - 1) tb = seg.y;
-        if (ta > tb) continue;
-        int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, v, inv, slack, ta, tb, &rr, &best);
-        if (m >= 0) best_q = qlist[sl.z + m];
+        real ta[8], tb[8];
+        int in = 0; /* the walking lanes whose stretch meets the slab */
+        for (int l = 0; l < n; ++l) {
+            if (!(walking >> l & 1)) continue;
+            ta[l] = fmax(sx[l], zs.x / c[l]);
+            tb[l] = fmin(sy[l], zs.y / c[l]);
+            if (s == 0) ta[l] = sx[l]; /* the end slabs reach the eye or the bound's entry and exit */
+            if (s == SLABS - 1) tb[l] = sy[l];
+            if (ta[l] <= tb[l]) in |= 1 << l;
+        }
+        if (!in) continue;
+        bool shared = sl.w <= LANE_QUADRICS && popcount(in) > 1;
+        if (shared)
+            for (int m = 0; m < sl.w; ++m) {
+                real8 r1, r2;
+                int8 k = ray_classify8(quadric_load(qs, qlist[sl.z + m]), e, vx8, vy8, vz8, &r1, &r2);
+                vstore8(r1, 0, lr.r1[m]);
+                vstore8(r2, 0, lr.r2[m]);
+                vstore8(convert_uchar8(k), 0, lr.kind[m]);
+            }
+        for (int l = 0; l < n; ++l) {
+            if (!(in >> l & 1)) continue;
+            real3 v = (real3)(vx[l], vy[l], vz[l]);
+            int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, v, inv[l], slack, ta[l], tb[l],
+                             shared ? &lr : 0, l, &rr, &best[l]);
+            if (m >= 0) {
+                qid[l] = qlist[sl.z + m];
+                walking &= ~(1 << l);
+            }
+        }
     }
-    if (best_q >= 0) *depth = refine_depth(quadric_load(qs, best_q), e, v, best);
-    return best_q;
+    for (int l = 0; l < n; ++l)
+        if (qid[l] >= 0) depth[l] = refine_depth(quadric_load(qs, qid[l]), e, (real3)(vx[l], vy[l], vz[l]), best[l]);
 }
 
 /* One work-item per RAY_LANES pixels of a row (all in one tile: TILE is a multiple of RAY_LANES):
@@ -306,13 +394,16 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     dy = select((real8)0, dy, shown);
     dz = select((real8)1, dz, shown);
     pixel_normalize8(&dx, &dy, &dz);
+    int qid[8];
+    real depth[8];
+    trace_lanes(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, forward, slack, lanes, dx, dy, dz, qid, depth);
     real vx[8], vy[8], vz[8];
     vstore8(dx, 0, vx); vstore8(dy, 0, vy); vstore8(dz, 0, vz);
     for (int l = 0; l < lanes; ++l) {
-        real3 v = (real3)(vx[l], vy[l], vz[l]);
-        real t;
-        int q = trace_ray(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, v, dot(v, forward), slack, &t);
+        int q = qid[l];
         if (q < 0) continue;
+        real3 v = (real3)(vx[l], vy[l], vz[l]);
+        real t = depth[l];
         real3 p = e + t * v;
         int prim = primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
         if (prim != last_prim) { /* neighbours mostly show one primitive */
