@@ -226,6 +226,24 @@ inline real2 ray_box_inv(real3 e, real3 inv, real3 lo, real3 hi)
 }
 
 
+/* ray_box_inv on the eight lanes' rays (inverse directions ix, iy, iz): [t0, t1] per lane. */
+inline void ray_box8(real3 e, real8 ix, real8 iy, real8 iz, real3 lo, real3 hi, real8 *t0, real8 *t1)
+{
+    real3 a = lo - e, b = hi - e;
+    real8 ax = a.x * ix, ay = a.y * iy, az = a.z * iz, bx = b.x * ix, by = b.y * iy, bz = b.z * iz;
+    *t0 = fmax(fmax(fmin(ax, bx), fmin(ay, by)), fmin(az, bz));
+    *t1 = fmin(fmin(fmax(ax, bx), fmax(ay, by)), fmax(az, bz));
+}
+
+/* The lanes where mask m (a real8 comparison) holds, as bits. */
+inline int lane_bits(realmask8 m)
+{
+    int8 b = convert_int8(m) & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 h = b.lo | b.hi;
+    int2 q = h.lo | h.hi;
+    return q.x | q.y;
+}
+
 /* The first root in [ta, tb] on the CSG surface of slab tape t (quadrics ql, nq of them):
  * returns the listed index of its quadric (-1: none) and writes its depth. */
 inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, int n, __global const int *ql,
@@ -234,22 +252,25 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
 {
     int ns = 0; /* the solved quadrics, listed first in rr->solved */
     for (int m = 0; m < nq; ++m) {
-        int q = ql[m];
-        real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
-        if (lo.w != 0) {
-            real2 tt = ray_box_inv(e, inv, lo.xyz - slack, hi.xyz + slack);
-            if (!(fmax(tt.x, ta) <= fmin(tt.y, tb))) {
-                rr->r1[m] = rr->r2[m] = INFINITY;
-                rr->kind[m] = lo.w < 0 ? 4 : 0;
-                continue;
-            }
-        }
-        if (lr) {
+        if (lr) { /* classified and culled for all lanes at once (bit 3: culled) */
+            uchar k = lr->kind[m][lane];
             rr->r1[m] = lr->r1[m][lane];
             rr->r2[m] = lr->r2[m][lane];
-            rr->kind[m] = lr->kind[m][lane];
-        } else
+            rr->kind[m] = k & 7;
+            if (k & 8) continue;
+        } else {
+            int q = ql[m];
+            real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
+            if (lo.w != 0) {
+                real2 tt = ray_box_inv(e, inv, lo.xyz - slack, hi.xyz + slack);
+                if (!(fmax(tt.x, ta) <= fmin(tt.y, tb))) {
+                    rr->r1[m] = rr->r2[m] = INFINITY;
+                    rr->kind[m] = lo.w < 0 ? 4 : 0;
+                    continue;
+                }
+            }
             rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
+        }
         if (rr->r1[m] <= tb) rr->solved[ns++] = m;
     }
     if (ns == 0) return -1;
@@ -310,20 +331,20 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
                         __global const int4 *slabs, int tile, real3 e, real3 forward, real slack, int n, real8 vx8,
                         real8 vy8, real8 vz8, int *qid, real *depth)
 {
-    real vx[8], vy[8], vz[8], c[8], sx[8], sy[8], best[8];
-    real3 inv[8];
+    /* per lane as in a ray of its own: c = v.forward, inv = 1 / v, the stretch in the bound */
+    real8 c8 = ray_dot8(vx8, vy8, vz8, (real8)forward.x, (real8)forward.y, (real8)forward.z);
+    real8 ix8 = 1 / vx8, iy8 = 1 / vy8, iz8 = 1 / vz8;
+    real8 s0, s1;
+    ray_box8(e, ix8, iy8, iz8, blo - slack, bhi + slack, &s0, &s1);
+    s0 = fmax(s0, (real8)0);
+    /* lanes whose ray is in the bound and has no hit yet */
+    int walking = lane_bits(s0 <= s1) & ((1 << n) - 1);
+    real vx[8], vy[8], vz[8], ix[8], iy[8], iz[8], best[8];
     vstore8(vx8, 0, vx); vstore8(vy8, 0, vy); vstore8(vz8, 0, vz);
-    int walking = 0; /* lanes whose ray is in the bound and has no hit yet */
-    for (int l = 0; l < n; ++l) {
-        real3 v = (real3)(vx[l], vy[l], vz[l]);
-        c[l] = dot(v, forward);
-        inv[l] = 1 / v;
-        real2 seg = ray_box_inv(e, inv[l], blo - slack, bhi + slack);
-        sx[l] = fmax(seg.x, (real)0);
-        sy[l] = seg.y;
+    vstore8(ix8, 0, ix); vstore8(iy8, 0, iy); vstore8(iz8, 0, iz);
+    for (int l = 0; l < 8; ++l) {
         qid[l] = -1;
         best[l] = INFINITY;
-        if (sx[l] <= sy[l]) walking |= 1 << l;
     }
     ray_roots rr;
     lane_roots lr;
@@ -331,31 +352,38 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
         int4 sl = slabs[tile * SLABS + s];
         if (sl.y == 0) continue;
         real2 zs = slab_range(tile_z[tile], s);
-        real ta[8], tb[8];
-        int in = 0; /* the walking lanes whose stretch meets the slab */
-        for (int l = 0; l < n; ++l) {
-            if (!(walking >> l & 1)) continue;
-            ta[l] = fmax(sx[l], zs.x / c[l]);
-            tb[l] = fmin(sy[l], zs.y / c[l]);
-            if (s == 0) ta[l] = sx[l]; /* the end slabs reach the eye or the bound's entry and exit */
-            if (s == SLABS - 1) tb[l] = sy[l];
-            if (ta[l] <= tb[l]) in |= 1 << l;
-        }
+        real8 ta8 = fmax(s0, zs.x / c8), tb8 = fmin(s1, zs.y / c8);
+        if (s == 0) ta8 = s0; /* the end slabs reach the eye or the bound's entry and exit */
+        if (s == SLABS - 1) tb8 = s1;
+        int in = walking & lane_bits(ta8 <= tb8); /* the walking lanes whose stretch meets the slab */
         if (!in) continue;
         bool shared = sl.w <= LANE_QUADRICS && popcount(in) > 1;
         if (shared)
             for (int m = 0; m < sl.w; ++m) {
-                real8 r1, r2;
-                int8 k = ray_classify8(quadric_load(qs, qlist[sl.z + m]), e, vx8, vy8, vz8, &r1, &r2);
-                vstore8(r1, 0, lr.r1[m]);
-                vstore8(r2, 0, lr.r2[m]);
-                vstore8(convert_uchar8(k), 0, lr.kind[m]);
+                int q = qlist[sl.z + m];
+                real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
+                realmask8 missed = 0;
+                if (lo.w != 0) {
+                    real8 b0, b1;
+                    ray_box8(e, ix8, iy8, iz8, lo.xyz - slack, hi.xyz + slack, &b0, &b1);
+                    missed = !(fmax(b0, ta8) <= fmin(b1, tb8));
+                }
+                real8 r1 = INFINITY, r2 = INFINITY;
+                int8 k = lo.w < 0 ? 4 : 0;
+                if ((lane_bits(missed) & in) != in)
+                    k = ray_classify8(quadric_load(qs, q), e, vx8, vy8, vz8, &r1, &r2);
+                int8 gone = convert_int8(missed);
+                vstore8(select(r1, (real8)INFINITY, missed), 0, lr.r1[m]);
+                vstore8(select(r2, (real8)INFINITY, missed), 0, lr.r2[m]);
+                vstore8(convert_uchar8(select(k, (int8)(lo.w < 0 ? 4 | 8 : 8), gone)), 0, lr.kind[m]);
             }
+        real ta[8], tb[8];
+        vstore8(ta8, 0, ta);
+        vstore8(tb8, 0, tb);
         for (int l = 0; l < n; ++l) {
             if (!(in >> l & 1)) continue;
-            real3 v = (real3)(vx[l], vy[l], vz[l]);
-            int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, v, inv[l], slack, ta[l], tb[l],
-                             shared ? &lr : 0, l, &rr, &best[l]);
+            int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, (real3)(vx[l], vy[l], vz[l]),
+                             (real3)(ix[l], iy[l], iz[l]), slack, ta[l], tb[l], shared ? &lr : 0, l, &rr, &best[l]);
             if (m >= 0) {
                 qid[l] = qlist[sl.z + m];
                 walking &= ~(1 << l);
