@@ -30,8 +30,17 @@
  * quadric, a solve per quadric whose box the ray meets, and per visited root a pass over the
  * slab tape or, past the first few, over the rows the rest of the stretch leaves.
  *
- * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.  Each work-item
- * traces RAY_LANES pixels of a row, one after the other, and shades them together.
+ * Lanes: a work-item traces RAY_LANES (8) neighbouring pixels of a row, which share a tile.
+ * Each lane walks the slabs as a ray of its own, but the per-ray arithmetic that does not branch
+ * runs on real8 vectors over the lanes with each lane's bits of the scalar code (the view rays,
+ * the stretch in the bound and in each slab, the culling-box tests, and ray_classify of each
+ * quadric of a slab of up to LANE_QUADRICS, shared by the lanes that walk it); the root walk
+ * and the membership tests stay per lane.  The hits are shaded together as float8
+ * (pixel_lanes_store).  So the image is the per-pixel kernel's, bit for bit, at a fraction of
+ * its cost: the double square roots and divisions of the set-up and of the solves, latency
+ * bound in a scalar work-item, fill vector units instead.
+ *
+ * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
  */
 #include "tiles.h"
 #include "pixel.h"
@@ -82,10 +91,8 @@ inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
     return a < 0 ? 6 : 2;
 }
 
-/* ray_classify of one quadric on the eight rays e + t (vx, vy, vz) of a work-item's lanes:
- * per lane the arithmetic of quadric_Ap, dot and quadric_intersect, expression for expression
- * (dot's products summed in order, unfused), with selects for their branches, so each lane
- * gets ray_classify's bits.  Q(e) and A e - b are the same for all lanes. */
+/* dot() of eight pairs of vectors as PoCL computes it: (ax bx + ay by) + az bz, each product
+ * rounded on its own (not fused). */
 inline real8 ray_dot8(real8 ax, real8 ay, real8 az, real8 bx, real8 by, real8 bz)
 {
 #pragma OPENCL FP_CONTRACT OFF
@@ -93,6 +100,10 @@ inline real8 ray_dot8(real8 ax, real8 ay, real8 az, real8 bx, real8 by, real8 bz
     return (x + y) + z;
 }
 
+/* ray_classify of one quadric on the eight rays e + t (vx, vy, vz) of a work-item's lanes:
+ * per lane the arithmetic of quadric_Ap, dot and quadric_intersect, expression for expression,
+ * with selects for their branches, so each lane gets ray_classify's bits
+ * (tests/test_ray_lanes.py).  Q(e) and A e - b are the same for all lanes. */
 inline int8 ray_classify8(quadric q, real3 e, real8 vx, real8 vy, real8 vz, real8 *r1, real8 *r2)
 {
     real3 w = quadric_Ap(q, e) + quadric_minus_b(q);
@@ -346,7 +357,7 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
         qid[l] = -1;
         best[l] = INFINITY;
     }
-    ray_roots rr;
+    ray_roots rr; /* filled by slab_hit anew per slab and lane */
     lane_roots lr;
     for (int s = 0; s < SLABS && walking; ++s) {
         int4 sl = slabs[tile * SLABS + s];
@@ -357,6 +368,8 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
         if (s == SLABS - 1) tb8 = s1;
         int in = walking & lane_bits(ta8 <= tb8); /* the walking lanes whose stretch meets the slab */
         if (!in) continue;
+        /* the slab's quadrics classified and culled on all lanes at once, or (a longer list or
+         * a single lane) by slab_hit per lane */
         bool shared = sl.w <= LANE_QUADRICS && popcount(in) > 1;
         if (shared)
             for (int m = 0; m < sl.w; ++m) {
@@ -395,8 +408,8 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
 }
 
 /* One work-item per RAY_LANES pixels of a row (all in one tile: TILE is a multiple of RAY_LANES):
- * each lane's ray is traced on its own (trace_ray), then the hits are shaded as float8 vectors
- * over the lanes (pixel_shade8, the resolve pass's lighting and encoding). */
+ * the lanes' rays are traced (trace_lanes), then their hits are shaded as float8 vectors
+ * (pixel_lanes_store: shade_light8 and shade_encode8, the resolve pass's lighting and encoding). */
 __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
                        __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
                        PRIMITIVE_TABLE, __global const view_rec *view, PIXEL_OUTPUTS)
@@ -412,7 +425,8 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     pixel_lanes_clear(&px);
     int last_prim = -2;
     float4 albedo = 0;
-    /* the lanes' view rays: view_ray's arithmetic on real8 (lanes past the row's end: +z) */
+    /* the lanes' view rays: view_ray's arithmetic (d00 + j dx + i dy, then normalize) on real8;
+     * lanes past the row's end get +z */
     real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
     real8 dx = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
     real8 dy = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];

@@ -42,14 +42,12 @@ typedef struct {
 
 inline real3 view_eye(__global const view_rec *vw) { return vload3(0, vw->eye); }
 
-/* Un-normalized direction d00 + j dx + i dy of the view ray of pixel (i, j). */
-inline real3 view_dir(__global const view_rec *vw, int i, int j)
-{
-    return vload3(0, vw->d00) + (real)j * vload3(0, vw->dx) + (real)i * vload3(0, vw->dy);
-}
-
 /* Unit direction of the view ray of pixel (i, j). */
-inline real3 view_ray(__global const view_rec *vw, int i, int j) { return normalize(view_dir(vw, i, j)); }
+inline real3 view_ray(__global const view_rec *vw, int i, int j)
+{
+    real3 d = vload3(0, vw->d00) + (real)j * vload3(0, vw->dx) + (real)i * vload3(0, vw->dy);
+    return normalize(d);
+}
 
 /* x^y for x >= 0 as exp2(y log2 x): several times faster than pow() on CPU devices, and
  * plenty for 8-bit output (x = 0 gives 0 for y > 0). */
