@@ -14,7 +14,10 @@ constants), and the roots in the slab are visited in depth order until one is on
 surface (the membership with the root's quadric substituted differs between its two sides, the
 other leaves taken from the classification).  Exact from any eye position, inside the solid
 included; the cost per ray is a box test per listed quadric, a solve per quadric whose box it
-meets, and one pass over the pruned rows per visited root, not roots x leaves.
+meets, and one pass over the pruned rows per visited root, not roots x leaves.  A work-item
+traces :data:`~clcsg.cl.constants.RAY_LANES` neighbouring pixels of a row: the arithmetic that
+does not branch (view rays, stretches, box tests, a slab's solves) runs on vectors over them with
+the bits of the per-ray code, and their hits are shaded together.
 """
 
 from __future__ import annotations
