@@ -38,8 +38,8 @@ INSTANCE_REGS = 32
 #: shading runs as one float8 vector
 RESOLVE_LANES = 8
 
-#: pixels of a row per work-item of the exact ray tracer (rendering/raytrace.cl): traced one
-#: by one, shaded as one float8 vector (pixel.h's pixel_lanes)
+#: pixels of a row per work-item of the exact ray tracer (rendering/raytrace.cl): their rays'
+#: branch-free arithmetic runs as real8 vectors, their shading as one float8 (pixel.h's pixel_lanes)
 RAY_LANES = 8
 
 #: the framebuffer word of a pixel no fragment reached (depth bits << 32 | index)

@@ -239,8 +239,8 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()
     arena, qlist, tile_z, slabs = bufs
-    ev = kernel(prg, "raytrace")(q, *pixel_range(-(-W // RAY_LANES), H), scene.quadrics, arena, qlist, cull_buf, *bound, tile_z, slabs,
-                                 *scene.colour_args(), view_buf, *outs)
+    ev = kernel(prg, "raytrace")(q, *pixel_range(-(-W // RAY_LANES), H), scene.quadrics, arena, qlist, cull_buf,
+                                 *bound, tile_z, slabs, *scene.colour_args(), view_buf, *outs)
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev])
     q.finish()
