@@ -68,6 +68,18 @@ def test_raytrace_matches_oracle(cl_context, name, normal_form):
         assert ref.mask.any()
 
 
+@pytest.mark.parametrize("name", ["box_minus_3_cylinders", "union_of_spheres"])
+def test_raytrace_matches_oracle_at_widths_off_the_lanes(cl_context, name):
+    """Widths that are no multiple of the RAY_LANES (8) pixels a work-item traces nor of the
+    tile: the last work-item of each row has fewer lanes."""
+    shape = SCENES[name]
+    tape = clcsg.Scene(shape).compile("tree")
+    for w, h in ((61, 43), (13, 9), (5, 4)):
+        cam = Camera.fit(tape, w, h)
+        ref = compare(raytrace(tape, cam, device=cl_context), shape, tape, cam)
+        assert ref.mask.any()
+
+
 def test_tree_and_dnf_images_are_identical(cl_context):
     shape = SCENES["box_minus_3_cylinders"] | SCENES["union_of_spheres"].translate((0, 0, 1.5))
     tree, dnf = (clcsg.Scene(shape).compile(nf) for nf in ("tree", "dnf"))

@@ -38,6 +38,10 @@ INSTANCE_REGS = 32
 #: shading runs as one float8 vector
 RESOLVE_LANES = 8
 
+#: pixels of a row per work-item of the exact ray tracer (rendering/raytrace.cl): their rays'
+#: branch-free arithmetic runs as real8 vectors, their shading as one float8 (pixel.h's pixel_lanes)
+RAY_LANES = 8
+
 #: the framebuffer word of a pixel no fragment reached (depth bits << 32 | index)
 EMPTY_KEY = 0xFFFFFFFFFFFFFFFF
 
@@ -55,5 +59,6 @@ def defines() -> dict:
     d["ROUNDING_ULPS"] = ROUNDING_ULPS
     d["INSTANCE_REGS"] = INSTANCE_REGS
     d["RESOLVE_LANES"] = RESOLVE_LANES
+    d["RAY_LANES"] = RAY_LANES
     d["EMPTY_KEY"] = f"0x{EMPTY_KEY:016x}UL"
     return d

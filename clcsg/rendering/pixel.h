@@ -20,60 +20,115 @@ typedef struct {
     __global float *depth_out, __global int *id_out, __global int *prim_out, __global uchar4 *rgba_out
 #define PIXEL_OUT ((pixel_out){depth_out, id_out, prim_out, rgba_out})
 
-/* Row-major index of pixel (i, j) = (get_global_id(1), get_global_id(0)); -1 outside the view. */
-inline int pixel_index(__global const view_rec *view, int *i, int *j)
-{
-    *j = get_global_id(0);
-    *i = get_global_id(1);
-    return (*i < view->height && *j < view->width) ? *i * view->width + *j : -1;
-}
-
-inline void pixel_miss(pixel_out out, __global const view_rec *view, int pix)
-{
-    out.depth[pix] = INFINITY;
-    out.quadric[pix] = -1;
-    out.primitive[pix] = -1;
-    out.rgba[pix] = shade_background(view);
-}
-
 /* The display colour of primitive prim (-1: grey). */
 inline float4 pixel_color(__global const prim_rec *prims, int prim)
 {
     return prim >= 0 ? vload4(0, prims[prim].color) : (float4)(0.8f, 0.8f, 0.8f, 1.0f);
 }
 
-/* The unit normal grad Q(p) / |grad Q(p)| of the shading, in float. */
-inline float3 pixel_normal(__global const quadric_rec *qs, int qid, real3 p)
+/* normalize() of eight vectors (x, y, z) in place, as one real8 computation where |p|^2 is a
+ * normal number: p (1 / sqrt((x x + y y) + z z)), the products rounded on their own (not
+ * fused), which is bit for bit what PoCL's normalize() does there; the other lanes (zero, tiny
+ * or huge vectors, where normalize() rescales first) take normalize() itself. */
+inline void pixel_normalize8(real8 *x, real8 *y, real8 *z)
 {
-    return convert_float3(normalize(quadric_gradient(quadric_load(qs, qid), p)));
+#pragma OPENCL FP_CONTRACT OFF
+    real8 xx = *x * *x, yy = *y * *y, zz = *z * *z;
+    real8 l2 = (xx + yy) + zz;
+    real8 inv = 1 / sqrt(l2);
+    real8 nx = *x * inv, ny = *y * inv, nz = *z * inv;
+    if (any(!(l2 >= REAL_MIN && l2 <= REAL_MAX))) {
+        real s[8], px[8], py[8], pz[8], ox[8], oy[8], oz[8];
+        vstore8(l2, 0, s);
+        vstore8(*x, 0, px); vstore8(*y, 0, py); vstore8(*z, 0, pz);
+        vstore8(nx, 0, ox); vstore8(ny, 0, oy); vstore8(nz, 0, oz);
+        for (int l = 0; l < 8; ++l)
+            if (!(s[l] >= REAL_MIN && s[l] <= REAL_MAX)) {
+                real3 n = normalize((real3)(px[l], py[l], pz[l]));
+                ox[l] = n.x; oy[l] = n.y; oz[l] = n.z;
+            }
+        nx = vload8(0, ox); ny = vload8(0, oy); nz = vload8(0, oz);
+    }
+    *x = nx; *y = ny; *z = nz;
 }
 
-inline void pixel_write(pixel_out out, int pix, int prim, int qid, real depth, uchar4 rgba)
+/* The outputs of RAY_LANES consecutive pixels of a row, gathered lane by lane (pixel_lanes_set)
+ * and shaded together (pixel_lanes_store): per lane the depth, quadric and primitive ids (a miss
+ * keeps pixel_lanes_clear's +inf, -1, -1), the linear albedo (shade_albedo), the gradient of
+ * the hit quadric at the hit (normalized in pixel_lanes_store) and the unit view ray, in float. */
+#if RAY_LANES != 8
+#error "the pixel lanes are shaded as one float8"
+#endif
+typedef struct {
+    real gx[8], gy[8], gz[8];
+    float depth[8], ax[8], ay[8], az[8], aw[8], vx[8], vy[8], vz[8];
+    int quadric[8], primitive[8];
+} pixel_lanes;
+
+inline void pixel_lanes_clear(pixel_lanes *px)
 {
-    out.depth[pix] = (float)depth;
-    out.quadric[pix] = qid;
-    out.primitive[pix] = prim;
-    out.rgba[pix] = rgba;
+    for (int l = 0; l < 8; ++l) {
+        px->depth[l] = INFINITY;
+        px->quadric[l] = px->primitive[l] = -1;
+        px->ax[l] = px->ay[l] = px->az[l] = px->aw[l] = 0.0f;
+        px->gx[l] = px->gy[l] = 0;
+        px->gz[l] = 1; /* a lane without a hit keeps a harmless normal and ray */
+        px->vx[l] = px->vy[l] = 0.0f;
+        px->vz[l] = -1.0f;
+    }
 }
 
-/* A hit at p on quadric qid shown as primitive prim, whose albedo (shade_albedo) is given. */
-inline void pixel_hit_lit(pixel_out out, __global const view_rec *view, int pix, float4 albedo, int prim,
-                          __global const quadric_rec *qs, int qid, real3 p, real depth, real3 v)
+/* Lane l: a hit at depth on quadric qid (gradient g there) shown as primitive prim, whose
+ * albedo is given, on the unit view ray v. */
+inline void pixel_lanes_set(pixel_lanes *px, int l, float depth, int qid, int prim, float4 albedo, real3 g,
+                            float3 v)
 {
-    pixel_write(out, pix, prim, qid, depth, shade_lit(view, albedo, pixel_normal(qs, qid, p), convert_float3(v)));
+    px->depth[l] = depth;
+    px->quadric[l] = qid;
+    px->primitive[l] = prim;
+    px->ax[l] = albedo.x; px->ay[l] = albedo.y; px->az[l] = albedo.z; px->aw[l] = albedo.w;
+    px->gx[l] = g.x; px->gy[l] = g.y; px->gz[l] = g.z;
+    px->vx[l] = v.x; px->vy[l] = v.y; px->vz[l] = v.z;
 }
 
-/* A hit at p on quadric qid shown as primitive prim. */
-inline void pixel_hit_as(pixel_out out, __global const view_rec *view, int pix, __global const prim_rec *prims,
-                         int prim, __global const quadric_rec *qs, int qid, real3 p, real depth, real3 v)
+/* The lanes shaded (shade_light8 with the unit normals g / |g| in float, shade_encode8;
+ * misses: shade_background) and written to pixels pix ... pix + lanes - 1. */
+inline void pixel_lanes_store(pixel_out out, __global const view_rec *view, int pix, int lanes, pixel_lanes *px)
 {
-    pixel_hit_lit(out, view, pix, shade_albedo(view, pixel_color(prims, prim)), prim, qs, qid, p, depth, v);
-}
-
-inline void pixel_hit(pixel_out out, __global const view_rec *view, int pix, PRIMITIVE_TABLE,
-                      __global const quadric_rec *qs, int qid, real3 p,
-                      real depth, real3 v)
-{
-    pixel_hit_as(out, view, pix, prims, primitive_at(PRIMITIVE_TABLE_ARGS, qs, qid, p), qs, qid, p, depth, v);
+    int8 qid = vload8(0, px->quadric);
+    char8 hit = convert_char8(qid >= 0);
+    uchar4 bg = shade_background(view);
+    uchar8 rx = bg.x, ry = bg.y, rz = bg.z, ra = bg.w;
+    if (any(hit)) {
+        real8 gx = vload8(0, px->gx), gy = vload8(0, px->gy), gz = vload8(0, px->gz);
+        pixel_normalize8(&gx, &gy, &gz);
+        float8 cx, cy, cz;
+        shade_light8(view, vload8(0, px->ax), vload8(0, px->ay), vload8(0, px->az), convert_float8(gx),
+                     convert_float8(gy), convert_float8(gz), vload8(0, px->vx), vload8(0, px->vy),
+                     vload8(0, px->vz), &cx, &cy, &cz);
+        rx = select(rx, shade_encode8(view, cx), hit);
+        ry = select(ry, shade_encode8(view, cy), hit);
+        rz = select(rz, shade_encode8(view, cz), hit);
+        ra = select(ra, convert_uchar8_sat(vload8(0, px->aw) * 255.0f + 0.5f), hit);
+    }
+    if (lanes == 8) {
+        vstore8(vload8(0, px->depth), 0, out.depth + pix);
+        vstore8(qid, 0, out.quadric + pix);
+        vstore8(vload8(0, px->primitive), 0, out.primitive + pix);
+        __global uchar *rgba = (__global uchar *)(out.rgba + pix);
+        vstore16((uchar16)(rx.s0, ry.s0, rz.s0, ra.s0, rx.s1, ry.s1, rz.s1, ra.s1,
+                           rx.s2, ry.s2, rz.s2, ra.s2, rx.s3, ry.s3, rz.s3, ra.s3), 0, rgba);
+        vstore16((uchar16)(rx.s4, ry.s4, rz.s4, ra.s4, rx.s5, ry.s5, rz.s5, ra.s5,
+                           rx.s6, ry.s6, rz.s6, ra.s6, rx.s7, ry.s7, rz.s7, ra.s7), 0, rgba + 16);
+        return;
+    }
+    uchar r[8], g[8], b[8], a[8];
+    vstore8(rx, 0, r); vstore8(ry, 0, g); vstore8(rz, 0, b); vstore8(ra, 0, a);
+    for (int l = 0; l < lanes; ++l) {
+        out.depth[pix + l] = px->depth[l];
+        out.quadric[pix + l] = px->quadric[l];
+        out.primitive[pix + l] = px->primitive[l];
+        out.rgba[pix + l] = (uchar4)(r[l], g[l], b[l], a[l]);
+    }
 }
 #endif

@@ -30,6 +30,16 @@
  * quadric, a solve per quadric whose box the ray meets, and per visited root a pass over the
  * slab tape or, past the first few, over the rows the rest of the stretch leaves.
  *
+ * Lanes: a work-item traces RAY_LANES (8) neighbouring pixels of a row, which share a tile.
+ * Each lane walks the slabs as a ray of its own, but the per-ray arithmetic that does not branch
+ * runs on real8 vectors over the lanes with each lane's bits of the scalar code (the view rays,
+ * the stretch in the bound and in each slab, the culling-box tests, and ray_classify of each
+ * quadric of a slab of up to LANE_QUADRICS, shared by the lanes that walk it); the root walk
+ * and the membership tests stay per lane.  The hits are shaded together as float8
+ * (pixel_lanes_store).  So the image is the per-pixel kernel's, bit for bit, at a fraction of
+ * its cost: the double square roots and divisions of the set-up and of the solves, latency
+ * bound in a scalar work-item, fill vector units instead.
+ *
  * LOCAL_QUADRICS (set by the driver) bounds the quadrics listed by any slab.
  */
 #include "tiles.h"
@@ -43,6 +53,9 @@
 #endif
 #define RAY_PRUNE_AFTER 2
 
+#if TILE % RAY_LANES != 0
+#error "a work-item's RAY_LANES pixels lie in one tile"
+#endif
 #ifndef LOCAL_QUADRICS
 #error "LOCAL_QUADRICS is set by the driver, clcsg/rendering/raytracer.py"
 #endif
@@ -56,6 +69,14 @@ typedef struct {
     short solved[LOCAL_QUADRICS];
 } ray_roots;
 
+/* A slab's quadrics (up to LANE_QUADRICS) classified on all eight lanes' rays at once
+ * (ray_classify8), for slab_hit to take instead of solving them lane by lane. */
+#define LANE_QUADRICS 16
+typedef struct {
+    real r1[LANE_QUADRICS][8], r2[LANE_QUADRICS][8];
+    uchar kind[LANE_QUADRICS][8];
+} lane_roots;
+
 inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
 {
     real a = dot(v, quadric_Ap(q, v));
@@ -68,6 +89,45 @@ inline uchar ray_classify(quadric q, real3 e, real3 v, real *r1, real *r2)
     }
     if (a == 0) return h != 0 ? (h < 0 ? 5 : 1) : 3;
     return a < 0 ? 6 : 2;
+}
+
+/* dot() of eight pairs of vectors as PoCL computes it: (ax bx + ay by) + az bz, each product
+ * rounded on its own (not fused). */
+inline real8 ray_dot8(real8 ax, real8 ay, real8 az, real8 bx, real8 by, real8 bz)
+{
+#pragma OPENCL FP_CONTRACT OFF
+    real8 x = ax * bx, y = ay * by, z = az * bz;
+    return (x + y) + z;
+}
+
+/* ray_classify of one quadric on the eight rays e + t (vx, vy, vz) of a work-item's lanes:
+ * per lane the arithmetic of quadric_Ap, dot and quadric_intersect, expression for expression,
+ * with selects for their branches, so each lane gets ray_classify's bits
+ * (tests/test_ray_lanes.py).  Q(e) and A e - b are the same for all lanes. */
+inline int8 ray_classify8(quadric q, real3 e, real8 vx, real8 vy, real8 vz, real8 *r1, real8 *r2)
+{
+    real3 w = quadric_Ap(q, e) + quadric_minus_b(q);
+    real c = quadric_value(q, e);
+    real8 ax = q.xx * vx + q.xy * vy + q.xz * vz, ay = q.xy * vx + q.yy * vy + q.yz * vz,
+          az = q.xz * vx + q.yz * vy + q.zz * vz;
+    real8 a = ray_dot8(vx, vy, vz, ax, ay, az);
+    real8 h = ray_dot8(vx, vy, vz, (real8)w.x, (real8)w.y, (real8)w.z);
+    real8 disc = h * h - a * c;
+    real8 sq = sqrt(disc);
+    real8 qq = -(h + select(-sq, sq, h >= 0));
+    real8 t1 = select((real8)INFINITY, qq / a, a != 0);
+    real8 t2 = select((real8)INFINITY, c / qq, qq != 0);
+    realmask8 go = !(disc < 0);
+    realmask8 ok1 = go & isfinite(t1), ok2 = go & isfinite(t2), both = ok1 & ok2, none = !(ok1 | ok2);
+    real8 lo = select(select(t2, t1, ok1), fmin(t1, t2), both);
+    real8 hi = select(lo, fmax(t1, t2), both);
+    *r1 = select(lo, (real8)INFINITY, none);
+    *r2 = select(hi, (real8)INFINITY, none);
+    int8 ia = convert_int8(a != 0), na = convert_int8(a < 0), ih = convert_int8(h != 0), nh = convert_int8(h < 0);
+    int8 k0 = c != 0 ? (int8)(c < 0 ? 4 : 0) : select((int8)3, select((int8)0, (int8)4, na), ia);
+    int8 k1 = select((int8)3, select((int8)1, (int8)5, nh), ih);
+    int8 k2 = select((int8)2, (int8)6, na);
+    return select(select(k1, k2, ia), k0, convert_int8(none));
 }
 
 /* sign of Q_m(e + t v) from the classification */
@@ -177,25 +237,51 @@ inline real2 ray_box_inv(real3 e, real3 inv, real3 lo, real3 hi)
 }
 
 
+/* ray_box_inv on the eight lanes' rays (inverse directions ix, iy, iz): [t0, t1] per lane. */
+inline void ray_box8(real3 e, real8 ix, real8 iy, real8 iz, real3 lo, real3 hi, real8 *t0, real8 *t1)
+{
+    real3 a = lo - e, b = hi - e;
+    real8 ax = a.x * ix, ay = a.y * iy, az = a.z * iz, bx = b.x * ix, by = b.y * iy, bz = b.z * iz;
+    *t0 = fmax(fmax(fmin(ax, bx), fmin(ay, by)), fmin(az, bz));
+    *t1 = fmin(fmin(fmax(ax, bx), fmax(ay, by)), fmax(az, bz));
+}
+
+/* The lanes where mask m (a real8 comparison) holds, as bits. */
+inline int lane_bits(realmask8 m)
+{
+    int8 b = convert_int8(m) & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 h = b.lo | b.hi;
+    int2 q = h.lo | h.hi;
+    return q.x | q.y;
+}
+
 /* The first root in [ta, tb] on the CSG surface of slab tape t (quadrics ql, nq of them):
  * returns the listed index of its quadric (-1: none) and writes its depth. */
 inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, int n, __global const int *ql,
                     int nq, __global const real *cull, real3 e, real3 v, real3 inv, real slack, real ta, real tb,
-                    ray_roots *rr, real *depth)
+                    const lane_roots *lr, int lane, ray_roots *rr, real *depth)
 {
     int ns = 0; /* the solved quadrics, listed first in rr->solved */
     for (int m = 0; m < nq; ++m) {
-        int q = ql[m];
-        real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
-        if (lo.w != 0) {
-            real2 tt = ray_box_inv(e, inv, lo.xyz - slack, hi.xyz + slack);
-            if (!(fmax(tt.x, ta) <= fmin(tt.y, tb))) {
-                rr->r1[m] = rr->r2[m] = INFINITY;
-                rr->kind[m] = lo.w < 0 ? 4 : 0;
-                continue;
+        if (lr) { /* classified and culled for all lanes at once (bit 3: culled) */
+            uchar k = lr->kind[m][lane];
+            rr->r1[m] = lr->r1[m][lane];
+            rr->r2[m] = lr->r2[m][lane];
+            rr->kind[m] = k & 7;
+            if (k & 8) continue;
+        } else {
+            int q = ql[m];
+            real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
+            if (lo.w != 0) {
+                real2 tt = ray_box_inv(e, inv, lo.xyz - slack, hi.xyz + slack);
+                if (!(fmax(tt.x, ta) <= fmin(tt.y, tb))) {
+                    rr->r1[m] = rr->r2[m] = INFINITY;
+                    rr->kind[m] = lo.w < 0 ? 4 : 0;
+                    continue;
+                }
             }
+            rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
         }
-        rr->kind[m] = ray_classify(quadric_load(qs, q), e, v, &rr->r1[m], &rr->r2[m]);
         if (rr->r1[m] <= tb) rr->solved[ns++] = m;
     }
     if (ns == 0) return -1;
@@ -247,39 +333,127 @@ inline real refine_depth(quadric q, real3 e, real3 v, real t)
     return t;
 }
 
+/* The hits of a work-item's lanes (rays e + t v, v = (vx, vy, vz)[l], lanes l < n) through
+ * tile `tile`: per lane the tile's slabs are walked front to back until one holds a hit (a lane
+ * walks them as if alone; the lanes only share the slabs' classifications, ray_classify8).
+ * Writes each lane's quadric id (-1: none) and refined depth. */
+inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
+                        __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z,
+                        __global const int4 *slabs, int tile, real3 e, real3 forward, real slack, int n, real8 vx8,
+                        real8 vy8, real8 vz8, int *qid, real *depth)
+{
+    /* per lane as in a ray of its own: c = v.forward, inv = 1 / v, the stretch in the bound */
+    real8 c8 = ray_dot8(vx8, vy8, vz8, (real8)forward.x, (real8)forward.y, (real8)forward.z);
+    real8 ix8 = 1 / vx8, iy8 = 1 / vy8, iz8 = 1 / vz8;
+    real8 s0, s1;
+    ray_box8(e, ix8, iy8, iz8, blo - slack, bhi + slack, &s0, &s1);
+    s0 = fmax(s0, (real8)0);
+    /* lanes whose ray is in the bound and has no hit yet */
+    int walking = lane_bits(s0 <= s1) & ((1 << n) - 1);
+    real vx[8], vy[8], vz[8], ix[8], iy[8], iz[8], best[8];
+    vstore8(vx8, 0, vx); vstore8(vy8, 0, vy); vstore8(vz8, 0, vz);
+    vstore8(ix8, 0, ix); vstore8(iy8, 0, iy); vstore8(iz8, 0, iz);
+    for (int l = 0; l < 8; ++l) {
+        qid[l] = -1;
+        best[l] = INFINITY;
+    }
+    ray_roots rr; /* filled by slab_hit anew per slab and lane */
+    lane_roots lr;
+    for (int s = 0; s < SLABS && walking; ++s) {
+        int4 sl = slabs[tile * SLABS + s];
+        if (sl.y == 0) continue;
+        real2 zs = slab_range(tile_z[tile], s);
+        real8 ta8 = fmax(s0, zs.x / c8), tb8 = fmin(s1, zs.y / c8);
+        if (s == 0) ta8 = s0; /* the end slabs reach the eye or the bound's entry and exit */
+        if (s == SLABS - 1) tb8 = s1;
+        int in = walking & lane_bits(ta8 <= tb8); /* the walking lanes whose stretch meets the slab */
+        if (!in) continue;
+        /* the slab's quadrics classified and culled on all lanes at once, or (a longer list or
+         * a single lane) by slab_hit per lane */
+        bool shared = sl.w <= LANE_QUADRICS && popcount(in) > 1;
+        if (shared)
+            for (int m = 0; m < sl.w; ++m) {
+                int q = qlist[sl.z + m];
+                real4 lo = vload4(0, cull + 8 * q), hi = vload4(1, cull + 8 * q);
+                realmask8 missed = 0;
+                if (lo.w != 0) {
+                    real8 b0, b1;
+                    ray_box8(e, ix8, iy8, iz8, lo.xyz - slack, hi.xyz + slack, &b0, &b1);
+                    missed = !(fmax(b0, ta8) <= fmin(b1, tb8));
+                }
+                real8 r1 = INFINITY, r2 = INFINITY;
+                int8 k = lo.w < 0 ? 4 : 0;
+                if ((lane_bits(missed) & in) != in)
+                    k = ray_classify8(quadric_load(qs, q), e, vx8, vy8, vz8, &r1, &r2);
+                int8 gone = convert_int8(missed);
+                vstore8(select(r1, (real8)INFINITY, missed), 0, lr.r1[m]);
+                vstore8(select(r2, (real8)INFINITY, missed), 0, lr.r2[m]);
+                vstore8(convert_uchar8(select(k, (int8)(lo.w < 0 ? 4 | 8 : 8), gone)), 0, lr.kind[m]);
+            }
+        real ta[8], tb[8];
+        vstore8(ta8, 0, ta);
+        vstore8(tb8, 0, tb);
+        for (int l = 0; l < n; ++l) {
+            if (!(in >> l & 1)) continue;
+            int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, (real3)(vx[l], vy[l], vz[l]),
+                             (real3)(ix[l], iy[l], iz[l]), slack, ta[l], tb[l], shared ? &lr : 0, l, &rr, &best[l]);
+            if (m >= 0) {
+                qid[l] = qlist[sl.z + m];
+                walking &= ~(1 << l);
+            }
+        }
+    }
+    for (int l = 0; l < n; ++l)
+        if (qid[l] >= 0) depth[l] = refine_depth(quadric_load(qs, qid[l]), e, (real3)(vx[l], vy[l], vz[l]), best[l]);
+}
+
+/* One work-item per RAY_LANES pixels of a row (all in one tile: TILE is a multiple of RAY_LANES):
+ * the lanes' rays are traced (trace_lanes), then their hits are shaded as float8 vectors
+ * (pixel_lanes_store: shade_light8 and shade_encode8, the resolve pass's lighting and encoding). */
 __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *arena, __global const int *qlist,
                        __global const real *cull, real3 blo, real3 bhi, __global const real2 *tile_z, __global const int4 *slabs,
                        PRIMITIVE_TABLE, __global const view_rec *view, PIXEL_OUTPUTS)
 {
-    int i, j;
-    int pix = pixel_index(view, &i, &j);
-    if (pix < 0) return;
-    int tile = (i / TILE) * ((view->width + TILE - 1) / TILE) + j / TILE;
-    real3 e = view_eye(view), v = view_ray(view, i, j);
-    real c = dot(v, vload3(0, view->forward));
+    int i = get_global_id(1), j0 = get_global_id(0) * RAY_LANES;
+    int W = view->width;
+    if (i >= view->height || j0 >= W) return;
+    int lanes = min(RAY_LANES, W - j0);
+    int tile = (i / TILE) * ((W + TILE - 1) / TILE) + j0 / TILE;
+    real3 e = view_eye(view), forward = vload3(0, view->forward);
     real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
-    real3 inv = 1 / v;
-    real2 seg = ray_box_inv(e, inv, blo - slack, bhi + slack);
-    seg.x = fmax(seg.x, (real)0);
-    ray_roots rr;
-    real best = INFINITY;
-    int best_q = -1;
-    for (int s = 0; s < SLABS && best_q < 0 && seg.x <= seg.y; ++s) {
-        int4 sl = slabs[tile * SLABS + s];
-        if (sl.y == 0) continue;
-        real2 zs = slab_range(tile_z[tile], s);
-        real ta = fmax(seg.x, zs.x / c), tb = fmin(seg.y, zs.y / c);
-        if (s == 0) ta = seg.x; /* the end slabs reach the eye or the bound's entry and exit */
-        if (s == SLABS - 1) tb = seg.y;
-        if (ta > tb) continue;
-        int m = slab_hit(qs, arena + sl.x, sl.y, qlist + sl.z, sl.w, cull, e, v, inv, slack, ta, tb, &rr, &best);
-        if (m >= 0) best_q = qlist[sl.z + m];
+    pixel_lanes px;
+    pixel_lanes_clear(&px);
+    int last_prim = -2;
+    float4 albedo = 0;
+    /* the lanes' view rays: view_ray's arithmetic (d00 + j dx + i dy, then normalize) on real8;
+     * lanes past the row's end get +z */
+    real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+    real8 dx = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
+    real8 dy = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
+    real8 dz = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
+    realmask8 shown = convert_realmask8((int8)(0, 1, 2, 3, 4, 5, 6, 7) < (int8)(lanes));
+    dx = select((real8)0, dx, shown);
+    dy = select((real8)0, dy, shown);
+    dz = select((real8)1, dz, shown);
+    pixel_normalize8(&dx, &dy, &dz);
+    int qid[8];
+    real depth[8];
+    trace_lanes(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, forward, slack, lanes, dx, dy, dz, qid, depth);
+    real vx[8], vy[8], vz[8];
+    vstore8(dx, 0, vx); vstore8(dy, 0, vy); vstore8(dz, 0, vz);
+    for (int l = 0; l < lanes; ++l) {
+        int q = qid[l];
+        if (q < 0) continue;
+        real3 v = (real3)(vx[l], vy[l], vz[l]);
+        real t = depth[l];
+        real3 p = e + t * v;
+        int prim = primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
+        if (prim != last_prim) { /* neighbours mostly show one primitive */
+            albedo = shade_albedo(view, pixel_color(prims, prim));
+            last_prim = prim;
+        }
+        pixel_lanes_set(&px, l, (float)t, q, prim, albedo, quadric_gradient(quadric_load(qs, q), p),
+                        convert_float3(v));
     }
-    pixel_out out = PIXEL_OUT;
-    if (best_q < 0) {
-        pixel_miss(out, view, pix);
-        return;
-    }
-    best = refine_depth(quadric_load(qs, best_q), e, v, best);
-    pixel_hit(out, view, pix, PRIMITIVE_TABLE_ARGS, qs, best_q, e + best * v, best, v);
+    pixel_lanes_store(PIXEL_OUT, view, i * W + j0, lanes, &px);
 }

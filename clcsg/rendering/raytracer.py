@@ -14,7 +14,10 @@ constants), and the roots in the slab are visited in depth order until one is on
 surface (the membership with the root's quadric substituted differs between its two sides, the
 other leaves taken from the classification).  Exact from any eye position, inside the solid
 included; the cost per ray is a box test per listed quadric, a solve per quadric whose box it
-meets, and one pass over the pruned rows per visited root, not roots x leaves.
+meets, and one pass over the pruned rows per visited root, not roots x leaves.  A work-item
+traces :data:`~clcsg.cl.constants.RAY_LANES` neighbouring pixels of a row: the arithmetic that
+does not branch (view rays, stretches, box tests, a slab's solves) runs on vectors over them with
+the bits of the per-ray code, and their hits are shaded together.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy as np
 
 from ..compile.tape import Tape
 from ..readers.scenes import as_scene
+from ..cl.constants import RAY_LANES
 from ..cl.device import choose_real, context_of
 from ..cl.programs import build, event_seconds, kernel
 from ..cl.memory import device_buffer, upload
@@ -235,8 +239,8 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     prg = build(context, "rendering/raytrace.cl", defines, real)
     t_built = time.perf_counter()
     arena, qlist, tile_z, slabs = bufs
-    ev = kernel(prg, "raytrace")(q, *pixel_range(W, H), scene.quadrics, arena, qlist, cull_buf, *bound, tile_z, slabs,
-                                 *scene.colour_args(), view_buf, *outs)
+    ev = kernel(prg, "raytrace")(q, *pixel_range(-(-W // RAY_LANES), H), scene.quadrics, arena, qlist, cull_buf,
+                                 *bound, tile_z, slabs, *scene.colour_args(), view_buf, *outs)
     for a, b in zip((depth, ids, prims, rgba), outs):
         cl.enqueue_copy(q, a, b, wait_for=[ev])
     q.finish()

@@ -19,8 +19,11 @@ typedef double8 real8;
 typedef long4 realmask4; /* the mask types of select() on real4, real8 */
 typedef long8 realmask8;
 #define convert_real4 convert_double4
+#define convert_real8 convert_double8
 #define convert_realmask4 convert_long4
+#define convert_realmask8 convert_long8
 #define REAL_MAX DBL_MAX
+#define REAL_MIN DBL_MIN
 #define REAL_EPS DBL_EPSILON
 #else
 typedef float real;
@@ -30,9 +33,12 @@ typedef float4 real4;
 typedef float8 real8;
 typedef int4 realmask4;
 #define convert_real4 convert_float4
+#define convert_real8 convert_float8
 #define convert_realmask4 convert_int4
+#define convert_realmask8 convert_int8
 typedef int8 realmask8;
 #define REAL_MAX FLT_MAX
+#define REAL_MIN FLT_MIN
 #define REAL_EPS FLT_EPSILON
 #endif
 
