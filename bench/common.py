@@ -1,6 +1,7 @@
 """Shared benchmark plumbing: machine/device description, result files, timing helpers, the
 manifold3d translation of a clcsg shape (:class:`Translator`) and the first-order surface error
-(:func:`surface_error`) that the peer and mesh benchmarks both measure with.
+(:func:`surface_error`) that the peer and mesh benchmarks both measure with, and the command and
+environment of fresh ``clcsg`` processes (:func:`clcsg_command`, :func:`environment_for_runs`).
 
 Every other bench module may import this one and :mod:`bench.zoo`; neither imports another
 bench module, so there are no import cycles.
@@ -14,6 +15,7 @@ import math
 import os
 import platform
 import subprocess
+import sys
 import time
 import warnings
 
@@ -404,3 +406,27 @@ def surface_error(tape, points, chunk=20000):
             d = np.where(g > 0, np.abs(val) / g, np.where(val == 0, 0.0, np.inf))
         out[s:s + chunk] = d.min(axis=1)
     return out
+
+
+# -- fresh clcsg processes (startup, progress) -------------------------------------------------
+def clcsg_command() -> list[str]:
+    """The ``clcsg`` console script beside this Python, else ``python -m clcsg``."""
+    script = os.path.join(os.path.dirname(sys.executable), "clcsg")
+    return [script] if os.path.exists(script) else [sys.executable, "-m", "clcsg"]
+
+
+def package_root() -> str:
+    """The folder holding the ``clcsg`` package this benchmark imported."""
+    import clcsg
+
+    return os.path.dirname(os.path.dirname(os.path.abspath(clcsg.__file__)))
+
+
+def environment_for_runs() -> dict:
+    """The caller's environment with Python's bytecode cache on (as a user has it), and this
+    ``clcsg`` first on the path (the console script would otherwise load the installed one)."""
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env.pop("CLCSG_NO_CACHE", None)
+    env["PYTHONPATH"] = os.pathsep.join([package_root()] + [p for p in [env.get("PYTHONPATH")] if p])
+    return env

@@ -16,9 +16,10 @@ with t measured from the step's start and T the time of that last level:
 * **expected / real**: the ``estimated`` field of the events (the expected sample count,
   known before the first level) over the samples written.
 
-The runs take 1-20 s of sampling each on a 2-core machine: the zoo models, a few examples and
-the 50 x 50 perforated plate (:func:`bench.zoo.plate`, 5,001 primitives), at radii small enough
-for the level loop to be the bulk of the run.  Every run is made ``rounds`` times (the machine
+The runs take 2-6 s each on a 2-core machine (the sampling bar 1-3 s): the zoo models, a few
+examples and the 50 x 50 perforated plate (:func:`bench.zoo.plate`, 5,001 primitives), at radii
+small enough for the level loop to be the bulk of the run (at 0.2-0.3% of the diagonal the
+examples sample in under 0.5 s).  Every run is made ``rounds`` times (the machine
 is shared and the ETA is about wall time), the runs in turn.  The level histories (per level:
 cells, samples, arrival time) are kept in the JSON, so a forecast can be replayed on them
 (:func:`replay`).  A separate pass measures expected / real on every example at r = 1% and
@@ -38,8 +39,7 @@ import tempfile
 import time
 import warnings
 
-from .common import Load, git_commit, git_dirty, write
-from .startup import clcsg_command, environment_for_runs, package_root
+from .common import Load, clcsg_command, environment_for_runs, git_commit, git_dirty, package_root, write
 from .zoo import EXAMPLES_DIR, ZOO_DIR, plate
 
 #: seconds left below which an event's ETA is not judged (see the module docstring)
@@ -98,12 +98,14 @@ def bar_events(events) -> tuple[float, list]:
 
 
 def history(events) -> dict:
-    """The level history of a run: per level its cells, the samples after it and the time
-    (since the sample step's start) its progress event arrived; the expected count."""
+    """The level history of a run: per level its cells, the samples after it, the time (since
+    the sample step's start) its progress event arrived, the bar's total and ETA; the expected
+    count."""
     start, bar = bar_events(events)
     done = [e["done"] for e in bar]
     return {"cells": [d - p for d, p in zip(done, [0] + done[:-1])], "samples": [e["samples"] for e in bar],
-            "t": [round(e["t"] - start, 5) for e in bar], "estimated": bar[-1]["estimated"] if bar else 0}
+            "t": [round(e["t"] - start, 5) for e in bar], "total": [e["total"] for e in bar],
+            "eta": [e["eta"] for e in bar], "estimated": bar[-1]["estimated"] if bar else 0}
 
 
 def judge(points, end) -> dict:

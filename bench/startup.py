@@ -27,7 +27,7 @@ import sys
 import tempfile
 import time
 
-from .common import Load, fmt, git_commit, git_dirty, write
+from .common import Load, clcsg_command, environment_for_runs, fmt, git_commit, git_dirty, package_root, write
 
 #: ``openscad -o two_cubes.csg`` of ``cube(10); translate([20,0,0]) cube(10);``
 TWO_CUBES_CSG = """cube(size = [10, 10, 10], center = false);
@@ -42,12 +42,6 @@ BARE = "import numpy, pyopencl as cl; cl.create_some_context(interactive=False)"
 TARGETS = {"version": 0.6, "two cubes": 1.3}
 
 
-def clcsg_command() -> list[str]:
-    """The ``clcsg`` console script beside this Python, else ``python -m clcsg``."""
-    script = os.path.join(os.path.dirname(sys.executable), "clcsg")
-    return [script] if os.path.exists(script) else [sys.executable, "-m", "clcsg"]
-
-
 def commands(folder: str) -> dict[str, list[str]]:
     scene = os.path.join(folder, "two_cubes.csg")
     with open(scene, "w", encoding="utf-8") as f:
@@ -55,23 +49,6 @@ def commands(folder: str) -> dict[str, list[str]]:
     cli = clcsg_command()
     return {"bare": [sys.executable, "-c", BARE], "version": cli + ["--version"],
             "two cubes": cli + ["sample", scene, "-o", os.path.join(folder, "x.ply")]}
-
-
-def package_root() -> str:
-    """The folder holding the ``clcsg`` package this benchmark imported."""
-    import clcsg
-
-    return os.path.dirname(os.path.dirname(os.path.abspath(clcsg.__file__)))
-
-
-def environment_for_runs() -> dict:
-    """The caller's environment with Python's bytecode cache on (as a user has it), and this
-    ``clcsg`` first on the path (the console script would otherwise load the installed one)."""
-    env = dict(os.environ)
-    env.pop("PYTHONDONTWRITEBYTECODE", None)
-    env.pop("CLCSG_NO_CACHE", None)
-    env["PYTHONPATH"] = os.pathsep.join([package_root()] + [p for p in [env.get("PYTHONPATH")] if p])
-    return env
 
 
 def run_once(argv, env) -> tuple[float, float]:
