@@ -11,26 +11,26 @@ larger part s = SPLIT_LARGER of the edge) while its diagonal exceeds QUAD_SPLIT_
 then in two along its longest edge, which shrinks the diagonal by s every two levels.  With
 n_q = ceil(log(d_0 / (QUAD_SPLIT_DIAG r)) / log(1 / s)) four-way levels for the largest root
 cell and d_q = d_0 s^n_q, its cells reach a diagonal D after n_q + 2 log(d_q / D) / log(1 / s)
-levels: the *peak level* at D = PEAK_DIAG r (2 radii: there the surface cells are resolved,
-and the cells per level stop growing; within a level of the largest level on the runs of
-``python -m bench progress``) and the *last level* at D = the floor (cells smaller than it are
-dropped, so no level past it has cells; the floor is measured on the 3-D diagonal, slightly
-larger, so this is about one level early: the forecast runs to its ceiling).
+levels: the *peak level* at D = PEAK_DIAG r (2 radii: the surface cells are resolved about
+there, and the cells per level stop growing) and the *last level* at D = the floor, rounded
+(cells smaller than it are dropped; the floor is measured on the cell's 3-D diagonal, so the
+level is right within one on the runs of ``python -m bench progress``).
 
 **Cells ahead.**  After a level of n cells with c children queued, the cells of the levels
-ahead are c, c g, c g^2, ... up to the last level, with g = sqrt(c / n_prev) the growth over
-the last two levels, kept in [1/2, 2] during the four-way levels (cells along a trimming curve
-double when both edges halve) and in [1/2, sqrt 2] after (they double every two levels).
-Before the peak the levels past it are forecast to halve (the cells left there are those along
-trimming curves, most resolved within a few levels); once past it, the growth seen goes on: a
-decline (curves resolving) or sqrt 2 (cells that stay undecided split down to the floor, the
-tail that is half of the run on the gear, the rook and the pen stand).
+ahead are c, c g_1, c g_1 g_2, ... up to the last level, with g = sqrt(c / n_prev) the growth
+over the last two levels.  Before the peak g is kept in [1/2, 2] during the four-way levels
+(cells along a trimming curve double when both edges halve) and in [1/2, sqrt 2] after (they
+double every two levels).  Past the peak the cells left are of two kinds: surface still being
+resolved, while the level emits at least SURFACE_SHARE of the most samples a level emitted
+(the sponge, the plate), which declines (g kept in [1/4, 1/2]); or cells along trimming curves
+that stay undecided and split down to the floor (the gear, the rook, the pen stand: half of
+their run), which grow (g kept in [1.2, sqrt 2]).  A forecast made before the peak takes the
+levels past it to shrink by PAST_PEAK_SURFACE or PAST_PEAK_TAIL per level by the same test.
+The cells of the last level are dropped, not split: they cost FLOOR_COST of a cell.
 
-**Samples ahead.**  The samples a level emits decline once the surface is resolved; with e the
-samples of the last level and rho = e / e_prev < 1, the samples ahead are e rho / (1 - rho)
-(rho at most 1/2: surface cells resolve at least half per level), at most the expected count
-not yet emitted (:func:`clcsg.compile.bounds.estimates.expected_samples`), and exactly that
-while the emission still grows (the early levels).
+**Samples ahead.**  While the samples per level still grow, the expected count not yet emitted
+(:func:`clcsg.compile.bounds.estimates.expected_samples`); once past their peak, a halving per
+level (as many again as the last level emitted), at most the expected count left.
 
 **Seconds.**  A level costs a + b (cells + SAMPLE_COST samples emitted): a the cheapest level
 seen (launches, the counter read, the finish pass's fixed part), SAMPLE_COST the cost of
@@ -38,7 +38,11 @@ emitting and finishing a sample against classifying a cell (0.25-0.35 on PoCL CP
 parameter, since the early levels, with few cells and many samples, cannot separate the two),
 and b fitted to the levels seen, weighted DECAY^age so it follows the cost per cell as the
 tapes get shorter deeper down.  The first level is left out once there is another: it also
-pays one-off costs (the program's first launch, the buffers' first use).
+pays one-off costs (the program's first launch, the root tapes at full length).
+
+The constants were chosen on the recorded level histories of ``python -m bench progress``
+(replayed through this class); they are rules of thumb of the subdivision, not fits to a
+machine, SAMPLE_COST aside.
 """
 
 from __future__ import annotations
@@ -49,11 +53,21 @@ import math
 PEAK_DIAG = 2.0
 #: weight of a level in the time fit per level of age
 DECAY = 0.7
-#: least and largest growth of the cells per level (see the module docstring)
+#: least and largest growth of the cells per level before the peak (see the module docstring)
 GROWTH_MIN, GROWTH_QUAD, GROWTH_PAIR = 0.5, 2.0, math.sqrt(2)
+#: growth of the undecided tail past the peak, at least and at most
+TAIL_MIN, TAIL_MAX = 1.2, math.sqrt(2)
+#: decline per level of cells still resolving surface past the peak, at least and at most
+DECLINE_MIN, DECLINE_MAX = 0.25, 0.5
+#: the levels past the peak, forecast before it: decline while resolving surface, else the tail
+PAST_PEAK_SURFACE, PAST_PEAK_TAIL = 0.5, 0.71
+#: a level resolves surface while it emits at least this share of the most samples a level emitted
+SURFACE_SHARE = 0.2
 #: the cost of a sample emitted over that of a cell classified (measured on PoCL CPU: 0.25-0.35)
 SAMPLE_COST = 0.3
-#: largest decline ratio of the samples per level once they decline
+#: the cost of a cell at the floor's level (dropped, not split) over that of a cell split
+FLOOR_COST = 0.5
+#: decline per level of the samples emitted once past their peak
 SAMPLES_DECLINE = 0.5
 
 
@@ -74,15 +88,15 @@ def level_bounds(root_diagonal: float, radius: float, floor: float, split_larger
 
 class Forecast:
     """Seconds left of the level loop (module docstring).  ``estimate``: the expected sample
-    count (0: unknown); ``quad`` and ``last`` from :func:`level_bounds` (``last`` None: no
-    bound known, ``max_levels`` ends the tail)."""
+    count (0: unknown); ``quad``, ``peak`` and ``last`` from :func:`level_bounds` (None: not
+    known; ``max_levels`` then ends the tail)."""
 
     def __init__(self, estimate: int = 0, quad: float = 0.0, peak: float | None = None, last: float | None = None,
                  max_levels: int = 400):
         self.estimate = max(0, int(estimate))
         self.quad = quad
         self.peak = max_levels if peak is None else peak
-        self.last = max_levels - 1 if last is None else min(max_levels - 1, math.ceil(last))
+        self.last = max_levels - 1 if last is None else min(max_levels - 1, math.floor(last + 0.5))
         self.max_levels = max_levels
         self.cells: list[int] = []
         self.emitted: list[int] = []
@@ -103,28 +117,33 @@ class Forecast:
         h = self.cells
         g = (children / max(h[-2], 1)) ** 0.5 if len(h) > 1 else children / max(h[-1], 1)
         past = len(h) > self.peak
+        # still resolving surface (a good share of the most samples a level emitted), or the
+        # undecided cells along trimming curves that split down to the floor
+        surface = self.emitted[-1] >= SURFACE_SHARE * max(self.emitted)
         n, out, lv = float(children), [], len(h)
         while n >= 1 and lv <= self.last:
             out.append(n)
-            if lv < self.peak or past:
+            if past and surface:
+                n *= min(max(g, DECLINE_MIN), DECLINE_MAX)
+            elif past:
+                n *= min(max(g, TAIL_MIN), TAIL_MAX)
+            elif lv < self.peak:
                 n *= min(max(g, GROWTH_MIN), GROWTH_QUAD if lv < self.quad else GROWTH_PAIR)
             else:
-                n *= GROWTH_MIN
+                n *= PAST_PEAK_SURFACE if surface else PAST_PEAK_TAIL
             lv += 1
         return out
 
     def samples_ahead(self) -> float:
         """Forecast samples of the levels ahead (module docstring)."""
-        left = max(0, self.estimate - self.samples) if self.estimate else None
         e = self.emitted[-1]
-        prev = self.emitted[-2] if len(self.emitted) > 1 else 0
-        if prev > 0 and e < prev:
-            rho = min(e / prev, SAMPLES_DECLINE)
-            tail = e * rho / (1 - rho)
-            return tail if left is None else min(tail, left)
-        if left is None or (left == 0 and e > 0):  # growing past the estimate, or nothing known
-            return e * SAMPLES_DECLINE / (1 - SAMPLES_DECLINE)
-        return left
+        left = self.estimate - self.samples
+        if e < max(self.emitted):  # past the emission's peak: halving per level
+            tail = e * SAMPLES_DECLINE / (1 - SAMPLES_DECLINE)
+            return min(tail, left) if left > 0 else tail
+        if left > 0:  # still growing: the expected count not yet emitted
+            return left
+        return e * SAMPLES_DECLINE / (1 - SAMPLES_DECLINE)
 
     def costs(self) -> tuple[float, float, float]:
         """(a, b, c) of the level time model a + b cells + c samples (module docstring)."""
@@ -137,6 +156,8 @@ class Forecast:
             w += age * (secs[i] - a)
             x += age * (cells[i] + SAMPLE_COST * emitted[i])
         b = w / x if x > 0 else 0.0
+        if b <= 0:  # nothing to fit yet: the mean cost of the levels so far, first included
+            b = sum(secs) / max(sum(n + SAMPLE_COST * e for n, e in zip(cells, emitted)), 1)
         return a, b, SAMPLE_COST * b
 
     def seconds_left(self, children: int) -> float:
@@ -145,5 +166,7 @@ class Forecast:
         if not ahead:
             return 0.0
         a, b, c = self.costs()
-        return a * len(ahead) + b * sum(ahead) + c * self.samples_ahead()
+        # cells at the floor's level are dropped, not split: FLOOR_COST of a cell's cost
+        work = sum(ahead) - (1 - FLOOR_COST) * (ahead[-1] if len(self.cells) + len(ahead) - 1 == self.last else 0)
+        return a * len(ahead) + b * work + c * self.samples_ahead()
 
