@@ -19,7 +19,8 @@ bosses and tessellated spheres, against manifold3d's Boolean), ``surfels`` (a sp
 icosphere), ``startup`` (the fixed cost of a process: ``clcsg --version`` and ``clcsg sample`` of
 two cubes against a bare numpy + pyopencl start), ``load`` (reading 0.5, 5 and 50 MB ``.csg`` and
 ``.json`` scenes: CPU time and peak memory per byte of the file, ``openscad`` on the same
-``.csg``).  Each writes
+``.csg``), ``progress`` (the sampling bar's ETA against the time actually left over the second
+half of real runs, its percentage, and the expected sample count against the real one).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -31,7 +32,7 @@ import importlib
 
 MODULES = {"surfels": "surfel_operands"}
 PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands",
-         "surfels", "startup", "load")
+         "surfels", "startup", "load", "progress")
 
 
 def main(argv=None):

@@ -1,6 +1,7 @@
 """Shared benchmark plumbing: machine/device description, result files, timing helpers, the
 manifold3d translation of a clcsg shape (:class:`Translator`) and the first-order surface error
-(:func:`surface_error`) that the peer and mesh benchmarks both measure with.
+(:func:`surface_error`) that the peer and mesh benchmarks both measure with, and the command and
+environment of fresh ``clcsg`` processes (:func:`clcsg_command`, :func:`environment_for_runs`).
 
 Every other bench module may import this one and :mod:`bench.zoo`; neither imports another
 bench module, so there are no import cycles.
@@ -408,6 +409,7 @@ def surface_error(tape, points, chunk=20000):
     return out
 
 
+# -- fresh clcsg processes (startup, peers, progress) -------------------------------------------
 def clcsg_command() -> list[str]:
     """The ``clcsg`` console script beside this Python, else ``python -m clcsg``."""
     script = os.path.join(os.path.dirname(sys.executable), "clcsg")

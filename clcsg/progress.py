@@ -93,13 +93,13 @@ class Step:
 
     def update(self, done=None, total=None, label=None, unit=None, phase=False, note=None, always=False, **info):
         """New counts (absolute), label or unit; ``phase``: a new phase starts (its rate and
-        ETA count from now); ``info``: extra fields for JSON, shown after the bar unless a
+        ETA count from now; or from ``phase``, a ``time.perf_counter()`` time it started); ``info``: extra fields for JSON, shown after the bar unless a
         ``note`` (text) is given for the bar.  JSON progress lines come at most every
         :data:`JSON_INTERVAL` seconds, unless ``always``."""
         if self.closed:
             return
         if phase:
-            self.t_phase = time.perf_counter()
+            self.t_phase = time.perf_counter() if phase is True else float(phase)
         if label is not None:
             self.label = label
         if unit is not None:

@@ -94,6 +94,7 @@ from ..readers.scenes import as_scene
 from .samples import Samples
 from ..compile.bounds import estimates as guard
 from ..progress import for_option
+from .forecast import Forecast, level_bounds
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
@@ -276,100 +277,60 @@ QUAD_SPLIT_DIAG = 8.0
 MAX_CHILDREN = 4
 
 
-#: the largest fraction of the run the bar takes from the samples emitted / the expected count
-SAMPLES_SHARE = 0.9
-
-
 class _Progress:
     """Progress of the level loop on the current reporter (:mod:`clcsg.progress`: a bar on
     a terminal, JSON lines with ``--progress json``, nothing in a pipe or with ``progress=False``).
 
-    The work left is forecast in seconds.  Cells: after level L, with c children queued, the
-    cells of the levels ahead are c, c g_1, c g_1 g_2, ... with g the growth per level seen
-    over the last two levels, kept in [1/2, sqrt 2] (cells along a curve double each time their
-    size halves, every two levels) up to the *peak level*, where cells reach the size at which
-    a single sample resolves them (about r / 2: 2 log(extent / (r / 2)) / log(1 / SPLIT_LARGER)
-    levels below the largest root cell), and 1/2 past it (the cells left are those along
-    trimming curves, resolved within a few levels).  Time: a level costs a + b cells, with a
-    the cheapest level so far (launches, the counter read, the level's finish pass) and b the
-    rest of the time so far per cell.  The total work is also estimated before the run, as the
-    expected sample count (:func:`clcsg.compile.bounds.estimates.expected_samples`, from the
-    measured surface area); the samples emitted so far over it is a second forecast of the
-    fraction done (up to :data:`SAMPLES_SHARE`).  The fraction shown, the larger of the two
-    (for the cells, elapsed / (elapsed + forecast)), is the largest seen so far: it never goes
-    back, and reaches 100% when the last level is done;
-    the bar counts cells, its total is done / fraction, so its ETA (rate so far times the cells
-    left) is the forecast.  The samples so far and the expected count
+    The seconds left are forecast by :class:`clcsg.sampling.forecast.Forecast` from the levels
+    seen (cells per level up to the level where they reach the floor, seconds per level
+    a + b (cells + samples), the expected sample count as the samples still to come while the
+    emission grows).  The fraction shown is elapsed / (elapsed + forecast), elapsed counted
+    from the start of the level loop, and the largest seen so far: it never goes back, and is
+    100% when the last level is done.  The bar counts cells; its total is done / fraction and
+    its rate counts from the same start, so its ETA (the rate so far times the cells left) is
+    the forecast.  The samples so far and the expected count
     (:func:`clcsg.compile.bounds.estimates.expected_samples`) are shown next to the bar.
     """
 
-    def __init__(self, enabled, estimate=0, roots=None, radius=None, max_levels=400):
+    def __init__(self, enabled, estimate=0, roots=None, radius=None, max_levels=400, floor=None):
         self.reporter = for_option(enabled)
         self.estimate = int(estimate)
-        self.max_levels = max_levels
-        self.peak = max_levels
-        if roots is not None and len(roots) and radius:
-            extent = float(np.max(np.maximum(roots["x1"] - roots["x0"], roots["y1"] - roots["y0"])))
-            if extent > radius / 2:
-                self.peak = round(2 * math.log(2 * extent / radius) / math.log(1 / SPLIT_LARGER))
+        peak = last = None
+        quad = 0.0
+        if roots is not None and len(roots) and radius and floor:
+            diag = float(np.max(np.hypot(roots["x1"] - roots["x0"], roots["y1"] - roots["y0"])))
+            if diag > 0:
+                quad, peak, last = level_bounds(diag, radius, floor, SPLIT_LARGER, QUAD_SPLIT_DIAG)
+        self.forecast = Forecast(self.estimate, quad, peak, last, max_levels)
         outer = self.reporter.active()
         self.own = outer is None or outer.name != "sample"
         self.step = self.reporter.step("sample", "sampling") if self.own else outer
         self.cells = 0
         self.fraction = 0.0
         self.shown = 0.0
-        self.history: list[int] = []
-        self.times: list[float] = []
         self.t0 = self.t_last = time.perf_counter()
-
-    def ahead(self, level, children) -> list:
-        """Forecast cells of the levels after ``level`` (see the class docstring)."""
-        if not children:
-            return []
-        h = self.history
-        g = (children / h[-2]) ** 0.5 if len(h) > 1 else children / max(h[-1], 1)
-        g = min(max(g, 0.5), math.sqrt(2))
-        n, out, lv = float(children), [], level + 1
-        while n >= 1 and lv < self.max_levels:
-            out.append(n)
-            n *= g if lv < self.peak else 0.5
-            lv += 1
-        return out
-
-    def by_samples(self, samples) -> float:
-        """The fraction of the expected samples emitted so far, at most :data:`SAMPLES_SHARE`
-        (the last levels are left to the cell forecast: the expected count is within about
-        1.3x, not exact)."""
-        return min(samples / self.estimate, SAMPLES_SHARE) if self.estimate > 0 else 0.0
-
-    def seconds_ahead(self, cells) -> float:
-        """Forecast seconds of levels of ``cells`` each: a + b n per level."""
-        a = min(self.times)
-        b = max(0.0, sum(self.times) - a * len(self.times)) / max(sum(self.history), 1)
-        return sum(a + b * n for n in cells)
 
     def level(self, level, cells, samples, children=0):
         if self.reporter.mode == "none":  # nothing is shown: no forecast to make
             self.cells += cells
             return
         now = time.perf_counter()
-        self.times.append(now - self.t_last)
+        self.forecast.add(cells, samples, now - self.t_last)
         self.t_last = now
         self.cells += cells
-        self.history.append(cells)
         elapsed = now - self.t0
-        left = self.seconds_ahead(self.ahead(level, children))
+        left = self.forecast.seconds_left(children)
         if not children:
             self.fraction = 1.0
         elif elapsed + left > 0:
-            by_cells = elapsed / (elapsed + left)
-            self.fraction = max(self.fraction, min(max(by_cells, self.by_samples(samples)), 0.999))
+            self.fraction = max(self.fraction, min(elapsed / (elapsed + left), 0.999))
         total = max(self.cells, math.ceil(self.cells / max(self.fraction, 1e-9)))
         if self.cells / total < self.shown:  # rounding must not take the bar back either
             total = max(self.cells, math.floor(self.cells / self.shown))
         self.shown = self.cells / total
         self.step.update(done=self.cells, total=total, label="sampling", unit="cells",
-                         phase=level == 0, level=level + 1, samples=samples, estimated=self.estimate,
+                         phase=self.t0 if level == 0 else False, level=level + 1, samples=samples,
+                         estimated=self.estimate,
                          note=f"level {level + 1}, {samples:,} samples (estimate {self.estimate:,})", always=True)
 
     def done(self):
@@ -610,7 +571,7 @@ class _Subdivision:
         self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
         self.arena_budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem)
         self.zeroed = "oclgrind" in ctx.info.platform.lower()
-        self.progress = _Progress(progress, estimate, roots, radius, max_levels)
+        self.progress = _Progress(progress, estimate, roots, radius, max_levels, floor)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
         self.grown = {"cells": 0, "samples": 0, "arena": 0}

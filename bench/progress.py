@@ -1,0 +1,228 @@
+"""How honest the sampling progress is: the ETA against the time actually left, the bar's
+percentage, and the expected sample count shown before sampling against the real count.
+
+Each run is the real command line, ``clcsg sample SCENE -r R -o x.ply --progress json``, in a
+fresh process; its stderr is read line by line and each JSON line is stamped with the time it
+arrives (``time.perf_counter`` in this process).  The *sampling bar* lives between the sample
+step's ``start`` event and its last level (the progress event at 100%, ``done == total``);
+with t measured from the step's start and T the time of that last level:
+
+* **ETA ratio**: for every progress event of the bar in the second half (t >= T / 2) that has
+  at least :data:`MIN_LEFT` seconds left (the bar shows whole seconds; a shorter remainder is
+  "00:00" whatever the forecast), the ratio eta / (T - t); per run its worst factor (the
+  largest of max ratio and 1 / min ratio) and the median ratio.  *Within 2x*: the worst factor
+  is at most 2;
+* **monotone**: done / total never decreases from one event to the next;
+* **expected / real**: the ``estimated`` field of the events (the expected sample count,
+  known before the first level) over the samples written.
+
+The runs take 2-6 s each on a 2-core machine (the sampling bar 1-3 s): the zoo models, a few
+examples and the 50 x 50 perforated plate (:func:`bench.zoo.plate`, 5,001 primitives), at radii
+small enough for the level loop to be the bulk of the run (at 0.2-0.3% of the diagonal the
+examples sample in under 0.5 s).  Every run is made ``rounds`` times (the machine
+is shared and the ETA is about wall time), the runs in turn.  The level histories (per level:
+cells, samples, arrival time) are kept in the JSON, so a forecast can be replayed on them
+(:func:`replay`).  A separate pass measures expected / real on every example at r = 1% and
+0.2% of the diagonal (``clcsg.sample`` in this process, no timing).  Writes
+``bench/results/progress.json``.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+
+from .common import Load, clcsg_command, environment_for_runs, git_commit, git_dirty, package_root, write
+from .zoo import EXAMPLES_DIR, ZOO_DIR, plate
+
+#: seconds left below which an event's ETA is not judged (see the module docstring)
+MIN_LEFT = 0.1
+
+#: (name, scene: a path under examples/ or "plate50", radius as the CLI takes it)
+RUNS = [
+    ("gear", "zoo/gear.json", "0.05%"),
+    ("bracket (zoo)", "zoo/bracket.json", "0.05%"),
+    ("flange (zoo)", "zoo/flange.json", "0.04%"),
+    ("lens", "zoo/lens.json", "0.03%"),
+    ("rook", "rook.csg", "0.05%"),
+    ("pen_stand", "pen_stand.csg", "0.05%"),
+    ("menger3", "menger3.csg", "0.1%"),
+    ("plate 50x50", "plate50", "1%"),
+]
+QUICK = ("gear", "rook", "menger3", "plate 50x50")
+
+
+def scene_path(scene: str, folder: str) -> str:
+    if scene == "plate50":
+        import clcsg
+
+        path = os.path.join(folder, "plate50.json")
+        if not os.path.exists(path):
+            clcsg.save(plate(50), path)
+        return path
+    return os.path.join(EXAMPLES_DIR, scene)
+
+
+def record(argv, env) -> tuple[list, float]:
+    """(events with their arrival time in seconds since launch as ``"t"``, process wall time)."""
+    t0 = time.perf_counter()
+    p = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, bufsize=1)
+    events = []
+    for line in p.stderr:
+        t = time.perf_counter() - t0
+        try:
+            ev = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a warning printed outside the reporter
+        ev["t"] = t
+        events.append(ev)
+    rc = p.wait()
+    wall = time.perf_counter() - t0
+    if rc != 0:
+        raise RuntimeError(f"{' '.join(argv)} exited with {rc}")
+    return events, wall
+
+
+def bar_events(events) -> tuple[float, list]:
+    """(arrival of the sample step's start, the sampling bar's progress events)."""
+    start = next(e["t"] for e in events if e["event"] == "start" and e["step"] == "sample")
+    bar = [e for e in events if e["event"] == "progress" and e["step"] == "sample" and e["label"] == "sampling"]
+    return start, bar
+
+
+def history(events) -> dict:
+    """The level history of a run: per level its cells, the samples after it, the time (since
+    the sample step's start) its progress event arrived, the bar's total and ETA; the expected
+    count."""
+    start, bar = bar_events(events)
+    done = [e["done"] for e in bar]
+    return {"cells": [d - p for d, p in zip(done, [0] + done[:-1])], "samples": [e["samples"] for e in bar],
+            "t": [round(e["t"] - start, 5) for e in bar], "total": [e["total"] for e in bar],
+            "eta": [e["eta"] for e in bar], "estimated": bar[-1]["estimated"] if bar else 0}
+
+
+def judge(points, end) -> dict:
+    """ETA ratios over the second half: ``points`` are (t, eta, fraction) of the bar, ``end``
+    the time of its last level (all since the step's start)."""
+    ratios = [eta / (end - t) for t, eta, _ in points if t >= end / 2 and end - t >= MIN_LEFT and eta is not None]
+    fractions = [f for _, _, f in points]
+    out = {"monotone": all(b >= a for a, b in zip(fractions, fractions[1:])), "judged": len(ratios)}
+    if ratios:
+        out.update(max_ratio=max(ratios), min_ratio=min(ratios), median_ratio=statistics.median(ratios),
+                   worst=max(max(ratios), 1 / max(min(ratios), 1e-9)))
+        out["within_2x"] = out["worst"] <= 2
+    return out
+
+
+def measure_run(events, wall) -> dict:
+    start, bar = bar_events(events)
+    end_ev = next(e for e in events if e["event"] == "end" and e["step"] == "sample")
+    last = next(i for i, e in enumerate(bar) if e["done"] == e["total"])
+    end = bar[last]["t"] - start
+    summary = next(e for e in events if e["event"] == "summary")
+    points = [(e["t"] - start, e["eta"], e["done"] / e["total"]) for e in bar[:last + 1]]
+    out = {"wall_s": wall, "sample_step_s": end_ev["t"] - start, "bar_s": end, "levels": len(bar),
+           "first_level_s": bar[0]["t"] - start, "samples": summary["samples"],
+           "estimated": bar[-1]["estimated"], "expected_ratio": bar[-1]["estimated"] / max(summary["samples"], 1)}
+    out.update(judge(points, end))
+    out["history"] = history(events)
+    return out
+
+
+def replay(hist: dict, forecast) -> dict:
+    """Judge ``forecast`` on a recorded level history: ``forecast(level, cells, samples,
+    children, t)`` -> (fraction, eta) is called per level as the sampler calls its progress."""
+    cells, samples, ts = hist["cells"], hist["samples"], hist["t"]
+    points = []
+    for i, (n, s, t) in enumerate(zip(cells, samples, ts)):
+        children = cells[i + 1] if i + 1 < len(cells) else 0
+        f, eta = forecast(i, n, s, children, t)
+        points.append((t, eta, f))
+    return judge(points, ts[-1])
+
+
+def expected_counts(radii=(0.01, 0.002)) -> list:
+    """expected / real samples on every example (the sponge aside at the smaller radius)."""
+    import clcsg
+
+    rows = []
+    paths = sorted(glob.glob(os.path.join(EXAMPLES_DIR, "*.json")) + glob.glob(os.path.join(EXAMPLES_DIR, "*.csg"))
+                   + glob.glob(os.path.join(ZOO_DIR, "*.json")))
+    for path in paths:
+        scene = clcsg.load(path)
+        tape = scene.compile()
+        diag = float(((tape.bound[1] - tape.bound[0]) ** 2).sum() ** 0.5)
+        row = {"scene": os.path.relpath(path, EXAMPLES_DIR)}
+        for rel in radii:
+            if "menger" in path and rel < 0.01:
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                s = clcsg.sample(scene, rel * diag, progress=False)
+            row[f"{rel:.1%}"] = s.stats["expected_samples"] / max(len(s), 1)
+        rows.append(row)
+    return rows
+
+
+def measure(rounds: int, quick: bool) -> dict:
+    env = environment_for_runs()
+    cli = clcsg_command()
+    folder = tempfile.mkdtemp(prefix="clcsg-progress-")
+    runs = [r for r in RUNS if not quick or r[0] in QUICK]
+    results = {name: [] for name, _, _ in runs}
+    for _ in range(rounds):
+        for name, scene, radius in runs:
+            argv = cli + ["sample", scene_path(scene, folder), "-r", radius, "-o", os.path.join(folder, "x.ply"),
+                          "--progress", "json"]
+            results[name].append(measure_run(*record(argv, env)))
+    return {"runs": [{"name": n, "scene": s, "radius": r, "rounds": results[n]} for n, s, r in runs],
+            "expected": expected_counts((0.01,) if quick else (0.01, 0.002))}
+
+
+def _f(x, spec=".2f"):
+    return "-" if x is None else format(x, spec)
+
+
+def table(result: dict) -> str:
+    lines = ["| run | r | levels | bar s | ETA worst (2nd half) | ETA median | within 2x | monotone | expected/real |",
+             "|---|---|---:|---|---|---|---|---|---:|"]
+    for run in result["runs"]:
+        rs = run["rounds"]
+        lines.append(f"| {run['name']} | {run['radius']} | {rs[0]['levels']} | "
+                     + " / ".join(_f(r["bar_s"], ".1f") for r in rs) + " | "
+                     + " / ".join(_f(r.get("worst"), ".1f") + "x" for r in rs) + " | "
+                     + " / ".join(_f(r.get("median_ratio")) for r in rs) + " | "
+                     + " / ".join("yes" if r.get("within_2x") else "no" for r in rs) + " | "
+                     + " / ".join("yes" if r["monotone"] else "NO" for r in rs) + " | "
+                     + f"{rs[0]['expected_ratio']:.2f} |")
+    within = sum(r.get("within_2x", False) for run in result["runs"] for r in run["rounds"])
+    total = sum(len(run["rounds"]) for run in result["runs"])
+    keys = [k for k in result["expected"][0] if k != "scene"]
+    lines += ["", f"ETA within 2x over the second half: {within} of {total} runs (rounds separated by /)", "",
+              "| example (expected / real samples) | " + " | ".join(f"r = {k}" for k in keys) + " |",
+              "|---|" + "---:|" * len(keys)]
+    for row in result["expected"]:
+        lines.append(f"| {row['scene']} | " + " | ".join(_f(row.get(k)) for k in keys) + " |")
+    return "\n".join(lines)
+
+
+def run(quick: bool = False, device=None, rounds: int | None = None) -> dict:
+    """Measure (``rounds`` of every run; 2, quick: 2 of 4 runs), write progress.json, print the
+    tables.  ``device`` is not used: each process picks its device as ``clcsg`` does."""
+    load = Load()
+    result = measure(rounds or 2, quick)
+    result["environment"] = load.into({"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "cpus": os.cpu_count(),
+                                       "clcsg": package_root(), "python": sys.version.split()[0],
+                                       "git_commit": git_commit(), "git_dirty": git_dirty(),
+                                       "timing": "wall time of JSON lines as they arrive on the pipe"})
+    path = write("progress", result)
+    print(table(result))
+    print(f"wrote {path}")
+    return result
