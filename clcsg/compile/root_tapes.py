@@ -35,10 +35,16 @@ class PrimitiveDag:
         self.order = _postorder(builder, root)
         self.pos = {e: k for k, e in enumerate(self.order)}
         self.by_instance: dict = {}
+        #: expression -> negated, for the expressions whose instances all have one polarity
+        #: (they are one solid: equal expressions are one node)
+        self.negated: dict = {}
         for e, owners in prims.items():
             if e in self.pos:
                 for inst, _ in owners:
                     self.by_instance.setdefault(inst, []).append(e)
+                polarity = {bool(neg) for _, neg in owners}
+                if len(polarity) == 1:
+                    self.negated[e] = polarity.pop()
         self.parents: dict = {}
         self.default: dict = {_TRUE: True, _FALSE: False}
         self.n_false: dict = {}
@@ -66,12 +72,23 @@ class PrimitiveDag:
             else:
                 self.default[e] = None
 
-    def pruned(self, near_instances) -> tuple[np.ndarray, int]:
-        """(ops, registers) of the tape with every primitive not in ``near_instances`` far."""
+    def pruned(self, near_instances, inside_instances=()) -> tuple[np.ndarray, int]:
+        """(ops, registers) of the tape with every primitive in ``inside_instances`` TRUE (the
+        region lies in its solid: its complement FALSE) and every other one not in
+        ``near_instances`` far (FALSE, its complement TRUE)."""
         near = {e for i in near_instances for e in self.by_instance.get(int(i), ())}
+        fixed = {}
+        for i in inside_instances:
+            for e in self.by_instance.get(int(i), ()):
+                if e in near:
+                    continue
+                if e in self.negated:
+                    fixed[e] = _FALSE if self.negated[e] else _TRUE
+                else:  # of both polarities: kept as it is (its default would be wrong here)
+                    near.add(e)
         live: dict = {self.root: set()}
-        stack = list(near)
-        seen = set(near)
+        stack = list(near) + list(fixed)
+        seen = set(stack)
         while stack:
             e = stack.pop()
             for p in self.parents.get(e, ()):
@@ -83,6 +100,9 @@ class PrimitiveDag:
         full: dict = {}
         built: dict = {}
         for e in sorted(seen | {self.root}, key=self.pos.__getitem__):
+            if e in fixed:
+                built[e] = fixed[e]
+                continue
             if e in near or self.b.kind[e] in (_LEAF, _CONST):
                 built[e] = self._copy(e, nb, full)
                 continue
@@ -153,7 +173,7 @@ def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
     if dag is None or not regions:
         return out, full
     qs = list(regions)
-    near = _near_sets(tape, qs, regions)
+    near, inside = _near_sets(tape, qs, regions)
     n_inst = len(tape.instances)
     sparse = [k for k, nr in enumerate(near) if len(nr) <= DENSE_FRACTION * n_inst]
     centers = np.array([0.5 * (regions[qs[k]][0] + regions[qs[k]][1]) for k in sparse]).reshape(-1, 3)
@@ -161,27 +181,40 @@ def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
     rows, used, shared, budget = [full], len(full), {}, MAX_NEAR
     for g in range(0, len(sparse), GROUP):
         members = sparse[g:g + GROUP]
-        key = frozenset().union(*(near[k] for k in members))
+        # a half-space inside some members' regions and outside others' is near for the group
+        ins = [frozenset(inside[k]) for k in members]
+        held = frozenset.intersection(*ins)
+        key = frozenset().union(*(near[k] for k in members), *ins) - held
+        held = held - key
         if len(key) > budget:
             break
         budget -= len(key)
-        if key not in shared:
-            ops, regs = dag.pruned(key)
+        if (key, held) not in shared:
+            ops, regs = dag.pruned(key, held)
             if regs > tape.n_regs or len(ops) >= len(full):
-                shared[key] = (0, len(full))
+                shared[key, held] = (0, len(full))
             else:
-                shared[key] = (used, len(ops))
+                shared[key, held] = (used, len(ops))
                 rows.append(ops)
                 used += len(ops)
         for k in members:
-            out[qs[k]] = shared[key]
+            out[qs[k]] = shared[key, held]
     return out, np.concatenate(rows).astype(np.int32)
 
 
-def _near_sets(tape, qs, regions) -> list:
-    """Per quadric of ``qs``, the instances whose boxes meet its region, and its owners."""
-    lo = np.array([i.box[0] if i.box is not None else np.full(3, np.inf) for i in tape.instances]).reshape(-1, 3)
-    hi = np.array([i.box[1] if i.box is not None else np.full(3, -np.inf) for i in tape.instances]).reshape(-1, 3)
+def _near_sets(tape, qs, regions) -> tuple[list, list]:
+    """Per quadric of ``qs``, (near, inside): the instances whose boxes meet its region, and its
+    owners; and the half-spaces whose solid holds the whole region (:func:`_half_space_sides`:
+    a half-space's box is mostly all of space, so the box test alone keeps every one near)."""
+    Q = np.asarray(tape.quadrics)
+    halves = [k for k, i in enumerate(tape.instances) if i.box is not None and i.node.kind == "halfspace"
+              and len(i.literals) == 1 and not np.any(Q[i.literals[0][0], :3, :3])]
+    is_half = np.zeros(len(tape.instances), dtype=bool)
+    is_half[halves] = True
+    lo = np.array([i.box[0] if i.box is not None and not h else np.full(3, np.inf)
+                   for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
+    hi = np.array([i.box[1] if i.box is not None and not h else np.full(3, -np.inf)
+                   for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
     rlo = np.array([regions[q][0] for q in qs]).reshape(-1, 3)
     rhi = np.array([regions[q][1] for q in qs]).reshape(-1, 3)
     region_of, inst = BoxTree(lo, hi).query(rlo, rhi)
@@ -189,7 +222,45 @@ def _near_sets(tape, qs, regions) -> list:
     region_of, inst = region_of[order], inst[order]
     bounds = np.searchsorted(region_of, np.arange(len(qs) + 1))
     owners = tape.owners()
-    return [set(inst[bounds[k]:bounds[k + 1]].tolist()) | set(owners[q]) for k, q in enumerate(qs)]
+    near = [set(inst[bounds[k]:bounds[k + 1]].tolist()) | set(owners[q]) for k, q in enumerate(qs)]
+    inside: list = [set() for _ in qs]
+    if halves:
+        crossing, within = _half_space_sides(tape, halves, rlo, rhi)
+        for k in range(len(qs)):
+            near[k].update(crossing[k])
+            inside[k].update(within[k])
+    return near, inside
+
+
+#: (region, half-space) pairs tested at once in :func:`_half_space_sides`
+_SIDE_CHUNK = 1 << 22
+
+
+def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
+    """Per region box [rlo, rhi] (R, 3), the half-space instances ``halves`` whose plane may
+    cross it and those whose solid holds all of it.  The solid s Q(x) <= 0 of a plane is
+    linear, g . x + c <= 0, so its range over a box is exact: g . m +- sum |g_i| h_i at the
+    box's center m and half-sizes h; a relative slack keeps the cases that rounding could
+    decide wrongly crossing (near)."""
+    Q = np.asarray(tape.quadrics, dtype=np.float64)
+    qi = np.array([tape.instances[k].literals[0][0] for k in halves])
+    sg = np.array([tape.instances[k].literals[0][1] for k in halves], dtype=np.float64)
+    g = 2.0 * sg[:, None] * Q[qi, :3, 3]
+    c = sg * Q[qi, 3, 3]
+    m, h = 0.5 * (rlo + rhi), 0.5 * (rhi - rlo)
+    scale = 1.0 + np.abs(np.concatenate([rlo, rhi], axis=1)).max(axis=1)
+    ids = np.asarray(halves)
+    crossing, within = [], []
+    step = max(1, _SIDE_CHUNK // max(len(halves), 1))
+    for s in range(0, len(m), step):
+        v = m[s:s + step] @ g.T + c[None]
+        spread = h[s:s + step] @ np.abs(g).T
+        slack = 1e-9 * scale[s:s + step, None] * np.linalg.norm(g, axis=1)[None]
+        hi_v, lo_v = v + spread + slack, v - spread - slack
+        for k in range(len(v)):
+            within.append(ids[hi_v[k] < 0].tolist())
+            crossing.append(ids[(hi_v[k] >= 0) & (lo_v[k] <= 0)].tolist())
+    return crossing, within
 
 
 #: boxes per shared tape of :func:`box_tapes` (a few dozen: the tape interpreter's cost per
