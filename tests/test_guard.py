@@ -143,3 +143,16 @@ def test_a_buffer_past_the_device_limit_is_a_limit_error(cl_context):
     check_allocation(cl_context, info.max_mem_alloc, "largest")  # the limit itself is allowed
     s = clcsg.sample(clcsg.sphere(1.0), 0.1, device=cl_context, capacity=(64, 64))
     assert len(s) > 0
+
+
+def test_a_probed_estimate_expects_the_probe_count_without_the_margin():
+    """After a probe run, the guard's estimate is the probe's count scaled as 1 / r^2 times
+    PROBE_MARGIN (a limit must not pass on a lucky probe); the expected count (the progress
+    bar's total work) is the same scaling without the margin."""
+    tape = clcsg.Scene(clcsg.box(2) - clcsg.sphere(1.2)).compile()
+    est = guard.estimate_tape(tape, 0.01)
+    probe = guard.measured(est, probe_samples=4000, probe_radius=0.05)
+    assert probe.measured_at == 0.05
+    want = 4000 * (0.05 / 0.01) ** 2
+    assert probe.samples == pytest.approx(guard.PROBE_MARGIN * want, rel=1e-9)
+    assert guard.expected_samples(tape, probe) == pytest.approx(want, rel=1e-9)

@@ -592,8 +592,13 @@ def expected_samples(tape, est: Estimate) -> float:
     sqrt 3 times more) are weighted per kind by :data:`EXPECTED_WEIGHTS`:
 
         expected = sum_kind w_kind area_kind / (pi r^2) + w_edge edges / r
+
+    An estimate rescaled from a probe run (:func:`measured`) expects the probe's count scaled
+    as 1 / r^2, without :data:`PROBE_MARGIN`.
     """
-    if not est.finite or not est.quadric_areas or est.measured_at is not None:
+    if est.measured_at is not None:  # rescaled from a probe run: without the guard's margin
+        return est.samples / PROBE_MARGIN
+    if not est.finite or not est.quadric_areas:
         return est.samples
     r = est.radius
     areas = None if tape.empty else measured_areas(tape)
