@@ -143,11 +143,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         vstore8(DEPTH, 0, out.depth + pix);
         vstore8(QID, 0, out.quadric + pix);
         vstore8(PRIM, 0, out.primitive + pix);
-        __global uchar *rgba = (__global uchar *)(out.rgba + pix);
-        vstore16((uchar16)(rx.s0, ry.s0, rz.s0, ra.s0, rx.s1, ry.s1, rz.s1, ra.s1,
-                           rx.s2, ry.s2, rz.s2, ra.s2, rx.s3, ry.s3, rz.s3, ra.s3), 0, rgba);
-        vstore16((uchar16)(rx.s4, ry.s4, rz.s4, ra.s4, rx.s5, ry.s5, rz.s5, ra.s5,
-                           rx.s6, ry.s6, rz.s6, ra.s6, rx.s7, ry.s7, rz.s7, ra.s7), 0, rgba + 16);
+        shade_store_rgba8((__global uchar *)(out.rgba + pix), rx, ry, rz, ra);
         return;
     }
 #define RESOLVE_STORE(l, c)                                                                         \

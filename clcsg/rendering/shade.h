@@ -115,6 +115,15 @@ inline uchar8 shade_encode8(__global const view_rec *vw, float8 c)
     return convert_uchar8_sat(exp2((1.0f / vw->gamma) * log2(c)) * 255.0f + 0.5f);
 }
 
+/* Eight pixels' channel bytes written as RGBA, interleaved, to rgba[0 .. 32). */
+inline void shade_store_rgba8(__global uchar *rgba, uchar8 r, uchar8 g, uchar8 b, uchar8 a)
+{
+    vstore16((uchar16)(r.s0, g.s0, b.s0, a.s0, r.s1, g.s1, b.s1, a.s1,
+                       r.s2, g.s2, b.s2, a.s2, r.s3, g.s3, b.s3, a.s3), 0, rgba);
+    vstore16((uchar16)(r.s4, g.s4, b.s4, a.s4, r.s5, g.s5, b.s5, a.s5,
+                       r.s6, g.s6, b.s6, a.s6, r.s7, g.s7, b.s7, a.s7), 0, rgba + 16);
+}
+
 /* shade_light1 on vectors: the lit colour of one pixel (n: the unit normal, v: the unit view ray). */
 inline float3 shade_light(__global const view_rec *vw, float4 albedo, float3 n, float3 v)
 {
