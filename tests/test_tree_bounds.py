@@ -559,3 +559,14 @@ def test_guard_refuses_only_what_really_does_not_fit(cl_context):
     assert len(ok) == len(s)
     with pytest.raises(LimitError, match="measured by sampling at radius"):
         clcsg.sample(prog.shape, r, device=cl_context, max_samples=int(0.5 * len(s)))
+
+
+def test_a_cone_tip_has_no_face_box():
+    """A cone frustum's cap of radius 0 (its tip) has no face: an empty face box (lo > hi), so
+    the sampler starts no task at the tip, on a point where the classification is degenerate."""
+    tape = clcsg.Scene(clcsg.cone(2, 1.0, 0.0)).compile()
+    (inst,) = tape.instances
+    faces = inst.face_boxes
+    assert len(faces) == 3
+    empty = [bool(np.any(f[0] > f[1])) for f in faces]
+    assert empty.count(True) == 1 and not empty[0]  # the side has a face, one cap has none

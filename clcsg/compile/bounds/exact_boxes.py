@@ -493,8 +493,13 @@ def kind_face_boxes(nodes, matrices, lo, hi, done):
             half = np.sqrt(np.maximum((lin * lin).sum(axis=1) - lw * lw, 0.0))
             mid = lin @ _vec3(p.get("center", (0, 0, 0)), "center") + t
             top, bottom = mid + 0.5 * h * lw, mid - 0.5 * h * lw
-            caps = np.array([(top - r2 * half, top + r2 * half), (bottom - r1 * half, bottom + r1 * half)])
-            out[k] = np.concatenate([box[None], _padded(caps)])
+            caps = _padded(np.array([(top - r2 * half, top + r2 * half), (bottom - r1 * half, bottom + r1 * half)]))
+            # a cone's tip is a cap of radius 0: no face (a box around the tip would make the
+            # sampler start a task there, on a point where the classification is degenerate)
+            for row, r in ((0, r2), (1, r1)):
+                if r == 0:
+                    caps[row] = (np.full(3, np.inf), np.full(3, -np.inf))
+            out[k] = np.concatenate([box[None], caps])
         elif n_lits == 1:
             out[k] = _hinted(box, getattr(node, "face_box", None), m)[None]
     return out
