@@ -293,12 +293,17 @@ def test_float32_path_keeps_the_guarantees(name, cl_context, monkeypatch):
     assert s.packed.real == np.float32
 
 
+@pytest.mark.parametrize("collide", [False, True])
 @pytest.mark.parametrize("seed", range(4))
-def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed):
+def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed, collide, monkeypatch):
     """Random clip programs (lengths 0-5, drawn from few distinct rows so many repeat): each
-    sample reads back its own rows, each distinct program is stored once, empty ones point at 0."""
+    sample reads back its own rows, each distinct program is stored once, empty ones point at 0;
+    also when every program gets the same key."""
+    from clcsg.sampling import sampler
     from clcsg.sampling.sampler import dedupe_programs
 
+    if collide:  # every program one key: the byte check must catch it and group by bytes
+        monkeypatch.setattr(sampler, "program_keys", lambda words: np.zeros(len(words), dtype=np.uint64))
     rng = np.random.default_rng(seed)
     n = 300
     count = rng.integers(0, 6, n).astype(np.int32)

@@ -868,13 +868,38 @@ class _Finisher:
         )
 
 
+#: the odd multipliers of :func:`program_keys`, one per 64-bit word of a program (grown on demand)
+_KEY_MULTIPLIERS = np.zeros(0, dtype=np.uint64)
+
+
+def program_keys(words: np.ndarray) -> np.ndarray:
+    """A 64-bit key per program (rows of ``words``, uint64): sum_j w_j M_j mod 2^64 with fixed
+    odd random multipliers M_j.  Equal programs have equal keys; :func:`dedupe_programs` checks
+    the words of the programs that share one."""
+    global _KEY_MULTIPLIERS
+    k = words.shape[1]
+    if len(_KEY_MULTIPLIERS) < k:
+        rng = np.random.default_rng(0x5EED)
+        _KEY_MULTIPLIERS = rng.integers(1, 2 ** 63, size=max(k, 2 * len(_KEY_MULTIPLIERS), 64),
+                                        dtype=np.uint64) | np.uint64(1)
+    h = words[:, 0] * _KEY_MULTIPLIERS[0]
+    for j in range(1, k):
+        h += words[:, j] * _KEY_MULTIPLIERS[j]
+    return h
+
+
 def dedupe_programs(rows, first, count):
-    """Equal clip programs stored once: (first, count, rows) over a compact row buffer.  Programs
-    of one length are compared as byte strings (a void view of their rows: one sort of keys
-    instead of a lexicographic sort over columns)."""
+    """Equal clip programs stored once: (first, count, rows) over a compact row buffer.
+
+    Programs of one length are gathered as whole rows (a row's 16 bytes as one array element,
+    which ``np.take`` copies three times faster than fancy indexing over columns), grouped by
+    their 64-bit keys (:func:`program_keys`: one sort of integers), and each checked against its
+    group's first program; if a key is shared by programs that differ, that length is grouped
+    by the programs' bytes instead (a void view of its rows, sorted as byte strings)."""
     first = first.copy()
     count = count.copy()
     rows = np.ascontiguousarray(rows, dtype=np.int32)
+    as_elements = rows.view(np.complex128).ravel()  # only copied, never compared as numbers
     out = [np.zeros((0, 4), dtype=np.int32)]
     used = 0
     # the lengths in use from a bincount: np.unique of a plain array imports numpy.ma (about
@@ -882,11 +907,19 @@ def dedupe_programs(rows, first, count):
     for c in np.flatnonzero(np.bincount(count[count > 0].astype(np.int64))):
         sel = np.flatnonzero(count == c)
         idx = first[sel, None] + np.arange(c)[None, :]
-        progs = np.ascontiguousarray(rows[idx].reshape(len(sel), 4 * c))
-        keys = progs.view(np.dtype((np.void, progs.itemsize * 4 * int(c)))).ravel()
-        _, keep, inverse = np.unique(keys, return_index=True, return_inverse=True)
-        out.append(progs[keep].reshape(-1, 4))
-        first[sel] = used + c * np.asarray(inverse).reshape(-1)
+        progs = np.take(as_elements, idx).view(np.uint64).reshape(len(sel), 2 * int(c))
+        keys = program_keys(progs)
+        order = np.argsort(keys, kind="stable")
+        starts = np.concatenate([[True], keys[order][1:] != keys[order][:-1]])
+        keep = order[starts]
+        inverse = np.empty(len(sel), dtype=np.int64)
+        inverse[order] = np.cumsum(starts) - 1
+        if not np.array_equal(np.take(progs, keep[inverse], axis=0), progs):  # a key collision
+            void = progs.view(np.dtype((np.void, progs.itemsize * progs.shape[1]))).ravel()
+            _, keep, inverse = np.unique(void, return_index=True, return_inverse=True)
+            inverse = np.asarray(inverse).reshape(-1)
+        out.append(np.take(progs, keep, axis=0).view(np.int32).reshape(-1, 4))
+        first[sel] = used + c * inverse
         used += len(keep) * c
     first[count == 0] = 0
     return first.astype(np.int32), count.astype(np.int32), np.concatenate(out).astype(np.int32)
