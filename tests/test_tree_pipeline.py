@@ -37,6 +37,8 @@ def check_samples(shape, s, radius, n_lines=8000):
     assert on_q.max() <= 1e-6 * size and on_csg.all(), (~on_csg).sum()
     pad = 1e-3 * size
     ref = T.surface_points(shape, s.bound + [[-pad], [pad]], n_lines=n_lines)
+    if len(ref) <= 100:  # a small or thin solid: few of the lines meet it, so draw ten times more
+        ref = T.surface_points(shape, s.bound + [[-pad], [pad]], n_lines=10 * n_lines)
     assert len(ref) > 100
     missing = uncovered(ref.points, ref.quadrics, oracle_ids(shape, s), radius, slack=1e-5)
     assert len(missing) == 0, f"{len(missing)} of {len(ref)} surface points uncovered, e.g. {ref.points[missing[:3]].tolist()}"
