@@ -185,7 +185,6 @@ def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
         ins = [frozenset(inside[k]) for k in members]
         held = frozenset.intersection(*ins)
         key = frozenset().union(*(near[k] for k in members), *ins) - held
-        held = held - key
         if len(key) > budget:
             break
         budget -= len(key)

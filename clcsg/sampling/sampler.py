@@ -910,7 +910,8 @@ def dedupe_programs(rows, first, count):
         progs = np.take(as_elements, idx).view(np.uint64).reshape(len(sel), 2 * int(c))
         keys = program_keys(progs)
         order = np.argsort(keys, kind="stable")
-        starts = np.concatenate([[True], keys[order][1:] != keys[order][:-1]])
+        ranked = keys[order]
+        starts = np.concatenate([[True], ranked[1:] != ranked[:-1]])
         keep = order[starts]
         inverse = np.empty(len(sel), dtype=np.int64)
         inverse[order] = np.cumsum(starts) - 1
