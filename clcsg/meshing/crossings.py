@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compile.interpret import contains
+from .project import first_order_distance
 
 #: bisection steps of the fallback (2^-50 of an edge)
 BISECTION_STEPS = 50
@@ -41,10 +42,10 @@ def line_roots(matrices, p0, p1):
     return r1, r2
 
 
-def crossings(tape, p0, p1, in0, candidates):
-    """Crossing points of the edges p0 -> p1 (E, 3) whose ends differ in membership (``in0``
-    at p0).  ``candidates`` (E, U) bool: the quadrics that may carry the surface on each edge.
-    Returns (points (E, 3), quadric (E,), fallbacks: how many needed bisection)."""
+def _intervals(tape, p0, p1, candidates):
+    """The candidates' roots along each edge and the membership between them: (ts (E, W + 1)
+    roots padded with 0 before and 1 after, tq (E, W + 1) their quadrics (-1 padding), count (E,)
+    of roots, state (E, W) membership per interval, constant past the last one)."""
     e_idx, q_idx = np.nonzero(candidates)
     r1, r2 = line_roots(tape.quadrics[q_idx], p0[e_idx], p1[e_idx])
     t = np.concatenate([r1, r2])
@@ -70,11 +71,39 @@ def crossings(tape, p0, p1, in0, candidates):
     state[ee, kk] = contains(tape.ops, tape.quadrics, pts)
     last = state[np.arange(n), count]
     state = np.where(valid, state, last[:, None])  # past the last interval: no more flips
+    tq = np.full((n, width + 1), -1, dtype=np.int64)
+    tq[e, rank + 1] = q
+    return ts, tq, count, state
+
+
+def thin_stretches(tape, p0, p1, candidates) -> tuple:
+    """The stretches of the edges p0 -> p1 between two membership changes: a wall, rod or slot
+    the edge crosses, which marching over the edge's two labels cannot see.  Returns (edge,
+    quadric it starts on, quadric it ends on, depth), the depth being the first-order
+    distance of the stretch's middle from the nearer of the two (a stretch an edge merely
+    clips off a curved surface is as deep as its sagitta)."""
+    ts, tq, _count, state = _intervals(tape, p0, p1, candidates)
+    flips = state[:, 1:] != state[:, :-1]  # flip j: at root j + 1
+    e, k = np.nonzero(flips[:, :-1] & flips[:, 1:])  # interval k + 1 between roots k + 1, k + 2
+    qa, qb = tq[e, k + 1], tq[e, k + 2]
+    if not len(e):
+        return e, qa, qb, np.zeros(0)
+    mid_t = 0.5 * (ts[e, k + 1] + ts[e, k + 2])
+    x = p0[e] + mid_t[:, None] * (p1[e] - p0[e])
+    d = np.minimum(first_order_distance(tape.quadrics[qa][:, None], x),
+                   first_order_distance(tape.quadrics[qb][:, None], x))
+    return e, qa, qb, d
+
+
+def crossings(tape, p0, p1, in0, candidates):
+    """Crossing points of the edges p0 -> p1 (E, 3) whose ends differ in membership (``in0``
+    at p0).  ``candidates`` (E, U) bool: the quadrics that may carry the surface on each edge.
+    Returns (points (E, 3), quadric (E,), fallbacks: how many needed bisection)."""
+    n = len(p0)
+    ts, tq, count, state = _intervals(tape, p0, p1, candidates)
     flips = state[:, 1:] != state[:, :-1]
     has = flips.any(axis=1) & (state[:, 0] == in0)
     first = np.argmax(flips, axis=1)  # root number first + 1 in ts
-    tq = np.full((n, width + 1), -1, dtype=np.int64)
-    tq[e, rank + 1] = q
     rows = np.arange(n)
     t_hit = ts[rows, first + 1]
     q_hit = tq[rows, first + 1]

@@ -3,7 +3,9 @@
 The stages, one module each:
 
 1. :mod:`.octree`: the grid cells the surface may cross (octree descent over the pruned tape);
-2. :mod:`.tetra`: marching tetrahedra on those cells: a closed, oriented 2-manifold;
+2. :mod:`.adapt`: their Kuhn tetrahedra, bisected (:mod:`.bisect`) where a feature is
+   thinner than they are; :mod:`.tetra`: marching tetrahedra on them: a closed, oriented
+   2-manifold;
 3. :mod:`.crossings`: every vertex moved onto the exact surface along its crossing edge;
 4. :mod:`.refine`: edges split onto the intersection curves of the quadrics (sharp edges and
    corners, solved by Newton onto two or three quadrics, :mod:`.project`) and on curved patches
@@ -23,17 +25,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..compile.interpret import contains
 from ..errors import SceneError, UsageError
 from ..readers.scenes import as_scene
 from ..sampling.radius import Radius
 from . import planar, refine
+from .adapt import adapt
 from .collapse import collapse_coincident
 from .decimate import decimate
 from .owners import triangle_owners
-from .crossings import crossings
 from .octree import surface_cells
-from .tetra import triangulate
 
 #: default tolerance: 0.1% of the bound's diagonal
 DEFAULT_TOLERANCE = "0.1%"
@@ -92,18 +92,12 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     grid = _timed(stats, "cells", surface_cells, tape, cells)
     stats.update(cells=int(len(grid.ijk)), boxes_tested=int(grid.visited), h=grid.h)
 
-    def inside_of(ids):
-        return contains(tape.ops, tape.quadrics, grid.points(grid.ijk_of(ids)))
-
-    edges, lo_in, tri, edge_cell = _timed(stats, "tetra", triangulate, grid, inside_of)
+    marched = _timed(stats, "adapt", adapt, tape, grid, tol, stats)
+    tri = marched.triangles
     if not len(tri):
         raise SceneError(f"{sc.source}: the solid is empty (or thinner than the grid, "
                          f"{grid.h:.3g} units): there is nothing to mesh")
-    pa, pb = grid.points(grid.ijk_of(edges[:, 0])), grid.points(grid.ijk_of(edges[:, 1]))
-    p_in = np.where(lo_in[:, None], pa, pb)
-    p_out = np.where(lo_in[:, None], pb, pa)
-    verts, vq, fallbacks = _timed(stats, "crossings", crossings, tape, p_in, p_out, np.ones(len(edges), bool),
-                                  grid.quadrics[edge_cell])
+    verts, vq, fallbacks = marched.points, marched.quadric, marched.fallbacks
     stats.update(base_triangles=int(len(tri)), crossing_fallbacks=fallbacks)
     vsets = np.full((len(verts), 3), -1, dtype=np.int64)
     vsets[:, 0] = vq

@@ -1,9 +1,11 @@
-"""Marching tetrahedra on the leaf cells: a closed, consistently oriented 2-manifold.
+"""Marching tetrahedra on a conforming tetrahedral mesh: a closed, consistently oriented
+2-manifold.
 
 Each cube is split into the six tetrahedra of its Kuhn (Freudenthal) triangulation, all
 sharing the diagonal from corner 000 to corner 111; neighbouring cubes then induce the same
-diagonal on their common face, so the tetrahedra form a simplicial complex of the grid.  With
-a binary label per grid point (inside the closed solid or not) the surface is the zero set of
+diagonal on their common face, so the tetrahedra form a simplicial complex of the grid (and
+stay one under :mod:`.bisect`'s refinement).  With
+a binary label per mesh vertex (inside the closed solid or not) the surface is the zero set of
 the piecewise-linear interpolant of the labels: one triangle per tetrahedron with one or three
 inside corners, two (a quad) with two.  That set separates inside from outside labels, is a
 closed 2-manifold without boundary (the outermost grid points are outside) and keeps its
@@ -50,47 +52,44 @@ def _case_table():
 _TABLE = _case_table()
 
 
-def triangulate(cells, inside_of):
-    """Triangles of the cells: (edges (E, 2) grid point ids, inside (E,) bool of edge[:, 0],
-    triangles (T, 3) indices into edges, a cell (E,) holding each edge).  ``inside_of(ids)`` gives the membership of grid
-    points.  Each edge is listed once (its ids sorted)."""
-    ijk = cells.ijk
-    corner_ijk = ijk[:, None, :] + CORNERS[None]  # (C, 8, 3)
-    corner_id = cells.point_ids(corner_ijk)
-    uniq, inv = np.unique(corner_id.ravel(), return_inverse=True)
-    inside_u = inside_of(uniq)
-    ins = inside_u[inv].reshape(-1, 8)
-    tet_id = corner_id[:, KUHN]  # (C, 6, 4)
-    tet_in = ins[:, KUHN]
-    tet_xyz = corner_ijk[:, KUHN]  # (C, 6, 4, 3)
-    mask = (tet_in * (1 << np.arange(4))).sum(axis=2)
-    tris_a, tris_b, owner, cell_of = [], [], [], []
+def triangulate(keys, xyz, inside):
+    """Marching tetrahedra: (edges (E, 2) vertex keys, inside (E,) bool of edge[:, 0],
+    triangles (T, 3) indices into edges, the tetrahedron holding each edge (E,) and each
+    triangle (T,)).  ``keys``
+    (N, 4) int64 and ``xyz`` (N, 4, 3) are the tetrahedra's corners, ``inside`` (N, 4) their
+    membership.  Each edge is listed once (its keys sorted)."""
+    mask = (inside * (1 << np.arange(4))).sum(axis=1)
+    tris_a, tris_b, owner, tet_of = [], [], [], []
     for m, tris in _TABLE.items():
-        sel = np.nonzero(mask == m)
-        if not tris or not len(sel[0]):
+        sel = np.flatnonzero(mask == m)
+        if not tris or not len(sel):
             continue
         for tri in tris:
             pa = np.array([p for p, _ in tri])
             pb = np.array([q for _, q in tri])
-            tris_a.append(tet_id[sel][:, pa])
-            tris_b.append(tet_id[sel][:, pb])
+            tris_a.append(keys[sel][:, pa])
+            tris_b.append(keys[sel][:, pb])
             owner.append((sel, m, pa, pb))
-            cell_of.append(sel[0])
+            tet_of.append(sel)
     if not tris_a:
-        return np.zeros((0, 2), np.int64), np.zeros(0, bool), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-    ea, eb = np.concatenate(tris_a), np.concatenate(tris_b)  # (T, 3) ids, a inside
-    flip = np.concatenate([_needs_flip(tet_xyz[sel], m, pa, pb) for sel, m, pa, pb in owner])
+        none = np.zeros(0, np.int64)
+        return np.zeros((0, 2), np.int64), np.zeros(0, bool), np.zeros((0, 3), np.int64), none, none
+    ea, eb = np.concatenate(tris_a), np.concatenate(tris_b)  # (T, 3) keys, a inside
+    flip = np.concatenate([_needs_flip(xyz[sel], m, pa, pb) for sel, m, pa, pb in owner])
     key_lo, key_hi = np.minimum(ea, eb), np.maximum(ea, eb)
-    n = np.int64(cells.size) ** 3
-    uniq, tri = np.unique(key_lo.ravel() * n + key_hi.ravel(), return_inverse=True)
-    edges = np.stack([uniq // n, uniq % n], axis=1)
+    vk, vi = np.unique(np.concatenate([key_lo.ravel(), key_hi.ravel()]), return_inverse=True)
+    n = np.int64(len(vk))
+    lo_i, hi_i = vi[:key_lo.size], vi[key_lo.size:]
+    uniq, tri = np.unique(lo_i * n + hi_i, return_inverse=True)
+    edges = np.stack([vk[uniq // n], vk[uniq % n]], axis=1)
     tri = tri.reshape(-1, 3)
     lo_inside = np.zeros(len(edges), dtype=bool)
     lo_inside[tri.ravel()] = (key_lo == ea).ravel()
     tri[flip] = tri[flip][:, ::-1]
-    edge_cell = np.zeros(len(edges), dtype=np.int64)
-    edge_cell[tri.ravel()] = np.repeat(np.concatenate(cell_of), 3)
-    return edges, lo_inside, tri, edge_cell
+    tri_tet = np.concatenate(tet_of)
+    edge_tet = np.zeros(len(edges), dtype=np.int64)
+    edge_tet[tri.ravel()] = np.repeat(tri_tet, 3)
+    return edges, lo_inside, tri, edge_tet, tri_tet
 
 
 def _needs_flip(xyz, mask, pa, pb) -> np.ndarray:

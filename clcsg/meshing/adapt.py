@@ -1,0 +1,198 @@
+"""Sub-cell features: bisecting the tetrahedra that hold what the grid is too coarse to see.
+
+Marching tetrahedra sees the solid only through its vertices' labels and one crossing per
+edge.  A feature thinner than a tetrahedron goes missing in two ways, both found exactly:
+
+1. an edge along which the membership changes more than once
+   (:func:`~.crossings.flip_counts`): a wall, rod or slot thinner than the edge crosses it;
+2. a tetrahedron whose crossings lie on two or more quadrics while its pruned tape needs
+   another (the step face between two coaxial cylinders or two parallel planes that no edge
+   crosses): no later split finds that face, since no vertex is on its quadric.
+
+Those tetrahedra are bisected (:mod:`.bisect`), the mesh closed again and the children's
+pruned tapes recomputed over their boxes, until none is left or a cell's tetrahedra have
+been bisected :data:`~.bisect.MAX_BISECTIONS` times (an eighth of its side).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..compile.interpret import contains
+from .bisect import MAX_BISECTIONS, SCALE, TET_EDGES, Tets, kuhn_tets, refine_tets
+from .box_states import _LIVE, box_states
+from .crossings import crossings, thin_stretches
+from .project import first_order_distance
+from .refine import REACH, Surface, _solve, edge_planes, edges_of, on_boundary
+from .tetra import triangulate
+
+
+#: rounds of bisection at most: tetrahedra the closure made coarser than their neighbours are
+#: tested in the rounds after the deepest (a tail of few)
+MAX_ROUNDS = MAX_BISECTIONS + 3
+
+
+class Labels:
+    """Membership of lattice points by key, each evaluated once."""
+
+    def __init__(self, evaluate):
+        self.evaluate = evaluate
+        self.keys = np.zeros(0, dtype=np.int64)
+        self.values = np.zeros(0, dtype=bool)
+
+    def __call__(self, keys) -> np.ndarray:
+        keys = np.asarray(keys, dtype=np.int64)
+        u, inv = np.unique(keys, return_inverse=True)
+        pos = np.searchsorted(self.keys, u)
+        known = (pos < len(self.keys)) & (self.keys[np.minimum(pos, max(len(self.keys) - 1, 0))] == u) \
+            if len(self.keys) else np.zeros(len(u), dtype=bool)
+        new = u[~known]
+        if len(new):
+            allk = np.concatenate([self.keys, new])
+            allv = np.concatenate([self.values, self.evaluate(new)])
+            order = np.argsort(allk, kind="stable")
+            self.keys, self.values = allk[order], allv[order]
+            pos = np.searchsorted(self.keys, u)
+        return self.values[pos][inv].reshape(keys.shape)
+
+
+@dataclass
+class Marched:
+    """Marching tetrahedra on the final mesh, its vertices on the exact surface: edges (E, 2)
+    lattice keys, the crossing ``points`` (E, 3) and their quadric ``quadric`` (E,), triangles
+    (T, 3) into the edges."""
+
+    edges: np.ndarray
+    points: np.ndarray
+    quadric: np.ndarray
+    triangles: np.ndarray
+    fallbacks: int
+
+
+def _prune(tape, tets: Tets, point) -> None:
+    """The pruned tapes of the new tetrahedra over their boxes (within the parent's)."""
+    fresh = np.flatnonzero(~tets.pruned)
+    if not len(fresh):
+        return
+    p = point(tets.keys(tets.xyz[fresh]).reshape(-1)).reshape(-1, 4, 3)
+    root, needed = box_states(tape, p.min(axis=1), p.max(axis=1))
+    tets.quadrics[fresh] &= needed & (root == _LIVE)[:, None]
+    tets.pruned[fresh] = True
+
+
+def _march(tape, tets: Tets, labels, point) -> tuple:
+    """Marching tetrahedra and the crossings, plus the tetrahedron of each triangle."""
+    keys = tets.keys()
+    inside = labels(keys)
+    edges, lo_in, tri, edge_tet, tri_tet = triangulate(keys, tets.xyz, inside)
+    pa, pb = point(edges[:, 0]), point(edges[:, 1])
+    p_in = np.where(lo_in[:, None], pa, pb)
+    p_out = np.where(lo_in[:, None], pb, pa)
+    verts, vq, fallbacks = crossings(tape, p_in, p_out, np.ones(len(edges), bool), tets.quadrics[edge_tet])
+    return Marched(edges, verts, vq, tri, fallbacks), tri_tet
+
+
+def _unresolved_spans(tape, marched: Marched, tri_tet, check, tol) -> np.ndarray:
+    """Triangles' tetrahedra (indices) with a triangle edge whose ends lie on two quadrics that
+    no intersection curve joins near it: :func:`~.refine.refine` would find none either, since
+    the surface between them is on a third quadric no vertex is on (the step face between two
+    coaxial cylinders or two parallel planes that no tetrahedron edge crosses).  Only the
+    triangles of the tetrahedra ``check`` (bool) are tested, and only edges whose middle is
+    farther than ``tol`` from both quadrics (where two quadrics touch, a cylinder tangent to a
+    plane, the edge is as close to the surface as a chord, and Newton has no crossing)."""
+    sets = np.full((len(marched.quadric), 3), -1, dtype=np.int64)
+    sets[:, 0] = marched.quadric
+    m = Surface(tape, marched.points, sets, marched.triangles)
+    edges, tri_edge = edges_of(m.triangles)
+    a, b = edges[:, 0], edges[:, 1]
+    tested = np.zeros(len(edges), dtype=bool)
+    tested[tri_edge[check[tri_tet]].ravel()] = True
+    span = np.flatnonzero(tested & (marched.quadric[a] != marched.quadric[b]))
+    mid = 0.5 * (m.vertices[a[span]] + m.vertices[b[span]])
+    far = np.minimum(first_order_distance(tape.quadrics[marched.quadric[a[span]]][:, None], mid),
+                     first_order_distance(tape.quadrics[marched.quadric[b[span]]][:, None], mid)) > tol
+    span, mid = span[far], mid[far]
+    if not len(span):
+        return np.zeros(0, dtype=np.int64)
+    sets = np.stack([marched.quadric[a[span]], marched.quadric[b[span]], np.full(len(span), -1)], axis=1)
+    length = np.linalg.norm(m.vertices[a[span]] - m.vertices[b[span]], axis=1)
+    x, ok = _solve(tape, sets, mid, edge_planes(m, edges, tri_edge)[span])
+    ok &= np.linalg.norm(x - mid, axis=1) <= REACH * length
+    ok[ok] = on_boundary(tape, x[ok])
+    bad = np.zeros(len(edges), dtype=bool)
+    bad[span[~ok]] = True
+    return np.unique(tri_tet[bad[tri_edge].any(axis=1)])
+
+
+def _thin_features(tape, tets: Tets, point, tol, check, on) -> np.ndarray:
+    """Tetrahedra ``check`` (bool (T,) in, out) with an edge that crosses a stretch of the
+    solid or of its outside (:func:`~.crossings.thin_stretches`) deeper than ``tol`` whose
+    quadrics are not both among the tetrahedron's crossings (``on``: sorted keys tet * U + q):
+    there, marching misses a wall or a rod.  A stretch on quadrics the tetrahedron's triangles
+    already reach is a curved patch clipped by the edge, which the later splits recover."""
+    live = np.flatnonzero(check & tets.quadrics.any(axis=1))
+    out = np.zeros(len(tets), dtype=bool)
+    if not len(live):
+        return out
+    ek = tets.keys()[live][:, TET_EDGES]  # (L, 6, 2)
+    lo, hi = ek.min(axis=2).ravel(), ek.max(axis=2).ravel()
+    vk, vi = np.unique(np.concatenate([lo, hi]), return_inverse=True)
+    n = np.int64(len(vk))
+    pair = vi[:len(lo)] * n + vi[len(lo):]
+    uniq, first, inv = np.unique(pair, return_index=True, return_inverse=True)
+    holder = live[first // 6]
+    e, qa, qb, depth = thin_stretches(tape, point(vk[uniq // n]), point(vk[uniq % n]), tets.quadrics[holder])
+    deep = depth > tol
+    e, qa, qb = e[deep], qa[deep], qb[deep]
+    if not len(e):
+        return out
+    # every (tetrahedron, edge) slot against the stretches of its edge
+    order = np.argsort(e, kind="stable")
+    e, qa, qb = e[order], qa[order], qb[order]
+    start = np.searchsorted(e, np.arange(len(uniq)))
+    count = np.searchsorted(e, np.arange(len(uniq)), side="right") - start
+    slot = np.flatnonzero(count[inv] > 0)
+    reps = count[inv[slot]]
+    slot_r = np.repeat(slot, reps)
+    idx = np.repeat(start[inv[slot]], reps) + (np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps))
+    tet = live[slot_r // 6]
+    u = np.int64(tets.quadrics.shape[1])
+    seen = _isin_sorted(tet * u + qa[idx], on) & _isin_sorted(tet * u + qb[idx], on)
+    out[tet[~seen]] = True
+    return out
+
+
+def _isin_sorted(x, sorted_keys) -> np.ndarray:
+    if not len(sorted_keys):
+        return np.zeros(len(x), dtype=bool)
+    pos = np.minimum(np.searchsorted(sorted_keys, x), len(sorted_keys) - 1)
+    return sorted_keys[pos] == x
+
+
+def adapt(tape, grid, tol: float, stats: dict) -> Marched:
+    """The grid's Kuhn tetrahedra, bisected where features are thinner than they are (and
+    deeper than half the tolerance ``tol``), and marching tetrahedra on the result."""
+    tets = kuhn_tets(grid)
+
+    def point(keys):
+        return grid.origin + (grid.h / SCALE) * tets.lattice(keys)
+
+    labels = Labels(lambda keys: contains(tape.ops, tape.quadrics, point(keys)))
+    per_round = []
+    new = np.ones(len(tets), dtype=bool)
+    for _round in range(MAX_ROUNDS + 1):
+        marched, tri_tet = _march(tape, tets, labels, point)
+        check = new & (tets.depth < MAX_BISECTIONS)  # the others were tested before
+        on = np.unique(tri_tet.repeat(3) * np.int64(tets.quadrics.shape[1]) + marched.quadric[marched.triangles].ravel())
+        flag = _thin_features(tape, tets, point, 0.5 * tol, check, on)
+        flag[_unresolved_spans(tape, marched, tri_tet, check, 0.5 * tol)] = True
+        if not flag.any() or _round == MAX_ROUNDS:
+            break
+        per_round.append(int(flag.sum()))
+        tets = refine_tets(tets, np.flatnonzero(flag))
+        new = ~tets.pruned
+        _prune(tape, tets, point)
+    stats.update(tetrahedra=len(tets), bisected_per_round=per_round, deepest=int(tets.depth.max(initial=0)))
+    return marched
