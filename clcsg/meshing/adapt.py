@@ -34,28 +34,73 @@ from .tetra import triangulate
 MAX_ROUNDS = MAX_BISECTIONS + 3
 
 
+class _Store:
+    """Values by int64 key, kept sorted for lookups (columns of numpy arrays)."""
+
+    def __init__(self, **columns):
+        self.keys = np.zeros(0, dtype=np.int64)
+        self.columns = columns
+
+    def known(self, u) -> np.ndarray:
+        """Which of the unique keys ``u`` are stored."""
+        if not len(self.keys):
+            return np.zeros(len(u), dtype=bool)
+        pos = np.minimum(np.searchsorted(self.keys, u), len(self.keys) - 1)
+        return self.keys[pos] == u
+
+    def add(self, keys, **columns) -> None:
+        allk = np.concatenate([self.keys, keys])
+        order = np.argsort(allk, kind="stable")
+        self.keys = allk[order]
+        for name, values in columns.items():
+            self.columns[name] = np.concatenate([self.columns[name], values])[order]
+
+    def get(self, name, keys) -> np.ndarray:
+        return self.columns[name][np.searchsorted(self.keys, keys)]
+
+
 class Labels:
-    """Membership of lattice points by key, each evaluated once."""
+    """Membership of lattice points by key, each evaluated once, and a stable small id per
+    point (the order they were first asked for)."""
 
     def __init__(self, evaluate):
         self.evaluate = evaluate
-        self.keys = np.zeros(0, dtype=np.int64)
-        self.values = np.zeros(0, dtype=bool)
+        self.store = _Store(inside=np.zeros(0, dtype=bool), id=np.zeros(0, dtype=np.int64))
 
     def __call__(self, keys) -> np.ndarray:
         keys = np.asarray(keys, dtype=np.int64)
         u, inv = np.unique(keys, return_inverse=True)
-        pos = np.searchsorted(self.keys, u)
-        known = (pos < len(self.keys)) & (self.keys[np.minimum(pos, max(len(self.keys) - 1, 0))] == u) \
-            if len(self.keys) else np.zeros(len(u), dtype=bool)
-        new = u[~known]
+        new = u[~self.store.known(u)]
         if len(new):
-            allk = np.concatenate([self.keys, new])
-            allv = np.concatenate([self.values, self.evaluate(new)])
-            order = np.argsort(allk, kind="stable")
-            self.keys, self.values = allk[order], allv[order]
-            pos = np.searchsorted(self.keys, u)
-        return self.values[pos][inv].reshape(keys.shape)
+            n = len(self.store.keys)
+            self.store.add(new, inside=self.evaluate(new), id=np.arange(n, n + len(new)))
+        return self.store.get("inside", u)[inv].reshape(keys.shape)
+
+    def ids(self, keys) -> np.ndarray:
+        """The ids of labelled points."""
+        return self.store.get("id", np.asarray(keys, dtype=np.int64))
+
+
+class _Crossings:
+    """Each marching edge's crossing, solved once: the edges persist across rounds of
+    bisection wherever their tetrahedra were not cut."""
+
+    def __init__(self):
+        self.store = _Store(point=np.zeros((0, 3)), quadric=np.zeros(0, dtype=np.int64))
+        self.fallbacks = 0
+
+    def __call__(self, tape, labels, edges, lo_in, candidates, point) -> tuple:
+        ids = labels.ids(edges)
+        code = np.minimum(ids[:, 0], ids[:, 1]) * np.int64(1 << 32) + np.maximum(ids[:, 0], ids[:, 1])
+        new = np.flatnonzero(~self.store.known(code))
+        if len(new):
+            pa, pb = point(edges[new, 0]), point(edges[new, 1])
+            lo = lo_in[new, None]
+            x, q, fallbacks = crossings(tape, np.where(lo, pa, pb), np.where(lo, pb, pa),
+                                        np.ones(len(new), bool), candidates[new])
+            self.fallbacks += fallbacks
+            self.store.add(code[new], point=x, quadric=q)
+        return self.store.get("point", code), self.store.get("quadric", code)
 
 
 @dataclass
@@ -82,16 +127,13 @@ def _prune(tape, tets: Tets, point) -> None:
     tets.pruned[fresh] = True
 
 
-def _march(tape, tets: Tets, labels, point) -> tuple:
+def _march(tape, tets: Tets, labels, solved, point) -> tuple:
     """Marching tetrahedra and the crossings, plus the tetrahedron of each triangle."""
     keys = tets.keys()
     inside = labels(keys)
     edges, lo_in, tri, edge_tet, tri_tet = triangulate(keys, tets.xyz, inside)
-    pa, pb = point(edges[:, 0]), point(edges[:, 1])
-    p_in = np.where(lo_in[:, None], pa, pb)
-    p_out = np.where(lo_in[:, None], pb, pa)
-    verts, vq, fallbacks = crossings(tape, p_in, p_out, np.ones(len(edges), bool), tets.quadrics[edge_tet])
-    return Marched(edges, verts, vq, tri, fallbacks), tri_tet
+    verts, vq = solved(tape, labels, edges, lo_in, tets.quadrics[edge_tet], point)
+    return Marched(edges, verts, vq, tri, solved.fallbacks), tri_tet
 
 
 def _unresolved_spans(tape, marched: Marched, tri_tet, check, tol) -> np.ndarray:
@@ -180,10 +222,11 @@ def adapt(tape, grid, tol: float, stats: dict) -> Marched:
         return grid.origin + (grid.h / SCALE) * tets.lattice(keys)
 
     labels = Labels(lambda keys: contains(tape.ops, tape.quadrics, point(keys)))
+    solved = _Crossings()
     per_round = []
     new = np.ones(len(tets), dtype=bool)
     for _round in range(MAX_ROUNDS + 1):
-        marched, tri_tet = _march(tape, tets, labels, point)
+        marched, tri_tet = _march(tape, tets, labels, solved, point)
         check = new & (tets.depth < MAX_BISECTIONS)  # the others were tested before
         on = np.unique(tri_tet.repeat(3) * np.int64(tets.quadrics.shape[1]) + marched.quadric[marched.triangles].ravel())
         flag = _thin_features(tape, tets, point, 0.5 * tol, check, on)
