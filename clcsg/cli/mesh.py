@@ -17,7 +17,8 @@ def add_parser(subparsers):
         description=f"""
             Mesh a scene (.json, OpenSCAD .csg or .scad) into a closed, consistently oriented,
             2-manifold triangle mesh: marching tetrahedra on the grid cells the pruned tape
-            keeps, every vertex solved onto the exact quadric surface in double precision,
+            keeps (their tetrahedra bisected where a wall, rod or step is thinner than a
+            cell), every vertex solved onto the exact quadric surface in double precision,
             edges split onto the exact intersection curves of the quadrics (sharp edges and
             corners) and on curved patches until the chord error is under the tolerance, then
             edges collapsed wherever the chord error bound and the sharp edges allow (curved
@@ -40,7 +41,7 @@ def add_parser(subparsers):
                         f"(default {DEFAULT_TOLERANCE.replace('%', '%%')})")
     p.add_argument("--cells", metavar="N", type=positive_int, default=DEFAULT_CELLS,
                    help=f"grid cells over the bound's longest side before refinement (default {DEFAULT_CELLS}); "
-                        "features thinner than a cell may be lost, raise it for thin walls")
+                        "features thinner than an eighth of a cell may be lost, raise it for thinner walls")
     p.add_argument("--bound", metavar="x0,y0,z0,x1,y1,z1", default=None,
                    help="box that clips unbounded terms (overrides the scene's own bound)")
 
