@@ -3,15 +3,18 @@
 Marching tetrahedra sees the solid only through its vertices' labels and one crossing per
 edge.  A feature thinner than a tetrahedron goes missing in two ways, both found exactly:
 
-1. an edge along which the membership changes more than once
-   (:func:`~.crossings.flip_counts`): a wall, rod or slot thinner than the edge crosses it;
-2. a tetrahedron whose crossings lie on two or more quadrics while its pruned tape needs
-   another (the step face between two coaxial cylinders or two parallel planes that no edge
-   crosses): no later split finds that face, since no vertex is on its quadric.
+1. an edge crosses a stretch of the solid or of its outside between two membership changes
+   (:func:`~.crossings.thin_stretches`), deeper than half the tolerance, on quadrics the
+   tetrahedron's crossings do not both reach: a wall, fin or rod thinner than the edge;
+2. a triangle edge joins two quadrics that no intersection curve joins near it (a step face
+   between two coaxial cylinders or two parallel planes that no tetrahedron edge crosses):
+   no later split finds that face, since no vertex is on its quadric.
 
 Those tetrahedra are bisected (:mod:`.bisect`), the mesh closed again and the children's
-pruned tapes recomputed over their boxes, until none is left or a cell's tetrahedra have
-been bisected :data:`~.bisect.MAX_BISECTIONS` times (an eighth of its side).
+pruned tapes recomputed over their boxes, until none is left, a cell's tetrahedra have been
+bisected :data:`~.bisect.MAX_BISECTIONS` times (an eighth of its side) or after
+:data:`MAX_ROUNDS`.  Only the tetrahedra made in a round are tested in the next, and each
+crossing is solved once.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..compile.interpret import contains
-from .bisect import MAX_BISECTIONS, SCALE, TET_EDGES, Tets, kuhn_tets, refine_tets
+from .bisect import MAX_BISECTIONS, SCALE, TET_EDGES, Tets, isin_sorted, kuhn_tets, refine_tets
 from .box_states import _LIVE, box_states
 from .crossings import crossings, thin_stretches
 from .project import first_order_distance
@@ -43,10 +46,7 @@ class _Store:
 
     def known(self, u) -> np.ndarray:
         """Which of the unique keys ``u`` are stored."""
-        if not len(self.keys):
-            return np.zeros(len(u), dtype=bool)
-        pos = np.minimum(np.searchsorted(self.keys, u), len(self.keys) - 1)
-        return self.keys[pos] == u
+        return isin_sorted(u, self.keys)
 
     def add(self, keys, **columns) -> None:
         allk = np.concatenate([self.keys, keys])
@@ -81,6 +81,13 @@ class Labels:
         return self.store.get("id", np.asarray(keys, dtype=np.int64))
 
 
+def edge_codes(labels, a, b) -> np.ndarray:
+    """One int64 per edge between labelled lattice points ``a``, ``b`` (same shape), the same
+    for (a, b) and (b, a)."""
+    ia, ib = labels.ids(a), labels.ids(b)
+    return np.minimum(ia, ib) * np.int64(1 << 32) + np.maximum(ia, ib)
+
+
 class _Crossings:
     """Each marching edge's crossing, solved once: the edges persist across rounds of
     bisection wherever their tetrahedra were not cut."""
@@ -90,8 +97,7 @@ class _Crossings:
         self.fallbacks = 0
 
     def __call__(self, tape, labels, edges, lo_in, candidates, point) -> tuple:
-        ids = labels.ids(edges)
-        code = np.minimum(ids[:, 0], ids[:, 1]) * np.int64(1 << 32) + np.maximum(ids[:, 0], ids[:, 1])
+        code = edge_codes(labels, edges[:, 0], edges[:, 1])
         new = np.flatnonzero(~self.store.known(code))
         if len(new):
             pa, pb = point(edges[new, 0]), point(edges[new, 1])
@@ -105,11 +111,10 @@ class _Crossings:
 
 @dataclass
 class Marched:
-    """Marching tetrahedra on the final mesh, its vertices on the exact surface: edges (E, 2)
-    lattice keys, the crossing ``points`` (E, 3) and their quadric ``quadric`` (E,), triangles
-    (T, 3) into the edges."""
+    """Marching tetrahedra on the final mesh, its vertices on the exact surface: per crossed
+    edge its crossing ``points`` (E, 3) and their quadric ``quadric`` (E,), triangles (T, 3)
+    into them."""
 
-    edges: np.ndarray
     points: np.ndarray
     quadric: np.ndarray
     triangles: np.ndarray
@@ -121,7 +126,7 @@ def _prune(tape, tets: Tets, point) -> None:
     fresh = np.flatnonzero(~tets.pruned)
     if not len(fresh):
         return
-    p = point(tets.keys(tets.xyz[fresh]).reshape(-1)).reshape(-1, 4, 3)
+    p = point(tets.keys(tets.xyz[fresh]))  # (F, 4, 3)
     root, needed = box_states(tape, p.min(axis=1), p.max(axis=1))
     tets.quadrics[fresh] &= needed & (root == _LIVE)[:, None]
     tets.pruned[fresh] = True
@@ -133,7 +138,7 @@ def _march(tape, tets: Tets, labels, solved, point) -> tuple:
     inside = labels(keys)
     edges, lo_in, tri, edge_tet, tri_tet = triangulate(keys, tets.xyz, inside)
     verts, vq = solved(tape, labels, edges, lo_in, tets.quadrics[edge_tet], point)
-    return Marched(edges, verts, vq, tri, solved.fallbacks), tri_tet
+    return Marched(verts, vq, tri, solved.fallbacks), tri_tet
 
 
 def _unresolved_spans(tape, marched: Marched, tri_tet, check, tol) -> np.ndarray:
@@ -168,7 +173,7 @@ def _unresolved_spans(tape, marched: Marched, tri_tet, check, tol) -> np.ndarray
     return np.unique(tri_tet[bad[tri_edge].any(axis=1)])
 
 
-def _thin_features(tape, tets: Tets, point, tol, check, on) -> np.ndarray:
+def _thin_features(tape, tets: Tets, point, tol, check, labels, on) -> np.ndarray:
     """Tetrahedra ``check`` (bool (T,) in, out) with an edge that crosses a stretch of the
     solid or of its outside (:func:`~.crossings.thin_stretches`) deeper than ``tol`` whose
     quadrics are not both among the tetrahedron's crossings (``on``: sorted keys tet * U + q):
@@ -179,13 +184,11 @@ def _thin_features(tape, tets: Tets, point, tol, check, on) -> np.ndarray:
     if not len(live):
         return out
     ek = tets.keys()[live][:, TET_EDGES]  # (L, 6, 2)
-    lo, hi = ek.min(axis=2).ravel(), ek.max(axis=2).ravel()
-    vk, vi = np.unique(np.concatenate([lo, hi]), return_inverse=True)
-    n = np.int64(len(vk))
-    pair = vi[:len(lo)] * n + vi[len(lo):]
-    uniq, first, inv = np.unique(pair, return_index=True, return_inverse=True)
+    uniq, first, inv = np.unique(edge_codes(labels, ek[..., 0], ek[..., 1]).ravel(),
+                                 return_index=True, return_inverse=True)
+    ends = ek.reshape(-1, 2)[first]
     holder = live[first // 6]
-    e, qa, qb, depth = thin_stretches(tape, point(vk[uniq // n]), point(vk[uniq % n]), tets.quadrics[holder])
+    e, qa, qb, depth = thin_stretches(tape, point(ends[:, 0]), point(ends[:, 1]), tets.quadrics[holder])
     deep = depth > tol
     e, qa, qb = e[deep], qa[deep], qb[deep]
     if not len(e):
@@ -201,16 +204,9 @@ def _thin_features(tape, tets: Tets, point, tol, check, on) -> np.ndarray:
     idx = np.repeat(start[inv[slot]], reps) + (np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps))
     tet = live[slot_r // 6]
     u = np.int64(tets.quadrics.shape[1])
-    seen = _isin_sorted(tet * u + qa[idx], on) & _isin_sorted(tet * u + qb[idx], on)
+    seen = isin_sorted(tet * u + qa[idx], on) & isin_sorted(tet * u + qb[idx], on)
     out[tet[~seen]] = True
     return out
-
-
-def _isin_sorted(x, sorted_keys) -> np.ndarray:
-    if not len(sorted_keys):
-        return np.zeros(len(x), dtype=bool)
-    pos = np.minimum(np.searchsorted(sorted_keys, x), len(sorted_keys) - 1)
-    return sorted_keys[pos] == x
 
 
 def adapt(tape, grid, tol: float, stats: dict) -> Marched:
@@ -229,7 +225,7 @@ def adapt(tape, grid, tol: float, stats: dict) -> Marched:
         marched, tri_tet = _march(tape, tets, labels, solved, point)
         check = new & (tets.depth < MAX_BISECTIONS)  # the others were tested before
         on = np.unique(tri_tet.repeat(3) * np.int64(tets.quadrics.shape[1]) + marched.quadric[marched.triangles].ravel())
-        flag = _thin_features(tape, tets, point, 0.5 * tol, check, on)
+        flag = _thin_features(tape, tets, point, 0.5 * tol, check, labels, on)
         flag[_unresolved_spans(tape, marched, tri_tet, check, 0.5 * tol)] = True
         if not flag.any() or _round == MAX_ROUNDS:
             break

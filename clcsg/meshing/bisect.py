@@ -74,7 +74,8 @@ def kuhn_tets(cells) -> Tets:
 def bisect(tets: Tets, sel) -> tuple:
     """``tets`` with the tetrahedra ``sel`` (indices) each replaced by its two children, the
     children last.  Returns (new Tets, parent of each child (2 S,) into the old tets, the cuts:
-    keys of the midpoints (S,) and of the cut edges' ends (S, 2)); the children inherit their parent's quadrics (a superset: callers may prune them)."""
+    keys of the midpoints (S,) and of the cut edges' ends (S, 2)).  The children inherit their
+    parent's quadrics (a superset: callers may prune them)."""
     sel = np.asarray(sel, dtype=np.int64)
     x, k = tets.xyz[sel], tets.tag[sel].astype(np.int64)
     twice = x[:, 0] + x[np.arange(len(sel)), k]
@@ -100,7 +101,10 @@ def bisect(tets: Tets, sel) -> tuple:
         (tets.keys(z), tets.keys(np.stack([x[:, 0], x[np.arange(len(sel)), k]], axis=1)))
 
 
-def _isin(x, sorted_keys) -> np.ndarray:
+def isin_sorted(x, sorted_keys) -> np.ndarray:
+    """Which of ``x`` are among ``sorted_keys`` (sorted, int64)."""
+    if not len(sorted_keys):
+        return np.zeros(np.shape(x), dtype=bool)
     pos = np.minimum(np.searchsorted(sorted_keys, x), len(sorted_keys) - 1)
     return sorted_keys[pos] == x
 
@@ -109,11 +113,11 @@ def hanging(tets: Tets, midpoints, ends) -> np.ndarray:
     """Tetrahedra (indices) with one of the vertex keys ``midpoints`` (sorted) at the middle of
     an edge.  In a mesh that conformed before some bisections only their midpoints can be such
     vertices, and only on edges between two of their edges' ends (``ends``, sorted)."""
-    near = np.flatnonzero(_isin(tets.keys(), ends).sum(axis=1) >= 2)
+    near = np.flatnonzero(isin_sorted(tets.keys(), ends).sum(axis=1) >= 2)
     x = tets.xyz[near]
     s = x[:, TET_EDGES[:, 0]] + x[:, TET_EDGES[:, 1]]  # (N, 6, 3): twice the midpoints
     even = np.all(s % 2 == 0, axis=2)
-    hit = even & _isin(tets.keys(s // 2), midpoints)
+    hit = even & isin_sorted(tets.keys(s // 2), midpoints)
     return near[hit.any(axis=1)]
 
 

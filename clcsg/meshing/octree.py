@@ -35,18 +35,6 @@ class Cells:
     size: int
     visited: int  # boxes tested over all levels
 
-    def points(self, ijk) -> np.ndarray:
-        return self.origin + self.h * np.asarray(ijk, dtype=np.float64)
-
-    def ijk_of(self, ids) -> np.ndarray:
-        """Integer corners (N, 3) of grid point ids (the inverse of :meth:`point_ids`)."""
-        ids = np.asarray(ids, dtype=np.int64)
-        return np.stack([ids // (self.size * self.size), (ids // self.size) % self.size, ids % self.size], axis=-1)
-
-    def point_ids(self, ijk) -> np.ndarray:
-        ijk = np.asarray(ijk, dtype=np.int64)
-        return (ijk[..., 0] * self.size + ijk[..., 1]) * self.size + ijk[..., 2]
-
 
 def surface_cells(tape, cells_per_side: int) -> Cells:
     """The leaf cells (about ``cells_per_side`` over the bound's longest side) the surface may
