@@ -225,20 +225,21 @@ inline rect splat_bound(__global const view_rec *view, quadric q, real lam_min, 
     return bound;
 }
 
-/* Step 2 on the unit view ray e + t v whose point nearest s is o = e + tc v (w0 = o - s), given
- * the nr roots tau0 <= tau1 of Q(o + tau v) = 0: the depth of the splat's fragment, 0 if none
- * (nearer root first; radius, depth, clip and facing tests).  word: the pixel's framebuffer
- * word as read; a root whose key (with sample index idx) is not below it loses, and so does
- * the farther root. */
-inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op *clip, int nc,
-                           __global const quadric_rec *quadrics, real r, real3 v, real tc, real3 w0, real3 o,
-                           int nr, real tau0, real tau1, ulong word, int idx, ulong *cnt)
+/* Step 2 on the unit view ray e + t v whose point nearest s is o = e + tc v, given the nr roots
+ * tau0 <= tau1 of Q(o + tau v) = a tau^2 + 2 h tau + c = 0: the depth of the splat's fragment,
+ * 0 if none (nearer root first; radius, depth, clip and facing tests).  o - s is orthogonal to
+ * v, so |p - s|^2 = |o - s|^2 + tau^2 and the radius test is tau^2 <= m2 = r^2 - |o - s|^2;
+ * the outward normal's component along the ray is sign grad Q(p).v = 2 sign (a tau + h).
+ * word: the pixel's framebuffer word as read; a root whose key (with sample index idx) is not
+ * below it loses, and so does the farther root. */
+inline real splat_fragment(int sign, int qid, __global const tape_op *clip, int nc,
+                           __global const quadric_rec *quadrics, real m2, real3 v, real tc, real3 o,
+                           int nr, real tau0, real tau1, real a, real h, ulong word, int idx, ulong *cnt)
 {
     for (int k = 0; k < nr; ++k) { /* nearer the eye first */
         real tau = k ? tau1 : tau0;
-        real3 w = w0 + tau * v; /* p - s */
         real depth = tc + tau;
-        if (dot(w, w) > r * r || !(depth > 0)) continue;
+        if (tau * tau > m2 || !(depth > 0)) continue;
         if ((((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx) >= word) return 0; /* loses, as the far root */
         real3 p = o + tau * v;
         int side = sign;
@@ -249,7 +250,7 @@ inline real splat_fragment(quadric q, int sign, int qid, __global const tape_op 
             side = (bits & 1) ? 1 : -1;
         }
 #if BACKFACE_CULLING
-        if (side * dot(quadric_gradient(q, p), v) > 0) continue;
+        if (side * (a * tau + h) > 0) continue;
 #endif
         return depth;
     }
@@ -296,23 +297,18 @@ inline ulong4 splat_keys4(real4 depth, int idx)
  * the radius, depth and facing tests and its key is below the word; one that passes the
  * first two but whose key is not below the word ends the lane (the farther root cannot win
  * either); else the farther root tau1 (nr = 2) under the same tests. */
-inline real4 splat_fragment4(quadric q, int sign, real r, real4 vX, real4 vY, real4 vZ, real4 tc, real4 wX,
-                             real4 wY, real4 wZ, real4 oX, real4 oY, real4 oZ, int4 nr, real4 tau0, real4 tau1,
+inline real4 splat_fragment4(int sign, real4 m2, real4 tc, real4 a, real4 h, int4 nr, real4 tau0, real4 tau1,
                              ulong4 word, int idx)
 {
     int4 ok[2], loses[2], faces[2];
     real4 depth[2];
     for (int k = 0; k < 2; ++k) {
         real4 tau = k ? tau1 : tau0;
-        real4 pX = wX + tau * vX, pY = wY + tau * vY, pZ = wZ + tau * vZ; /* p - s */
         depth[k] = tc + tau;
-        ok[k] = (nr > k) & convert_int4(pX * pX + pY * pY + pZ * pZ <= r * r) & convert_int4(depth[k] > 0);
+        ok[k] = (nr > k) & convert_int4(tau * tau <= m2) & convert_int4(depth[k] > 0);
         loses[k] = convert_int4(splat_keys4(depth[k], idx) >= word);
 #if BACKFACE_CULLING
-        real4 px = oX + tau * vX, py = oY + tau * vY, pz = oZ + tau * vZ;
-        real4 gX = q.xx * px + q.xy * py + q.xz * pz + q.xw, gY = q.xy * px + q.yy * py + q.yz * pz + q.yw,
-              gZ = q.xz * px + q.yz * py + q.zz * pz + q.zw; /* grad Q / 2 (eq. 4) */
-        faces[k] = convert_int4(sign * (gX * vX + gY * vY + gZ * vZ) <= 0);
+        faces[k] = convert_int4(sign * (a * tau + h) <= 0);
 #else
         faces[k] = (int4)(-1);
 #endif
@@ -403,8 +399,8 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             int4 meet = convert_int4(m2 >= 0) & (x + (int4)(0, 1, 2, 3) <= last);
             if (!any(meet)) continue; /* the rays miss the ball */
             real4 oX = e.x + tc * vX, oY = e.y + tc * vY, oZ = e.z + tc * vZ;
-            real4 t1, t2;
-            int4 nr = quadric_intersect4(q, oX, oY, oZ, vX, vY, vZ, &t1, &t2);
+            real4 t1, t2, qa, qh;
+            int4 nr = quadric_intersect4(q, oX, oY, oZ, vX, vY, vZ, &t1, &t2, &qa, &qh);
 #define SPLAT_LANE(l, c)                                                                                    \
             if (meet.c) {                                                                                   \
                 cnt[PC_FRAGMENTS]++;                                                                        \
@@ -413,9 +409,9 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
                 if (splat_occluded(tc.c - 16 * SLACK * (fabs(tc.c) + r), m2.c, word)) {                     \
                     cnt[PC_FRAGMENTS_OCCLUDED]++;                                                           \
                 } else if (nr.c) {                                                                          \
-                    real depth = splat_fragment(q, sign, qid, cp, nc, quadrics, r, (real3)(vX.c, vY.c, vZ.c), \
-                                                tc.c, (real3)(wX.c, wY.c, wZ.c), (real3)(oX.c, oY.c, oZ.c), \
-                                                nr.c, t1.c, t2.c, word, idx, cnt);                          \
+                    real depth = splat_fragment(sign, qid, cp, nc, quadrics, m2.c, (real3)(vX.c, vY.c, vZ.c), \
+                                                tc.c, (real3)(oX.c, oY.c, oZ.c), nr.c, t1.c, t2.c, qa.c,    \
+                                                qh.c, word, idx, cnt);                                      \
                     if (depth > 0) {                                                                        \
                         cnt[PC_FRAGMENTS_PASSED]++;                                                         \
                         splat_depth_test(slot, depth, idx, cnt);                                            \
@@ -439,7 +435,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             cnt[PC_FRAGMENTS] -= meet.x + meet.y + meet.z + meet.w;
             cnt[PC_FRAGMENTS_OCCLUDED] -= occluded.x + occluded.y + occluded.z + occluded.w;
             if (!any(live)) continue;
-            real4 depth = splat_fragment4(q, sign, r, vX, vY, vZ, tc, wX, wY, wZ, oX, oY, oZ, nr, t1, t2, word, idx);
+            real4 depth = splat_fragment4(sign, m2, tc, qa, qh, nr, t1, t2, word, idx);
             int4 pass = live & convert_int4(depth > 0);
             cnt[PC_FRAGMENTS_PASSED] -= pass.x + pass.y + pass.z + pass.w;
             if (pass.x) splat_depth_test(row, depth.x, idx, cnt);

@@ -77,9 +77,10 @@ inline int quadric_intersect(quadric q, real3 o, real3 v, real *t1, real *t2)
 
 /* quadric_intersect on four rays at once, as separate components (o = (oX, oY, oZ), v = ...):
  * per lane the same arithmetic, with selects for its branches.  Returns per lane how many
- * roots (0, 1, 2); t1 <= t2 where there are two, t1 = t2 where one. */
+ * roots (0, 1, 2); t1 <= t2 where there are two, t1 = t2 where one.  Also writes the
+ * polynomial's a and h: grad Q(o + t v).v = 2 (a t + h), the slope along the ray at a root. */
 inline int4 quadric_intersect4(quadric q, real4 oX, real4 oY, real4 oZ, real4 vX, real4 vY, real4 vZ, real4 *t1,
-                               real4 *t2)
+                               real4 *t2, real4 *pa, real4 *ph)
 {
     real4 AvX = q.xx * vX + q.xy * vY + q.xz * vZ, AvY = q.xy * vX + q.yy * vY + q.yz * vZ,
           AvZ = q.xz * vX + q.yz * vY + q.zz * vZ;
@@ -97,6 +98,8 @@ inline int4 quadric_intersect4(quadric q, real4 oX, real4 oY, real4 oZ, real4 vX
     realmask4 both = ok1 & ok2;
     *t1 = select(select(r2, r1, ok1), fmin(r1, r2), both);
     *t2 = select(*t1, fmax(r1, r2), both);
+    *pa = a;
+    *ph = h;
     return convert_int4(-ok1) + convert_int4(-ok2);
 }
 
