@@ -16,6 +16,8 @@ import numpy as np
 ITERATIONS = 40
 #: converged: first-order distances below this times max(1, |x|)
 REL = 1e-12
+#: settled: a step below this times max(1, |x|) (a few units in the last place)
+SETTLED = 4 * np.finfo(np.float64).eps
 
 
 def residuals(matrices, x):
@@ -35,20 +37,34 @@ def first_order_distance(matrices, x) -> np.ndarray:
 
 
 def newton(matrices, x0):
-    """(x, converged) after Newton on the quadrics ``matrices`` (N, k, 4, 4) from ``x0``."""
+    """(x, converged) after Newton on the quadrics ``matrices`` (N, k, 4, 4) from ``x0``.
+
+    A point leaves the iteration once its step is at the rounding of its coordinates
+    (:data:`SETTLED` times its scale) or not finite: the later steps of the fixed
+    :data:`ITERATIONS` could not move it further, so only the points still converging (most
+    settle within a few steps, quadratic convergence) pay for the rest."""
     x = np.array(x0, dtype=np.float64, copy=True)
     k = matrices.shape[1]
     eye = 1e-300 * np.eye(k)
+    live = np.arange(len(x))
+    mats, xa = matrices, x
     with np.errstate(all="ignore"):
         for _ in range(ITERATIONS):
-            f, j = residuals(matrices, x)
+            f, j = residuals(mats, xa)
             jjt = np.matmul(j, j.transpose(0, 2, 1)) + eye
             ok = np.abs(np.linalg.det(jjt)) > 0
             lam = np.zeros_like(f)
             if ok.any():
                 lam[ok] = np.linalg.solve(jjt[ok], f[ok][..., None])[..., 0]
             step = np.matmul(lam[:, None, :], j)[:, 0]
-            x = np.where(np.isfinite(step).all(axis=1, keepdims=True), x - step, x)
+            moving = np.isfinite(step).all(axis=1)
+            xa = np.where(moving[:, None], xa - step, xa)
+            x[live] = xa
+            moving &= np.abs(step).max(axis=1) > SETTLED * np.maximum(1.0, np.abs(xa).max(axis=1))
+            if not moving.all():
+                live, mats, xa = live[moving], mats[moving], xa[moving]
+                if not len(live):
+                    break
         d = first_order_distance(matrices, x)
     scale = np.maximum(1.0, np.abs(x).max(axis=1))
     return x, np.isfinite(d) & (d <= REL * scale) & np.isfinite(x).all(axis=1)
