@@ -24,11 +24,12 @@
  * the slab misses B_q, every primitive on q has the value it has with q's sign taken as s_q
  * all along the stretch: q is not solved (no roots, constant sign s_q), and every membership
  * and substitution test on the stretch is unchanged.  A ray that walks past a few roots
- * prunes the slab tape over the rest of its stretch (ray_prune: a quadric without a root
- * there keeps one sign on it); a tape that becomes constant has no surface there, else the
- * remaining roots are tested on the pruned rows.  The per-ray work is a box test per listed
- * quadric, a solve per quadric whose box the ray meets, and per visited root a pass over the
- * slab tape or, past the first few, over the rows the rest of the stretch leaves.
+ * searches the rest of its stretch by bisection (window_hit): the slab tape pruned over a
+ * window of it (ray_prune: a quadric without a root there keeps one sign on it) is constant
+ * where the window holds no surface, which is then skipped whole; a window of a few roots has
+ * them tested on its pruned rows.  The per-ray work is a box test per listed quadric, a solve
+ * per quadric whose box the ray meets, a pass over the slab tape per visited root for the
+ * first few, and then one per window, about log2 of the roots it passes.
  *
  * Lanes: a work-item traces RAY_LANES (8) neighbouring pixels of a row, which share a tile.
  * Each lane walks the slabs as a ray of its own, but the per-ray arithmetic that does not branch
@@ -255,6 +256,81 @@ inline int lane_bits(realmask8 m)
     return q.x | q.y;
 }
 
+/* The least root of the solved quadrics after t_cur (at t_cur too if `first`), +inf past tb. */
+inline real next_root(const ray_roots *rr, int ns, real t_cur, bool first, real tb)
+{
+    real t_next = INFINITY;
+    for (int k = 0; k < ns; ++k) {
+        int m = rr->solved[k];
+        real a = rr->r1[m], b = rr->r2[m];
+        if ((a > t_cur || (first && a == t_cur)) && a < t_next) t_next = a;
+        if ((b > t_cur || (first && b == t_cur)) && b < t_next) t_next = b;
+    }
+    return t_next <= tb ? t_next : INFINITY;
+}
+
+/* The listed quadric with a root at t on the CSG surface (-1: none), by the membership of the
+ * slab tape t (n rows) or, where nrows > 0, of the rows pruned over a stretch holding t. */
+inline int root_hit(const ray_roots *rr, int ns, real tt, __global const tape_op *t, int n, const tape_op *rows,
+                    int nrows)
+{
+    for (int k = 0; k < ns; ++k) {
+        int m = rr->solved[k];
+        if (rr->r1[m] != tt && rr->r2[m] != tt) continue;
+        uint bits = nrows > 0 ? ray_member(rows, nrows, rr, tt, m) : slab_member(t, n, rr, tt, m);
+        if (bits == 1 || bits == 2) return m;
+    }
+    return -1;
+}
+
+/* The first hit after t_cur (whose roots were visited) up to tb, by bisection of the stretch
+ * in t: a window [lo, hi] whose pruned tape (ray_prune) is constant has no surface and is
+ * skipped whole; one with at most RAY_WALK roots (or that cannot be split further) has its
+ * roots visited in order on its pruned rows; any other is split at its midpoint, the nearer
+ * half first.  So a ray that passes many roots before its hit (the face planes of a mesh
+ * operand, whose extensions cross it everywhere) costs a pass over the slab tape per window,
+ * about log2 of its roots of them, not one per root; the windows are taken in increasing t
+ * and each one's roots in order, so the hit is the first one, as visiting every root finds. */
+#define RAY_WALK 4
+#define RAY_DEPTH 32
+inline int window_hit(const ray_roots *rr, int ns, __global const tape_op *t, int n, real lo, real tb, real *depth)
+{
+    tape_op rows[RAY_ROWS];
+    real ends[RAY_DEPTH];
+    int sp = 0;
+    ends[sp++] = tb;
+    while (sp > 0) {
+        real hi = ends[sp - 1];
+        int r0 = 0, nrows = ray_prune(t, n, rr, lo, hi, rows, &r0);
+        if (nrows != 0) {
+            int roots = 0;
+            for (int k = 0; k < ns && roots <= RAY_WALK; ++k) {
+                int m = rr->solved[k];
+                real a = rr->r1[m], b = rr->r2[m];
+                roots += (a > lo && a <= hi) + (b > lo && b <= hi && b != a);
+            }
+            real mid = lo + (real)0.5 * (hi - lo);
+            if (roots > RAY_WALK && sp < RAY_DEPTH && mid > lo && mid < hi) {
+                ends[sp++] = mid;
+                continue;
+            }
+            for (real t_cur = lo;;) {
+                real t_next = next_root(rr, ns, t_cur, false, hi);
+                if (!(t_next <= hi)) break;
+                int m = root_hit(rr, ns, t_next, t, n, rows + r0, nrows);
+                if (m >= 0) {
+                    *depth = t_next;
+                    return m;
+                }
+                t_cur = t_next;
+            }
+        }
+        lo = hi;
+        --sp;
+    }
+    return -1;
+}
+
 /* The first root in [ta, tb] on the CSG surface of slab tape t (quadrics ql, nq of them):
  * returns the listed index of its quadric (-1: none) and writes its depth. */
 inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, int n, __global const int *ql,
@@ -285,40 +361,22 @@ inline int slab_hit(__global const quadric_rec *qs, __global const tape_op *t, i
         if (rr->r1[m] <= tb) rr->solved[ns++] = m;
     }
     if (ns == 0) return -1;
-    /* after RAY_PRUNE_AFTER roots without a hit, the tape pruned over the rest of the stretch
-     * (nrows -1: the slab's own; most rays hit at their first root and never prune) */
-    tape_op rows[RAY_ROWS];
-    int r0 = 0, nrows = -1, visited = 0;
+    /* the first RAY_PRUNE_AFTER roots on the slab's tape (most rays hit at their first root) */
     real t_cur = ta;
     bool first = ta > 0; /* a root exactly at ta is visited (not one at the eye) */
-    for (;;) {
-        if (RAY_PRUNE && visited == RAY_PRUNE_AFTER) {
-            nrows = ray_prune(t, n, rr, t_cur, tb, rows, &r0);
-            if (nrows == 0) return -1;
-        }
-        ++visited;
-        real t_next = INFINITY;
-        for (int k = 0; k < ns; ++k) {
-            int m = rr->solved[k];
-            real a = rr->r1[m], b = rr->r2[m];
-            if ((a > t_cur || (first && a == t_cur)) && a < t_next) t_next = a;
-            if ((b > t_cur || (first && b == t_cur)) && b < t_next) t_next = b;
-        }
+    for (int visited = 0; !RAY_PRUNE || visited < RAY_PRUNE_AFTER; ++visited) {
+        real t_next = next_root(rr, ns, t_cur, first, tb);
         if (!(t_next <= tb)) return -1;
-        for (int k = 0; k < ns; ++k) {
-            int m = rr->solved[k];
-            if (rr->r1[m] != t_next && rr->r2[m] != t_next) continue;
-            uint bits = nrows > 0 ? ray_member(rows + r0, nrows, rr, t_next, m) : slab_member(t, n, rr, t_next, m);
-            if (bits == 1 || bits == 2) {
-                *depth = t_next;
-                return m;
-            }
+        int m = root_hit(rr, ns, t_next, t, n, 0, 0);
+        if (m >= 0) {
+            *depth = t_next;
+            return m;
         }
         t_cur = t_next;
         first = false;
     }
+    return window_hit(rr, ns, t, n, t_cur, tb, depth);
 }
-
 
 /* The refined depth: solve again from the hit, Q(p0 + tau v) = 0 with p0 = e + t v, and take
  * the root nearest 0 (Q(p0) is tiny there: as accurate as the splats' near-sample solve). */

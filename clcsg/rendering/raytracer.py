@@ -12,9 +12,11 @@ is solved once (the others keep one known sign along it); its roots classify its
 whole ray.  The slab tape is pruned over the stretch (quadrics without a root in it become
 constants), and the roots in the slab are visited in depth order until one is on the CSG
 surface (the membership with the root's quadric substituted differs between its two sides, the
-other leaves taken from the classification).  Exact from any eye position, inside the solid
-included; the cost per ray is a box test per listed quadric, a solve per quadric whose box it
-meets, and one pass over the pruned rows per visited root, not roots x leaves.  A work-item
+other leaves taken from the classification); past the first few, the rest of the stretch is
+searched by bisection, a window whose pruned tape is constant holding no surface.  Exact from
+any eye position, inside the solid included; the cost per ray is a box test per listed
+quadric, a solve per quadric whose box it meets, and a pass over the slab tape per visited
+root for the first few, then per window, not roots x leaves.  A work-item
 traces :data:`~clcsg.cl.constants.RAY_LANES` neighbouring pixels of a row: the arithmetic that
 does not branch (view rays, stretches, box tests, a slab's solves) runs on vectors over them with
 the bits of the per-ray code, and their hits are shaded together.
