@@ -13,7 +13,11 @@ conservative distances (eq. 22 on the tree) at every point of it as the full tap
 The pruned expression is built from the near primitives upwards, so the work per quadric is the
 size of its pruned tape (and of the ancestors of its near primitives), not of the whole tape:
 each inner node knows how many of its operands are FALSE or TRUE when all their primitives are
-far (``default``), and only operands holding a near primitive are visited.
+at their defaults (``default``), and only operands holding a near or fixed primitive are
+visited.  A primitive's default is far, except for a half-space's, which is to hold the region:
+a half-space has no box, and a convex solid of many planes (a hull, a convex mesh) lies in
+nearly all of them, so a region lists only the few half-spaces crossing it or missing it, and
+the work stays with the planes near it, not with all of them.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ class PrimitiveDag:
     ``builder``/``root``: the compiler's hash-consed DAG; ``prims``: expression id -> the
     (instance index, negated) pairs whose expression it is."""
 
-    def __init__(self, builder: _Builder, root: int, prims: dict):
+    def __init__(self, builder: _Builder, root: int, prims: dict, held=frozenset()):
         self.b, self.root = builder, root
         self.order = _postorder(builder, root)
         self.pos = {e: k for k, e in enumerate(self.order)}
@@ -62,9 +66,12 @@ class PrimitiveDag:
                 self.n_false[e] = sum(x is False for x in d)
                 self.n_true[e] = sum(x is True for x in d)
                 self.none_args[e] = [a for a, x in zip(args, d) if x is None]
-            polarities = {neg for _, neg in prims.get(e, ())}
+            owners = prims.get(e, ())
+            polarities = {neg for _, neg in owners}
             if len(polarities) == 1:  # a primitive: FALSE where it is far, its complement TRUE
-                self.default[e] = polarities.pop()
+                neg = polarities.pop()
+                # or, for the held ones, TRUE where it is not listed (its complement FALSE)
+                self.default[e] = (not neg) if all(i in held for i, _ in owners) else neg
             elif kind == _AND:
                 self.default[e] = False if self.n_false[e] else (True if self.n_true[e] == len(args) else None)
             elif kind == _OR:
@@ -72,20 +79,23 @@ class PrimitiveDag:
             else:
                 self.default[e] = None
 
-    def pruned(self, near_instances, inside_instances=()) -> tuple[np.ndarray, int]:
-        """(ops, registers) of the tape with every primitive in ``inside_instances`` TRUE (the
-        region lies in its solid: its complement FALSE) and every other one not in
-        ``near_instances`` far (FALSE, its complement TRUE)."""
+    def pruned(self, near_instances, inside_instances=(), outside_instances=()) -> tuple[np.ndarray, int]:
+        """(ops, registers) of the tape with the primitives of ``near_instances`` kept, those of
+        ``inside_instances`` TRUE (the region lies in their solid: their complements FALSE),
+        those of ``outside_instances`` FALSE (the region misses their solid) and every other one
+        at its default: far (FALSE, its complement TRUE), or TRUE for a held instance (given
+        when the DAG was built: a half-space, whose solid holds most regions)."""
         near = {e for i in near_instances for e in self.by_instance.get(int(i), ())}
         fixed = {}
-        for i in inside_instances:
-            for e in self.by_instance.get(int(i), ()):
-                if e in near:
-                    continue
-                if e in self.negated:
-                    fixed[e] = _FALSE if self.negated[e] else _TRUE
-                else:  # of both polarities: kept as it is (its default would be wrong here)
-                    near.add(e)
+        for values, inside in ((inside_instances, True), (outside_instances, False)):
+            for i in values:
+                for e in self.by_instance.get(int(i), ()):
+                    if e in near:
+                        continue
+                    if e not in self.negated:  # of both polarities: kept as it is
+                        near.add(e)
+                    elif self.default[e] != (inside != self.negated[e]):
+                        fixed[e] = _TRUE if inside != self.negated[e] else _FALSE
         live: dict = {self.root: set()}
         stack = list(near) + list(fixed)
         seen = set(stack)
@@ -139,13 +149,24 @@ class PrimitiveDag:
 
 def primitive_dag(tape) -> PrimitiveDag | None:
     """The :class:`PrimitiveDag` of a tree tape (built once and kept on the tape), None for a
-    tape without one (the DNF shape)."""
+    tape without one (the DNF shape).  Its half-spaces (:func:`half_spaces`) are held: TRUE
+    unless a region lists them as crossing or outside, since a convex solid of many planes (a
+    hull, a convex mesh, a mesh's BSP cell) lies in nearly all of them, so the lists a region
+    gives stay as short as the planes that cross it."""
     if getattr(tape, "dag", None) is None:
         return None
     cached = getattr(tape, "_primitive_dag", None)
     if cached is None:
-        cached = tape._primitive_dag = PrimitiveDag(*tape.dag)
+        cached = tape._primitive_dag = PrimitiveDag(*tape.dag, held=frozenset(half_spaces(tape)))
     return cached
+
+
+def half_spaces(tape) -> list:
+    """The instances of ``tape`` that are one plane's half-space (their box is all of space, so
+    a box test keeps every one near; :func:`_half_space_sides` decides them exactly)."""
+    Q = np.asarray(tape.quadrics)
+    return [k for k, i in enumerate(tape.instances) if i.box is not None and i.node.kind == "halfspace"
+            and len(i.literals) == 1 and not np.any(Q[i.literals[0][0], :3, :3])]
 
 
 #: a quadric whose region holds more than this fraction of the primitives keeps the full tape
@@ -173,7 +194,7 @@ def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
     if dag is None or not regions:
         return out, full
     qs = list(regions)
-    near, inside = _near_sets(tape, qs, regions)
+    near, outside = _near_sets(tape, qs, regions)
     n_inst = len(tape.instances)
     sparse = [k for k, nr in enumerate(near) if len(nr) <= DENSE_FRACTION * n_inst]
     centers = np.array([0.5 * (regions[qs[k]][0] + regions[qs[k]][1]) for k in sparse]).reshape(-1, 3)
@@ -181,33 +202,32 @@ def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
     rows, used, shared, budget = [full], len(full), {}, MAX_NEAR
     for g in range(0, len(sparse), GROUP):
         members = sparse[g:g + GROUP]
-        # a half-space inside some members' regions and outside others' is near for the group
-        ins = [frozenset(inside[k]) for k in members]
-        held = frozenset.intersection(*ins)
-        key = frozenset().union(*(near[k] for k in members), *ins) - held
+        # a half-space outside some members' regions and not others' is near for the group
+        outs = [frozenset(outside[k]) for k in members]
+        missed = frozenset.intersection(*outs)
+        key = frozenset().union(*(near[k] for k in members), *outs) - missed
         if len(key) > budget:
             break
         budget -= len(key)
-        if (key, held) not in shared:
-            ops, regs = dag.pruned(key, held)
+        if (key, missed) not in shared:
+            ops, regs = dag.pruned(key, outside_instances=missed)
             if regs > tape.n_regs or len(ops) >= len(full):
-                shared[key, held] = (0, len(full))
+                shared[key, missed] = (0, len(full))
             else:
-                shared[key, held] = (used, len(ops))
+                shared[key, missed] = (used, len(ops))
                 rows.append(ops)
                 used += len(ops)
         for k in members:
-            out[qs[k]] = shared[key, held]
+            out[qs[k]] = shared[key, missed]
     return out, np.concatenate(rows).astype(np.int32)
 
 
 def _near_sets(tape, qs, regions) -> tuple[list, list]:
-    """Per quadric of ``qs``, (near, inside): the instances whose boxes meet its region, and its
-    owners; and the half-spaces whose solid holds the whole region (:func:`_half_space_sides`:
-    a half-space's box is mostly all of space, so the box test alone keeps every one near)."""
-    Q = np.asarray(tape.quadrics)
-    halves = [k for k, i in enumerate(tape.instances) if i.box is not None and i.node.kind == "halfspace"
-              and len(i.literals) == 1 and not np.any(Q[i.literals[0][0], :3, :3])]
+    """Per quadric of ``qs``, (near, outside): the instances whose boxes meet its region, its
+    owners and the half-spaces whose plane may cross the region; and the half-spaces whose
+    solid misses the whole region (:func:`_half_space_sides`).  The other half-spaces hold it,
+    their default in the :class:`PrimitiveDag` (:func:`primitive_dag`)."""
+    halves = half_spaces(tape)
     is_half = np.zeros(len(tape.instances), dtype=bool)
     is_half[halves] = True
     lo = np.array([i.box[0] if i.box is not None and not h else np.full(3, np.inf)
@@ -222,13 +242,13 @@ def _near_sets(tape, qs, regions) -> tuple[list, list]:
     bounds = np.searchsorted(region_of, np.arange(len(qs) + 1))
     owners = tape.owners()
     near = [set(inst[bounds[k]:bounds[k + 1]].tolist()) | set(owners[q]) for k, q in enumerate(qs)]
-    inside: list = [set() for _ in qs]
+    outside: list = [set() for _ in qs]
     if halves:
-        crossing, within = _half_space_sides(tape, halves, rlo, rhi)
+        crossing, missed = _half_space_sides(tape, halves, rlo, rhi)
         for k in range(len(qs)):
             near[k].update(crossing[k])
-            inside[k].update(within[k])
-    return near, inside
+            outside[k].update(missed[k])
+    return near, outside
 
 
 #: (region, half-space) pairs tested at once in :func:`_half_space_sides`
@@ -237,10 +257,10 @@ _SIDE_CHUNK = 1 << 22
 
 def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
     """Per region box [rlo, rhi] (R, 3), the half-space instances ``halves`` whose plane may
-    cross it and those whose solid holds all of it.  The solid s Q(x) <= 0 of a plane is
-    linear, g . x + c <= 0, so its range over a box is exact: g . m +- sum |g_i| h_i at the
-    box's center m and half-sizes h; a relative slack keeps the cases that rounding could
-    decide wrongly crossing (near)."""
+    cross it and those whose solid misses all of it (the rest hold it).  The solid s Q(x) <= 0
+    of a plane is linear, g . x + c <= 0, so its range over a box is exact: g . m +- sum |g_i|
+    h_i at the box's center m and half-sizes h; a relative slack keeps the cases that rounding
+    could decide wrongly crossing (near)."""
     Q = np.asarray(tape.quadrics, dtype=np.float64)
     qi = np.array([tape.instances[k].literals[0][0] for k in halves])
     sg = np.array([tape.instances[k].literals[0][1] for k in halves], dtype=np.float64)
@@ -249,17 +269,18 @@ def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
     m, h = 0.5 * (rlo + rhi), 0.5 * (rhi - rlo)
     scale = 1.0 + np.abs(np.concatenate([rlo, rhi], axis=1)).max(axis=1)
     ids = np.asarray(halves)
-    crossing, within = [], []
+    crossing, missed = [], []
     step = max(1, _SIDE_CHUNK // max(len(halves), 1))
     for s in range(0, len(m), step):
         v = m[s:s + step] @ g.T + c[None]
         spread = h[s:s + step] @ np.abs(g).T
         slack = 1e-9 * scale[s:s + step, None] * np.linalg.norm(g, axis=1)[None]
         hi_v, lo_v = v + spread + slack, v - spread - slack
-        for k in range(len(v)):
-            within.append(ids[hi_v[k] < 0].tolist())
-            crossing.append(ids[(hi_v[k] >= 0) & (lo_v[k] <= 0)].tolist())
-    return crossing, within
+        for rows, mask in ((crossing, (hi_v >= 0) & (lo_v <= 0)), (missed, lo_v > 0)):
+            r, k = np.nonzero(mask)
+            cuts = np.searchsorted(r, np.arange(len(v) + 1))
+            rows.extend(ids[k[cuts[j]:cuts[j + 1]]].tolist() for j in range(len(v)))
+    return crossing, missed
 
 
 #: boxes per shared tape of :func:`box_tapes` (a few dozen: the tape interpreter's cost per
