@@ -202,7 +202,10 @@ def test_intersect_line_roots_are_on_the_surface(data, case):
         if np.isnan(t):
             continue
         x = p + t * v
-        assert residual_ok(q, x, np.linalg.norm(p) + abs(t)), (mode, t, q.value(x))
+        # the roots are solved from the line's point nearest the quadric's center, so they
+        # carry the rounding of that shift too
+        reach = np.linalg.norm(p) + abs(t) + np.linalg.norm(q.center - p)
+        assert residual_ok(q, x, reach), (mode, t, q.value(x))
 
 
 @SETTINGS
