@@ -13,7 +13,7 @@ import clcsg
 from clcsg.compile.bounds import estimates as guard
 from clcsg.compile.bounds import surface_boxes as sb
 from clcsg.compile.bounds.term_boxes import literal_box
-from clcsg.compile.quadric_frames import principal_frame
+from clcsg.compile.quadric_frames import principal_frame, principal_frames
 from clcsg.model.quadric import Quadric
 from strategies import quadric_cases
 
@@ -59,17 +59,36 @@ def test_surface_boxes_match_the_literal_boxes_and_hold_the_surface(cases, seed)
 
 
 @settings(max_examples=100, deadline=None)
-@given(st.lists(quadric_cases(), min_size=1, max_size=6))
-def test_principal_frames_match_the_per_quadric_frames(cases):
-    U, lam, center, beta, gamma = sb.principal_frames(np.array([c.quadric.matrix for c in cases]))
+@given(st.lists(quadric_cases(), min_size=1, max_size=6), st.integers(0, 2**32 - 1))
+def test_principal_frames_reproduce_each_quadric(cases, seed):
+    """Per quadric of a stack: U orthonormal and right-handed, lam its eigenvalues (snapped
+    ones exactly 0), beta 0 on its non-null axes, a plane's u_3 along its b, and Q(q + U z) =
+    sum(lam z^2 + 2 beta z) + gamma at random z; each row equals the frame of its matrix
+    alone (the stack's neighbours do not change it)."""
+    M = np.array([c.quadric.matrix for c in cases])
+    U, lam, center, beta, gamma = principal_frames(M)
+    rng = np.random.default_rng(seed)
     for k, c in enumerate(cases):
-        f = principal_frame(c.quadric)
-        np.testing.assert_array_equal(lam[k], f.lam)
-        np.testing.assert_allclose(U[k], f.U, atol=1e-12)
-        scale = 1 + np.abs(c.quadric.matrix).max()
-        np.testing.assert_allclose(center[k], f.center, rtol=1e-9, atol=1e-9 * scale)
-        np.testing.assert_allclose(beta[k], f.beta, rtol=1e-9, atol=1e-9 * scale)
-        np.testing.assert_allclose(gamma[k], f.gamma, rtol=1e-9, atol=1e-9 * scale)
+        q = c.quadric
+        scale = 1 + np.abs(q.matrix).max()
+        np.testing.assert_allclose(U[k].T @ U[k], np.eye(3), atol=1e-12)
+        assert np.linalg.det(U[k]) > 0
+        want = np.linalg.eigvalsh(q.A)
+        np.testing.assert_allclose(np.sort(lam[k]), want, atol=1e-9 * scale)
+        assert np.all(beta[k][lam[k] != 0] == 0)
+        if not np.any(lam[k]) and np.linalg.norm(q.b) > 0:
+            assert abs(abs(U[k][:, 2] @ q.b) - np.linalg.norm(q.b)) <= 1e-12 * np.linalg.norm(q.b)
+        z = rng.uniform(-2, 2, (20, 3))
+        x = center[k] + z @ U[k].T
+        X = np.c_[x, np.ones(len(x))]
+        direct = np.einsum("ni,ij,nj->n", X, q.matrix, X)
+        local = (lam[k] * z * z + 2 * beta[k] * z).sum(axis=1) + gamma[k]
+        size = scale * (1 + np.abs(x).max()) ** 2
+        np.testing.assert_allclose(local, direct, atol=1e-9 * size)
+        alone = principal_frame(q)
+        for got, one in zip((U[k], lam[k], center[k], beta[k], gamma[k]),
+                            (alone.U, alone.lam, alone.center, alone.beta, alone.gamma)):
+            np.testing.assert_array_equal(got, one)
 
 
 def test_kinds_and_surface_meets_on_boxes_around_surface_points():

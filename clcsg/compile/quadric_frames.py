@@ -47,29 +47,59 @@ class PrincipalFrame:
 
 def principal_frame(q: Quadric) -> PrincipalFrame:
     """Eigen-decomposition, min-norm center and local coefficients of ``q``."""
-    A, b, c = q.A, q.b, q.c
-    scale = max(np.abs(q.matrix).max(), 1e-300)
-    lam, U = np.linalg.eigh(A)
-    lmax = np.abs(lam).max()
-    lam = np.where(np.abs(lam) <= EIGEN_SNAP * max(lmax, 1e-300), 0.0, lam)
-    if lmax <= EIGEN_SNAP * scale:
-        # a plane (A = 0): choose the frame with u_3 along b so that plane 3 is its heightfield
-        lam = np.zeros(3)
-        bn = np.linalg.norm(b)
-        w = b / bn if bn > 0 else np.array([0.0, 0.0, 1.0])
-        helper = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    return principal_frame_list([q.matrix])[0]
+
+
+def principal_frame_list(matrices) -> list:
+    """:class:`PrincipalFrame` of each of ``matrices`` (n, 4, 4) (:func:`principal_frames`)."""
+    U, lam, center, beta, gamma = principal_frames(matrices)
+    return [PrincipalFrame(U=U[k], lam=lam[k], center=center[k], beta=beta[k], gamma=float(gamma[k]))
+            for k in range(len(lam))]
+
+
+def mat_vec(M, v):
+    """M @ v for stacks (n, 3, 3) and (n, 3)."""
+    return np.einsum("nij,nj->ni", M, v)
+
+
+def mat_t_vec(M, v):
+    """M^T @ v for stacks (n, 3, 3) and (n, 3)."""
+    return np.einsum("nji,nj->ni", M, v)
+
+
+def principal_frames(matrices):
+    """(U (n, 3, 3), lam (n, 3), center (n, 3), beta (n, 3), gamma (n,)) of the quadrics
+    ``matrices`` (n, 4, 4) (symmetrized), each row of its matrix alone: A = U diag(lam) U^T
+    (eigh; |lam| <= EIGEN_SNAP max |lam| snapped to 0), a plane's frame with u_3 along b,
+    right-handed U, the min-norm center and the local beta (LINEAR_SNAP) and gamma."""
+    M = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
+    M = 0.5 * (M + M.transpose(0, 2, 1))
+    A, b, c = M[:, :3, :3], -M[:, :3, 3], M[:, 3, 3]
+    scale = np.maximum(np.abs(M).max(axis=(1, 2), initial=0.0), 1e-300)
+    lam, U = np.linalg.eigh(A) if len(M) else (np.zeros((0, 3)), np.zeros((0, 3, 3)))
+    lmax = np.abs(lam).max(axis=1, initial=0.0)
+    lam = np.where(np.abs(lam) <= EIGEN_SNAP * np.maximum(lmax, 1e-300)[:, None], 0.0, lam)
+    plane = lmax <= EIGEN_SNAP * scale
+    if plane.any():
+        bp = b[plane]
+        bn = np.linalg.norm(bp, axis=1)
+        w = np.where(bn[:, None] > 0, bp / np.where(bn > 0, bn, 1.0)[:, None], [0.0, 0.0, 1.0])
+        helper = np.where((np.abs(w[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
         u = np.cross(helper, w)
-        u /= np.linalg.norm(u)
-        U = np.column_stack([u, np.cross(w, u), w])
-    if np.linalg.det(U) < 0:
+        u /= np.linalg.norm(u, axis=1)[:, None]
         U = U.copy()
-        U[:, 0] = -U[:, 0]
-    # min-norm solution of A q = b in the eigenbasis
-    ub = U.T @ b
-    zc = np.where(lam != 0.0, ub / np.where(lam != 0.0, lam, 1.0), 0.0)
-    center = U @ zc
-    beta = U.T @ (A @ center - b)
-    beta = np.where(lam != 0.0, 0.0, beta)
-    beta = np.where(np.abs(beta) <= LINEAR_SNAP * scale, 0.0, beta)
-    gamma = float(center @ A @ center - 2.0 * b @ center + c)
-    return PrincipalFrame(U=U, lam=lam, center=center, beta=beta, gamma=gamma)
+        U[plane] = np.stack([u, np.cross(w, u), w], axis=2)
+        lam[plane] = 0.0
+    flip = np.linalg.det(U) < 0 if len(M) else np.zeros(0, bool)
+    if flip.any():
+        U = U.copy()
+        U[flip, :, 0] = -U[flip, :, 0]
+    ub = mat_t_vec(U, b)
+    nz = lam != 0.0
+    zc = np.where(nz, ub / np.where(nz, lam, 1.0), 0.0)
+    center = mat_vec(U, zc)
+    beta = mat_t_vec(U, mat_vec(A, center) - b)
+    beta = np.where(nz, 0.0, beta)
+    beta = np.where(np.abs(beta) <= LINEAR_SNAP * scale[:, None], 0.0, beta)
+    gamma = np.einsum("ni,ni->n", center, mat_vec(A, center)) - 2.0 * np.einsum("ni,ni->n", b, center) + c
+    return U, lam, center, beta, gamma

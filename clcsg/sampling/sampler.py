@@ -86,10 +86,9 @@ from ..cl.programs import build, kernel as program_kernel, launch
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
-from ..compile.quadric_frames import principal_frame
+from ..compile.quadric_frames import principal_frame_list
 from ..compile.root_tapes import prune_root_tapes
 from ..errors import LimitError, UsageError
-from ..model.quadric import Quadric
 from ..readers.scenes import as_scene
 from .samples import Samples
 from ..compile.bounds import estimates as guard
@@ -420,7 +419,7 @@ def _packed(tape, real):
     key = np.dtype(real).str
     if key not in cache:
         packed = pack(tape, real)
-        frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
+        frames = principal_frame_list(packed.local_matrices)
         cache[key] = (packed, frames, frame_records(frames, real))
     return cache[key]
 

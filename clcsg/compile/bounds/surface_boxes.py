@@ -1,8 +1,6 @@
 """Boxes of many quadric surfaces at once, and the other per-quadric facts the guard needs.
 
-:func:`principal_frames` is :func:`clcsg.compile.quadric_frames.principal_frame` on a stack of
-matrices (the same eigen-decomposition per matrix, the same snapping of small eigenvalues and
-linear terms, the same plane frame with u_3 along b).  :func:`surface_boxes` is, per quadric Q,
+:func:`surface_boxes` is, per quadric Q,
 the intersection of the boxes of its two literals (s Q <= 0 for s = +-1), each the box that
 :func:`clcsg.compile.bounds.term_boxes.literal_box` derives from the literal's supporting
 half-spaces (:func:`~clcsg.compile.bounds.term_boxes.supporting_planes`), exactly as there:
@@ -27,59 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..quadric_frames import EIGEN_SNAP, LINEAR_SNAP
+from ..quadric_frames import mat_vec, principal_frames
 from ...model.quadric import ray_distance
 
 #: components below this count as zero when a plane's normal is tested for being axis-aligned
 ALIGNED = 1e-12
 
 PLANE, CONVEX, SADDLE = 0, 1, 2
-
-
-def _mv(M, v):
-    """M @ v for stacks (n, 3, 3) and (n, 3)."""
-    return np.einsum("nij,nj->ni", M, v)
-
-
-def _mtv(M, v):
-    """M^T @ v for stacks (n, 3, 3) and (n, 3)."""
-    return np.einsum("nji,nj->ni", M, v)
-
-
-def principal_frames(matrices):
-    """(U (n, 3, 3), lam (n, 3), center (n, 3), beta (n, 3), gamma (n,)) of the quadrics
-    ``matrices`` (n, 4, 4), as :func:`~clcsg.compile.quadric_frames.principal_frame` per matrix."""
-    M = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
-    M = 0.5 * (M + M.transpose(0, 2, 1))
-    A, b, c = M[:, :3, :3], -M[:, :3, 3], M[:, 3, 3]
-    scale = np.maximum(np.abs(M).max(axis=(1, 2), initial=0.0), 1e-300)
-    lam, U = np.linalg.eigh(A) if len(M) else (np.zeros((0, 3)), np.zeros((0, 3, 3)))
-    lmax = np.abs(lam).max(axis=1, initial=0.0)
-    lam = np.where(np.abs(lam) <= EIGEN_SNAP * np.maximum(lmax, 1e-300)[:, None], 0.0, lam)
-    plane = lmax <= EIGEN_SNAP * scale
-    if plane.any():
-        bp = b[plane]
-        bn = np.linalg.norm(bp, axis=1)
-        w = np.where(bn[:, None] > 0, bp / np.where(bn > 0, bn, 1.0)[:, None], [0.0, 0.0, 1.0])
-        helper = np.where((np.abs(w[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        u = np.cross(helper, w)
-        u /= np.linalg.norm(u, axis=1)[:, None]
-        U = U.copy()
-        U[plane] = np.stack([u, np.cross(w, u), w], axis=2)
-        lam[plane] = 0.0
-    flip = np.linalg.det(U) < 0 if len(M) else np.zeros(0, bool)
-    if flip.any():
-        U = U.copy()
-        U[flip, :, 0] = -U[flip, :, 0]
-    ub = _mtv(U, b)
-    nz = lam != 0.0
-    zc = np.where(nz, ub / np.where(nz, lam, 1.0), 0.0)
-    center = _mv(U, zc)
-    beta = _mtv(U, _mv(A, center) - b)
-    beta = np.where(nz, 0.0, beta)
-    beta = np.where(np.abs(beta) <= LINEAR_SNAP * scale[:, None], 0.0, beta)
-    gamma = np.einsum("ni,ni->n", center, _mv(A, center)) - 2.0 * np.einsum("ni,ni->n", b, center) + c
-    return U, lam, center, beta, gamma
 
 
 def _bound_by_planes(lo, hi, rows, n, d):
@@ -111,7 +63,7 @@ def literal_boxes(matrices, sign: int):
     rest = ~plane & ~negative & ~para
     # half-spaces: 2 beta . z + gamma <= 0, the world normal g = 2 U beta
     i = np.flatnonzero(plane)
-    g = 2.0 * _mv(U[i], beta[i])
+    g = 2.0 * mat_vec(U[i], beta[i])
     gn = np.linalg.norm(g, axis=1)
     flat = gn == 0.0
     empty[i[flat & (gamma[i] > 0)]] = True
@@ -203,7 +155,7 @@ def surface_meets(matrices, q, lo, hi):
             lam[u] = np.linalg.eigvalsh(M[u, :3, :3])
         qs, x = q[s], c[s]
         A, b = M[qs, :3, :3], -M[qs, :3, 3]
-        Ax = _mv(A, x)
+        Ax = mat_vec(A, x)
         f = np.einsum("ni,ni->n", x, Ax) - 2.0 * np.einsum("ni,ni->n", x, b) + M[qs, 3, 3]
         g = 2.0 * np.linalg.norm(Ax - b, axis=1)
         d = ray_distance(f, g, lam[qs, 0], lam[qs, 2])
