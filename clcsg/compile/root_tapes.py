@@ -79,23 +79,22 @@ class PrimitiveDag:
             else:
                 self.default[e] = None
 
-    def pruned(self, near_instances, inside_instances=(), outside_instances=()) -> tuple[np.ndarray, int]:
+    def pruned(self, near_instances, outside_instances=()) -> tuple[np.ndarray, int]:
         """(ops, registers) of the tape with the primitives of ``near_instances`` kept, those of
-        ``inside_instances`` TRUE (the region lies in their solid: their complements FALSE),
-        those of ``outside_instances`` FALSE (the region misses their solid) and every other one
-        at its default: far (FALSE, its complement TRUE), or TRUE for a held instance (given
-        when the DAG was built: a half-space, whose solid holds most regions)."""
+        ``outside_instances`` FALSE (the region misses their solid: their complements TRUE) and
+        every other one at its default: far (FALSE, its complement TRUE), or for a held
+        instance (given when the DAG was built: a half-space, whose solid holds most regions)
+        TRUE, its complement FALSE."""
         near = {e for i in near_instances for e in self.by_instance.get(int(i), ())}
         fixed = {}
-        for values, inside in ((inside_instances, True), (outside_instances, False)):
-            for i in values:
-                for e in self.by_instance.get(int(i), ()):
-                    if e in near:
-                        continue
-                    if e not in self.negated:  # of both polarities: kept as it is
-                        near.add(e)
-                    elif self.default[e] != (inside != self.negated[e]):
-                        fixed[e] = _TRUE if inside != self.negated[e] else _FALSE
+        for i in outside_instances:
+            for e in self.by_instance.get(int(i), ()):
+                if e in near:
+                    continue
+                if e not in self.negated:  # of both polarities: kept as it is
+                    near.add(e)
+                elif self.default[e] != self.negated[e]:  # held: the region misses it here
+                    fixed[e] = _TRUE if self.negated[e] else _FALSE
         live: dict = {self.root: set()}
         stack = list(near) + list(fixed)
         seen = set(stack)
