@@ -148,6 +148,43 @@ def test_root_tapes_are_exact_over_their_regions(scene):
         np.testing.assert_array_equal(part[1], full[1])
 
 
+@pytest.mark.parametrize("scene", ["mesh", "concave_mesh", "pen_stand"])
+def test_root_tapes_are_exact_where_the_world_and_frame_boxes_meet(scene):
+    """The sampler's regions as it makes them (its tasks' patches grown by the radius, as a
+    world box and as a box in each quadric's principal frame, which for a tilted face plane is
+    much thinner): the root tapes decided on both are exact at random points of the frame box
+    inside the world box, on both sides of the quadric, and shorter than from the world boxes
+    alone on the faceted sphere."""
+    from clcsg.sampling.sampler import _task_regions
+
+    shape = {"mesh": _faceted_sphere_minus_bore, "concave_mesh": _random_mesh_minus_bore,
+             "pen_stand": lambda: clcsg.load(os.path.join(EXAMPLES, "pen_stand.csg")).shape}[scene]()
+    tape = Scene(shape).compile()
+    packed = pack(tape, np.float64)
+    frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
+    radius = 0.01 * float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+    tasks = root_tasks(tape, packed, frames, radius)[0]
+    regions, oriented = _task_regions(tasks, frames, packed.origin, 1.01 * radius)
+    spans, rows = prune_root_tapes(tape, regions, oriented)
+    plain, _ = prune_root_tapes(tape, regions)
+    if scene == "mesh":
+        assert sum(c for _, c in spans.values()) < 0.8 * sum(c for _, c in plain.values())
+    rng = np.random.default_rng(4)
+    pruned = [q for q, (first, _) in spans.items() if first > 0]
+    assert len(pruned) >= 10
+    for q in (pruned if len(pruned) <= 40 else rng.choice(pruned, 40, replace=False)):
+        first, count = spans[q]
+        o, U, lo, hi = oriented[q]
+        x = o + rng.uniform(lo, hi, (1500, 3)) @ U.T
+        wlo, whi = regions[q]
+        x = x[np.all((x >= wlo) & (x <= whi), axis=1)][:400]
+        assert len(x) >= 50
+        full = member(tape.ops, tape.quadrics, x, int(q))
+        part = member(rows[first:first + count], tape.quadrics, x, int(q))
+        np.testing.assert_array_equal(part[0], full[0])
+        np.testing.assert_array_equal(part[1], full[1])
+
+
 def test_root_tasks_point_at_pruned_tapes_that_start_the_arena():
     shape = sphere_union(125)
     tape = Scene(shape).compile()

@@ -178,9 +178,11 @@ MAX_NEAR = 400_000
 GROUP = 8
 
 
-def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
+def prune_root_tapes(tape, regions: dict, oriented: dict | None = None) -> tuple[dict, np.ndarray]:
     """Per quadric of ``regions`` ({quadric: (lo, hi) world box}) its root tape: ({quadric:
     (first, count)} into the returned rows (N, 4) int32, which start with the full tape).
+    ``oriented`` ({quadric: (o, U, lo, hi)}, optional): a second box of each region, the points
+    o + U z with lo <= z <= hi; the tapes are then exact over the part of each world box in it.
 
     A primitive is near a quadric's region if its box meets it (a
     :class:`~clcsg.compile.bvh.BoxTree` query for all regions at once); the primitives holding
@@ -193,7 +195,7 @@ def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
     if dag is None or not regions:
         return out, full
     qs = list(regions)
-    near, outside = _near_sets(tape, qs, regions)
+    near, outside = _near_sets(tape, qs, regions, oriented)
     n_inst = len(tape.instances)
     sparse = [k for k, nr in enumerate(near) if len(nr) <= DENSE_FRACTION * n_inst]
     centers = np.array([0.5 * (regions[qs[k]][0] + regions[qs[k]][1]) for k in sparse]).reshape(-1, 3)
@@ -221,11 +223,12 @@ def prune_root_tapes(tape, regions: dict) -> tuple[dict, np.ndarray]:
     return out, np.concatenate(rows).astype(np.int32)
 
 
-def _near_sets(tape, qs, regions) -> tuple[list, list]:
+def _near_sets(tape, qs, regions, oriented=None) -> tuple[list, list]:
     """Per quadric of ``qs``, (near, outside): the instances whose boxes meet its region, its
     owners and the half-spaces whose plane may cross the region; and the half-spaces whose
-    solid misses the whole region (:func:`_half_space_sides`).  The other half-spaces hold it,
-    their default in the :class:`PrimitiveDag` (:func:`primitive_dag`)."""
+    solid misses the whole region (:func:`_half_space_sides`, then :func:`_oriented_sides` on
+    the crossing ones where the region has an ``oriented`` box).  The other half-spaces hold
+    it, their default in the :class:`PrimitiveDag` (:func:`primitive_dag`)."""
     halves = half_spaces(tape)
     is_half = np.zeros(len(tape.instances), dtype=bool)
     is_half[halves] = True
@@ -244,6 +247,8 @@ def _near_sets(tape, qs, regions) -> tuple[list, list]:
     outside: list = [set() for _ in qs]
     if halves:
         crossing, missed = _half_space_sides(tape, halves, rlo, rhi)
+        if oriented:
+            _oriented_sides(tape, halves, [oriented.get(q) for q in qs], rlo, rhi, crossing, missed)
         for k in range(len(qs)):
             near[k].update(crossing[k])
             outside[k].update(missed[k])
@@ -260,13 +265,9 @@ def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
     of a plane is linear, g . x + c <= 0, so its range over a box is exact: g . m +- sum |g_i|
     h_i at the box's center m and half-sizes h; a relative slack keeps the cases that rounding
     could decide wrongly crossing (near)."""
-    Q = np.asarray(tape.quadrics, dtype=np.float64)
-    qi = np.array([tape.instances[k].literals[0][0] for k in halves])
-    sg = np.array([tape.instances[k].literals[0][1] for k in halves], dtype=np.float64)
-    g = 2.0 * sg[:, None] * Q[qi, :3, 3]
-    c = sg * Q[qi, 3, 3]
+    g, c = _half_space_planes(tape, halves)
     m, h = 0.5 * (rlo + rhi), 0.5 * (rhi - rlo)
-    scale = 1.0 + np.abs(np.concatenate([rlo, rhi], axis=1)).max(axis=1)
+    scale = _side_scale(rlo, rhi)
     ids = np.asarray(halves)
     crossing, missed = [], []
     step = max(1, _SIDE_CHUNK // max(len(halves), 1))
@@ -280,6 +281,60 @@ def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
             cuts = np.searchsorted(r, np.arange(len(v) + 1))
             rows.extend(ids[k[cuts[j]:cuts[j + 1]]].tolist() for j in range(len(v)))
     return crossing, missed
+
+
+def _half_space_planes(tape, halves) -> tuple[np.ndarray, np.ndarray]:
+    """(g (H, 3), c (H,)): the solid of each half-space instance as g . x + c <= 0."""
+    Q = np.asarray(tape.quadrics, dtype=np.float64)
+    qi = np.array([tape.instances[k].literals[0][0] for k in halves])
+    sg = np.array([tape.instances[k].literals[0][1] for k in halves], dtype=np.float64)
+    return 2.0 * sg[:, None] * Q[qi, :3, 3], sg * Q[qi, 3, 3]
+
+
+def _side_scale(rlo, rhi) -> np.ndarray:
+    """The coordinate scale of each region box, for the slack of the side tests."""
+    return 1.0 + np.abs(np.concatenate([rlo, rhi], axis=1)).max(axis=1)
+
+
+#: (region, crossing half-space) pairs tested at once in :func:`_oriented_sides`
+_PAIR_CHUNK = 1 << 20
+
+
+def _oriented_sides(tape, halves, oriented, rlo, rhi, crossing, missed) -> None:
+    """The half-spaces in ``crossing`` (per region, from its world box) tested again on the
+    region's oriented box (o, U, lo, hi) where it has one: over o + U z, lo <= z <= hi, the
+    solid's g . x + c is g . (o + U m) + c +- sum |(U^T g)_i| h_i (m, h: the box's center and
+    half-sizes), exact as for the world box, with the same slack.  Those that miss it move to
+    ``missed``; those that hold it leave ``crossing`` (a half-space holds by default).  In
+    place."""
+    g, c = _half_space_planes(tape, halves)
+    row_of = {int(i): k for k, i in enumerate(halves)}
+    regions = [k for k, box in enumerate(oriented) if box is not None and crossing[k]]
+    if not regions:
+        return
+    scale = _side_scale(rlo, rhi)
+    gnorm = np.linalg.norm(g, axis=1)
+    for s in range(0, len(regions), max(1, _PAIR_CHUNK // max(len(halves), 1))):
+        chunk = regions[s:s + max(1, _PAIR_CHUNK // max(len(halves), 1))]
+        r = np.concatenate([np.full(len(crossing[k]), j) for j, k in enumerate(chunk)])
+        inst = np.concatenate([crossing[k] for k in chunk]).astype(np.int64)
+        rows = np.array([row_of[i] for i in inst.tolist()], dtype=np.int64)
+        o = np.array([oriented[k][0] for k in chunk], dtype=np.float64)
+        U = np.array([oriented[k][1] for k in chunk], dtype=np.float64)
+        lo = np.array([oriented[k][2] for k in chunk], dtype=np.float64)
+        hi = np.array([oriented[k][3] for k in chunk], dtype=np.float64)
+        mid = o + np.einsum("rij,rj->ri", U, 0.5 * (lo + hi))
+        gp = g[rows]
+        v = np.einsum("pi,pi->p", gp, mid[r]) + c[rows]
+        spread = np.einsum("pj,pj->p", np.abs(np.einsum("pi,pij->pj", gp, U[r])), 0.5 * (hi - lo)[r])
+        slack = 1e-9 * scale[np.asarray(chunk)][r] * gnorm[rows]
+        hi_v, lo_v = v + spread + slack, v - spread - slack
+        keep, miss = (hi_v >= 0) & (lo_v <= 0), lo_v > 0
+        cuts = np.searchsorted(r, np.arange(len(chunk) + 1))
+        for j, k in enumerate(chunk):
+            a, b = cuts[j], cuts[j + 1]
+            missed[k] = list(missed[k]) + inst[a:b][miss[a:b]].tolist()
+            crossing[k] = inst[a:b][keep[a:b]].tolist()
 
 
 #: boxes per shared tape of :func:`box_tapes` (a few dozen: the tape interpreter's cost per

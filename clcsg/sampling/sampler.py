@@ -199,8 +199,8 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     c["x0"], c["y0"], c["x1"], c["y1"] = zlo[rows, i], zlo[rows, j], zhi[rows, i], zhi[rows, j]
     c["d"] = np.nan
     c["task"] = rows
-    regions = _task_regions(t, frames, packed.origin, 1.01 * radius + 1e-6 * scale)
-    spans, root_rows = prune_root_tapes(tape, regions)
+    regions, oriented = _task_regions(t, frames, packed.origin, 1.01 * radius + 1e-6 * scale)
+    spans, root_rows = prune_root_tapes(tape, regions, oriented)
     span = np.array([spans[int(q)] for q in t["quadric"]]).reshape(-1, 2)
     c["tape_first"], c["tape_count"] = span[:, 0], span[:, 1]
     return t, c, tape_rows(root_rows)
@@ -216,8 +216,12 @@ def _quadratic_ranges(lam, beta, a, b):
     return np.minimum(np.minimum(fa, fb), fv), np.maximum(np.maximum(fa, fb), fv)
 
 
-def _task_regions(t, frames, origin, grow) -> dict:
-    """Per quadric, a world box holding every point of its tasks' patches grown by ``grow``.
+def _task_regions(t, frames, origin, grow) -> tuple[dict, dict]:
+    """Per quadric, a world box holding every point of its tasks' patches grown by ``grow``,
+    and the same in the quadric's principal frame: (world origin of the frame, U, local lo,
+    local hi), the local box of its patches grown by ``grow`` along each axis (a ball of that
+    radius around a point of the box stays in it), which is much thinner than the world box
+    for a tilted plane.
 
     Over task (plane k, sheet)'s root rectangle, R(x, y) = lam_i x^2 + 2 beta_i x + lam_j y^2
     + 2 beta_j y + gamma is separable, so its range is the sum of two 1-D ranges, and the height
@@ -261,7 +265,12 @@ def _task_regions(t, frames, origin, grow) -> dict:
     starts = np.flatnonzero(np.concatenate([[True], qs[1:] != qs[:-1]]))
     lo_q = np.minimum.reduceat(wlo[order], starts, axis=0)
     hi_q = np.maximum.reduceat(whi[order], starts, axis=0)
-    return {int(u): (a, b) for u, a, b in zip(qs[starts], lo_q, hi_q)}
+    llo_q = np.minimum.reduceat(lo[order], starts, axis=0) - grow
+    lhi_q = np.maximum.reduceat(hi[order], starts, axis=0) + grow
+    first = order[starts]
+    world = {int(u): (a, b) for u, a, b in zip(qs[starts], lo_q, hi_q)}
+    local = {int(u): (center[f] + origin, U[f], a, b) for u, f, a, b in zip(qs[starts], first, llo_q, lhi_q)}
+    return world, local
 
 
 #: where a split cuts a cell's longest edge, as a fraction of it (the build option SPLIT_AT of
