@@ -255,7 +255,8 @@ def _near_sets(tape, qs, regions, oriented=None) -> tuple[list, list]:
     return near, outside
 
 
-#: (region, half-space) pairs tested at once in :func:`_half_space_sides`
+#: (node, half-space) pairs held at once by :func:`_half_space_sides` (the half-spaces are
+#: taken in chunks so that even a plane crossing every region keeps to it)
 _SIDE_CHUNK = 1 << 22
 
 
@@ -264,22 +265,63 @@ def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
     cross it and those whose solid misses all of it (the rest hold it).  The solid s Q(x) <= 0
     of a plane is linear, g . x + c <= 0, so its range over a box is exact: g . m +- sum |g_i|
     h_i at the box's center m and half-sizes h; a relative slack keeps the cases that rounding
-    could decide wrongly crossing (near)."""
+    could decide wrongly crossing (near).
+
+    The regions are the leaves of a binary tree of boxes (consecutive along a Morton curve,
+    each node the box of its two children), walked from the root: a half-space that holds or
+    misses a node's box does so for every region below it, so only the pairs whose plane
+    crosses a node go down to its children.  A face plane of a convex mesh crosses the few
+    boxes near its face at each level, so the work is about the planes times the depth, not
+    the planes times the regions."""
     g, c = _half_space_planes(tape, halves)
-    m, h = 0.5 * (rlo + rhi), 0.5 * (rhi - rlo)
-    scale = _side_scale(rlo, rhi)
     ids = np.asarray(halves)
-    crossing, missed = [], []
-    step = max(1, _SIDE_CHUNK // max(len(halves), 1))
-    for s in range(0, len(m), step):
-        v = m[s:s + step] @ g.T + c[None]
-        spread = h[s:s + step] @ np.abs(g).T
-        slack = 1e-9 * scale[s:s + step, None] * np.linalg.norm(g, axis=1)[None]
-        hi_v, lo_v = v + spread + slack, v - spread - slack
-        for rows, mask in ((crossing, (hi_v >= 0) & (lo_v <= 0)), (missed, lo_v > 0)):
-            r, k = np.nonzero(mask)
-            cuts = np.searchsorted(r, np.arange(len(v) + 1))
-            rows.extend(ids[k[cuts[j]:cuts[j + 1]]].tolist() for j in range(len(v)))
+    R = len(rlo)
+    crossing: list = [[] for _ in range(R)]
+    missed: list = [[] for _ in range(R)]
+    if R == 0 or len(ids) == 0:
+        return crossing, missed
+    order = morton_order(0.5 * (rlo + rhi))
+    levels = [(rlo[order], rhi[order])]
+    while len(levels[-1][0]) > 1:
+        lo, hi = levels[-1]
+        starts = np.arange(0, len(lo), 2)
+        levels.append((np.minimum.reduceat(lo, starts, axis=0), np.maximum.reduceat(hi, starts, axis=0)))
+    boxes = [(0.5 * (lo + hi), 0.5 * (hi - lo), _side_scale(lo, hi)) for lo, hi in levels]
+    gabs, gnorm = np.abs(g), np.linalg.norm(g, axis=1)
+    found = {"cross": [], "miss": []}  # (first leaf, leaves, plane) per decided pair
+    step = max(1, _SIDE_CHUNK // R)
+    for p0 in range(0, len(ids), step):
+        plane = np.arange(p0, min(p0 + step, len(ids)))
+        node = np.zeros(len(plane), dtype=np.int64)
+        for L in range(len(levels) - 1, -1, -1):
+            m, h, scale = boxes[L]
+            v = np.einsum("pi,pi->p", m[node], g[plane]) + c[plane]
+            spread = np.einsum("pi,pi->p", h[node], gabs[plane])
+            slack = 1e-9 * scale[node] * gnorm[plane]
+            hi_v, lo_v = v + spread + slack, v - spread - slack
+            miss = lo_v > 0
+            found["miss"].append((node[miss] << L, np.full(int(miss.sum()), 1 << L), plane[miss]))
+            cross = (hi_v >= 0) & (lo_v <= 0)
+            node, plane = node[cross], plane[cross]
+            if L == 0:
+                found["cross"].append((node, np.ones(len(node), dtype=np.int64), plane))
+                break
+            n_child = len(levels[L - 1][0])
+            right = 2 * node + 1 < n_child
+            node = np.concatenate([2 * node, 2 * node[right] + 1])
+            plane = np.concatenate([plane, plane[right]])
+    for key, out in (("cross", crossing), ("miss", missed)):
+        first = np.concatenate([f for f, _, _ in found[key]])
+        count = np.minimum(np.concatenate([n for _, n, _ in found[key]]), R - first)
+        plane = np.concatenate([p for _, _, p in found[key]])
+        leaf = np.repeat(first, count) + (np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count))
+        inst = ids[np.repeat(plane, count)]
+        region = order[leaf]
+        by = np.argsort(region, kind="stable")
+        region, inst = region[by], inst[by]
+        cuts = np.searchsorted(region, np.arange(R + 1))
+        for k in range(R):
+            out[k] = inst[cuts[k]:cuts[k + 1]].tolist()
     return crossing, missed
 
 
