@@ -169,10 +169,13 @@ def half_spaces(tape) -> list:
 
 
 #: a quadric whose region holds more than this fraction of the primitives keeps the full tape
-#: (pruning would save little), and past MAX_NEAR (quadric, near primitive) pairs in all the
-#: remaining quadrics keep it too: the work stays linear in the tape
+#: (pruning would save little), and past a budget of (quadric, near primitive) pairs in all,
+#: the remaining quadrics keep it too: MAX_NEAR, or where more, 1/NEAR_SHARE of the rows the
+#: full tape would give their root cells (the host's pruning then costs a small share of the
+#: level-0 work it saves; a mesh of 20,000 face planes has about 1.3M pairs)
 DENSE_FRACTION = 0.5
 MAX_NEAR = 400_000
+NEAR_SHARE = 64
 #: quadrics whose regions are neighbours along a Morton curve share one root tape, pruned to
 #: the union of their near primitives (fewer, slightly longer tapes: less host work)
 GROUP = 8
@@ -200,7 +203,8 @@ def prune_root_tapes(tape, regions: dict, oriented: dict | None = None) -> tuple
     sparse = [k for k, nr in enumerate(near) if len(nr) <= DENSE_FRACTION * n_inst]
     centers = np.array([0.5 * (regions[qs[k]][0] + regions[qs[k]][1]) for k in sparse]).reshape(-1, 3)
     sparse = [sparse[k] for k in morton_order(centers)]
-    rows, used, shared, budget = [full], len(full), {}, MAX_NEAR
+    rows, used, shared = [full], len(full), {}
+    budget = max(MAX_NEAR, len(sparse) * len(full) // NEAR_SHARE)
     for g in range(0, len(sparse), GROUP):
         members = sparse[g:g + GROUP]
         # a half-space outside some members' regions and not others' is near for the group
