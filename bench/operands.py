@@ -13,9 +13,9 @@ the bound's diagonal (warm: the kernels built once before), rendering the splats
 tracing at 320x240; and manifold3d's Boolean of the same mesh minus the cylinders (32
 segments) with ``to_mesh``.  Ratios are clcsg's sampling path (build + compile + sample)
 over manifold3d's Boolean.  ``--quick``: the smallest model of each family.  The icospheres
-go to subdivision 4 (5,120 faces) past the default plane limit of ``clcsg.polyhedron``: the
-compile is near linear in the face planes; sampling is not (every cell's tape of a convex
-mesh carries all its planes).
+go to subdivision 5 (20,480 faces) past the default plane limit of ``clcsg.polyhedron``: the
+compile is near linear in the face planes; sampling is not (a cell's tape of a convex mesh
+carries the planes that cross it, more of them the larger the cell).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from clcsg.cl.device import get_context
 
 from .common import Load, diagonal, environment, fmt, write
 
-FULL = {"bosses": (4, 8, 12), "icosphere": (1, 2, 3, 4)}
+FULL = {"bosses": (4, 8, 12), "icosphere": (1, 2, 3, 4, 5)}
 QUICK = {"bosses": (4,), "icosphere": (1,)}
 N_CYLINDERS = 20
 SEGMENTS = 32
