@@ -1,6 +1,6 @@
 """Whether a closed mesh intersects itself: the first pair of triangles that cross.
 
-Candidate pairs are the triangles whose bounding boxes overlap (a sweep along x in blocks), minus
+Candidate pairs are the triangles whose bounding boxes overlap (a box tree's query), minus
 the pairs that share a point (neighbours meet along their shared edge or corner by design).
 Each candidate is tested exactly as Moeller's interval test does it, in float64: the corners
 of each triangle on both sides of the other's plane, then the two segments in which the
@@ -16,33 +16,23 @@ import warnings
 
 import numpy as np
 
-#: rows of the box-overlap matrix per block (memory: block x triangles booleans)
-_BLOCK = 512
+from ..compile.bvh import BoxTree
+
 #: sine of the angle below which two triangles count as coplanar (their line is ill-conditioned;
 #: meshes written in float32 have neighbouring triangles of one flat face this far apart)
 _PARALLEL = 1e-6
 
 
 def _candidates(lo, hi, t, tol):
-    """(i, j), i < j, of the triangles whose boxes overlap and that share no point: a sweep
-    along x (triangles sorted by their boxes' low x; a block of them meets only the ones that
-    start before the block's largest high x)."""
-    order = np.argsort(lo[:, 0], kind="stable")
-    lo, hi, t = lo[order], hi[order], t[order]
-    out_i, out_j = [], []
-    n = len(lo)
-    for s in range(0, n, _BLOCK):
-        e = min(n, s + _BLOCK)
-        end = int(np.searchsorted(lo[:, 0], hi[s:e, 0].max() + tol, side="right"))
-        ov = np.all((lo[s:e, None, :] <= hi[None, s:end, :] + tol) & (hi[s:e, None, :] >= lo[None, s:end, :] - tol), axis=2)
-        ov &= np.arange(s, end)[None, :] > np.arange(s, e)[:, None]
-        i, j = np.nonzero(ov)
-        i, j = i + s, j + s
-        shared = np.any(t[i][:, :, None] == t[j][:, None, :], axis=(1, 2))
-        out_i.append(order[i[~shared]])
-        out_j.append(order[j[~shared]])
-    i, j = np.concatenate(out_i), np.concatenate(out_j)
-    return np.minimum(i, j), np.maximum(i, j)
+    """(i, j), i < j, of the triangles whose boxes overlap (within ``tol``) and that share no
+    point: a :class:`~clcsg.compile.bvh.BoxTree` over the boxes grown by ``tol``, queried by
+    the boxes themselves, so the work follows the overlapping pairs (a sweep along one axis
+    compared every triangle of a plate with every other one in its column)."""
+    i, j = BoxTree(lo - tol, hi + tol).query(lo, hi)
+    keep = i < j
+    i, j = i[keep], j[keep]
+    shared = np.any(t[i][:, :, None] == t[j][:, None, :], axis=(1, 2))
+    return i[~shared], j[~shared]
 
 
 def _interval(p, d, axis_dir, tol):
