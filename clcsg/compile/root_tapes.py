@@ -271,12 +271,11 @@ def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
     h_i at the box's center m and half-sizes h; a relative slack keeps the cases that rounding
     could decide wrongly crossing (near).
 
-    The regions are the leaves of a binary tree of boxes (consecutive along a Morton curve,
-    each node the box of its two children), walked from the root: a half-space that holds or
-    misses a node's box does so for every region below it, so only the pairs whose plane
-    crosses a node go down to its children.  A face plane of a convex mesh crosses the few
-    boxes near its face at each level, so the work is about the planes times the depth, not
-    the planes times the regions."""
+    The regions are the leaves of a :class:`~clcsg.compile.bvh.BoxTree`, walked from the root:
+    a half-space that holds or misses a node's box does so for every region below it, so only
+    the pairs whose plane crosses a node go down to its children.  A face plane of a convex
+    mesh crosses the few boxes near its face at each level, so the work is about the planes
+    times the depth, not the planes times the regions."""
     g, c = _half_space_planes(tape, halves)
     ids = np.asarray(halves)
     R = len(rlo)
@@ -284,43 +283,41 @@ def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
     missed: list = [[] for _ in range(R)]
     if R == 0 or len(ids) == 0:
         return crossing, missed
-    order = morton_order(0.5 * (rlo + rhi))
-    levels = [(rlo[order], rhi[order])]
-    while len(levels[-1][0]) > 1:
-        lo, hi = levels[-1]
-        starts = np.arange(0, len(lo), 2)
-        levels.append((np.minimum.reduceat(lo, starts, axis=0), np.maximum.reduceat(hi, starts, axis=0)))
-    boxes = [(0.5 * (lo + hi), 0.5 * (hi - lo), _side_scale(lo, hi)) for lo, hi in levels]
+    tree = BoxTree(rlo, rhi)
+    assert len(tree.unbounded) == 0, "task regions are bounded"
+    height = len(tree.levels) - 1
+    with np.errstate(invalid="ignore"):  # the empty nodes padding the tree: nan, never decided
+        boxes = [(0.5 * (lo + hi), 0.5 * (hi - lo), _side_scale(lo, hi)) for lo, hi in tree.levels]
     gabs, gnorm = np.abs(g), np.linalg.norm(g, axis=1)
-    found = {"cross": [], "miss": []}  # (first leaf, leaves, plane) per decided pair
+    found = {"cross": [], "miss": []}  # (level, node, plane) per decided pair
     step = max(1, _SIDE_CHUNK // R)
     for p0 in range(0, len(ids), step):
         plane = np.arange(p0, min(p0 + step, len(ids)))
         node = np.zeros(len(plane), dtype=np.int64)
-        for L in range(len(levels) - 1, -1, -1):
-            m, h, scale = boxes[L]
-            v = np.einsum("pi,pi->p", m[node], g[plane]) + c[plane]
-            spread = np.einsum("pi,pi->p", h[node], gabs[plane])
-            slack = 1e-9 * scale[node] * gnorm[plane]
-            hi_v, lo_v = v + spread + slack, v - spread - slack
-            miss = lo_v > 0
-            found["miss"].append((node[miss] << L, np.full(int(miss.sum()), 1 << L), plane[miss]))
-            cross = (hi_v >= 0) & (lo_v <= 0)
+        for depth, (m, h, scale) in enumerate(boxes):
+            with np.errstate(invalid="ignore"):
+                v = np.einsum("pi,pi->p", m[node], g[plane]) + c[plane]
+                spread = np.einsum("pi,pi->p", h[node], gabs[plane])
+                slack = 1e-9 * scale[node] * gnorm[plane]
+                hi_v, lo_v = v + spread + slack, v - spread - slack
+                miss = lo_v > 0
+                cross = (hi_v >= 0) & (lo_v <= 0)
+            found["miss"].append((height - depth, node[miss], plane[miss]))
             node, plane = node[cross], plane[cross]
-            if L == 0:
-                found["cross"].append((node, np.ones(len(node), dtype=np.int64), plane))
+            if depth == height:
+                found["cross"].append((0, node, plane))
                 break
-            n_child = len(levels[L - 1][0])
-            right = 2 * node + 1 < n_child
-            node = np.concatenate([2 * node, 2 * node[right] + 1])
-            plane = np.concatenate([plane, plane[right]])
+            node, plane = np.concatenate([2 * node, 2 * node + 1]), np.concatenate([plane, plane])
     for key, out in (("cross", crossing), ("miss", missed)):
-        first = np.concatenate([f for f, _, _ in found[key]])
-        count = np.minimum(np.concatenate([n for _, n, _ in found[key]]), R - first)
-        plane = np.concatenate([p for _, _, p in found[key]])
-        leaf = np.repeat(first, count) + (np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count))
-        inst = ids[np.repeat(plane, count)]
-        region = order[leaf]
+        leaves, planes = [], []
+        for up, node, plane in found[key]:  # a node `up` levels above the leaves covers 2^up
+            span = 1 << up
+            leaves.append((node[:, None] * span + np.arange(span)[None]).reshape(-1))
+            planes.append(np.repeat(plane, span))
+        region = tree.leaf_id[np.concatenate(leaves)]
+        inst = ids[np.concatenate(planes)]
+        real = region >= 0
+        region, inst = region[real], inst[real]
         by = np.argsort(region, kind="stable")
         region, inst = region[by], inst[by]
         cuts = np.searchsorted(region, np.arange(R + 1))
