@@ -4,7 +4,7 @@ Each model is a closed triangle mesh minus 20 cylinders:
 
 * ``bosses_k``: a plate with k x k square bosses (a CAD-like mesh: many triangles, few face
   planes), built and meshed by manifold3d; k = 80 is the 100k-triangle STL (103,244 triangles,
-  323 face planes);
+  327 face planes);
 * ``icosphere_s``: a tessellated sphere (subdivision s; every triangle its own plane: the case
   where clcsg's cost grows fastest, since a mesh operand is an expression of its face planes).
 
