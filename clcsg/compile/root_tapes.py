@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .bvh import BoxTree, morton_order
+from ..model.bvh import BoxTree, morton_order
 from .tape import _AND, _CONST, _FALSE, _LEAF, _OR, _TRUE, _Builder, _emit, _postorder
 
 
@@ -188,7 +188,7 @@ def prune_root_tapes(tape, regions: dict, oriented: dict | None = None) -> tuple
     o + U z with lo <= z <= hi; the tapes are then exact over the part of each world box in it.
 
     A primitive is near a quadric's region if its box meets it (a
-    :class:`~clcsg.compile.bvh.BoxTree` query for all regions at once); the primitives holding
+    :class:`~clcsg.model.bvh.BoxTree` query for all regions at once); the primitives holding
     the quadric are always near.  A tape pruned to a set of near primitives is exact over every
     region whose near primitives it holds, so up to :data:`GROUP` neighbouring quadrics share
     one, and equal near sets one tape."""
@@ -271,7 +271,7 @@ def _half_space_sides(tape, halves, rlo, rhi) -> tuple[list, list]:
     h_i at the box's center m and half-sizes h; a relative slack keeps the cases that rounding
     could decide wrongly crossing (near).
 
-    The regions are the leaves of a :class:`~clcsg.compile.bvh.BoxTree`, walked from the root:
+    The regions are the leaves of a :class:`~clcsg.model.bvh.BoxTree`, walked from the root:
     a half-space that holds or misses a node's box does so for every region below it, so only
     the pairs whose plane crosses a node go down to its children.  A face plane of a convex
     mesh crosses the few boxes near its face at each level, so the work is about the planes

@@ -16,7 +16,7 @@ import warnings
 
 import numpy as np
 
-from ..compile.bvh import BoxTree
+from .bvh import BoxTree
 
 #: sine of the angle below which two triangles count as coplanar (their line is ill-conditioned;
 #: meshes written in float32 have neighbouring triangles of one flat face this far apart)
@@ -25,7 +25,7 @@ _PARALLEL = 1e-6
 
 def _candidates(lo, hi, t, tol):
     """(i, j), i < j, of the triangles whose boxes overlap (within ``tol``) and that share no
-    point: a :class:`~clcsg.compile.bvh.BoxTree` over the boxes grown by ``tol``, queried by
+    point: a :class:`~clcsg.model.bvh.BoxTree` over the boxes grown by ``tol``, queried by
     the boxes themselves, so the work follows the overlapping pairs (a sweep along one axis
     compared every triangle of a plate with every other one in its column)."""
     i, j = BoxTree(lo - tol, hi + tol).query(lo, hi)

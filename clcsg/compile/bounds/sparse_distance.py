@@ -1,5 +1,5 @@
 """The conservative signed distance of a CSG graph at the centers of many boxes at once,
-evaluated only for the primitives near each box (a :class:`~clcsg.compile.bvh.BoxTree` over the
+evaluated only for the primitives near each box (a :class:`~clcsg.model.bvh.BoxTree` over the
 primitives' boxes).
 
 The graph is in negation normal form: leaves are primitives (possibly negated), inner nodes AND
@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...model.quadric import ray_distance
-from ..bvh import BoxTree
+from ...model.bvh import BoxTree
 
 LEAF, AND, OR = 0, 1, 2
 #: the fewest plane operands of one AND/OR evaluated as a dense group
