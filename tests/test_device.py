@@ -308,3 +308,17 @@ def test_require_int64_atomics(cl_context):
     else:
         with pytest.raises(DeviceError, match="needed by test"):
             D.require_int64_atomics(cl_context, "test")
+
+
+def test_vector_probe_passes_on_the_chosen_device():
+    """The device the rule chose builds and runs the renderer's 8-wide vector math in the
+    probe's child process (the check that passes over PoCL's wheel on AMD Zen 4)."""
+    info = D.get_context().info
+    assert D.vector_probe_error(info.platform_index, info.device_index) is None
+
+
+def test_vector_probe_failure_is_one_line():
+    """A child that fails (here: no such platform) gives a one-line reason, not a traceback."""
+    why = D.vector_probe_error(99, 0)
+    assert why is not None and why.startswith("its compiler fails on 8-wide vector math (")
+    assert "\n" not in why and "IndexError" in why

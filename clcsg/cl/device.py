@@ -20,9 +20,11 @@ Oclgrind (a platform whose name contains "Oclgrind") is a simulator about a thou
 slower than a real device.  The default, ``cpu`` and ``gpu`` never pick it; only ``oclgrind``,
 a ``P:D`` / ``P`` naming it, or ``PYOPENCL_CTX`` pointing at it do.
 
-A device is used only if its compiler builds a one-line kernel.  PoCL's pip wheel, for one,
-fails on CPUs newer than its LLVM ("unknown target CPU 'generic'"): the default, ``cpu`` and
-``gpu`` then pass over it to the next device of the rule, and naming it gets that reason.  A
+A device is used only if its compiler builds a one-line kernel and the renderer's 8-wide
+vector math (:mod:`.vector_probe`, in a child process).  PoCL's pip wheel, for one, fails on
+CPUs newer than its LLVM ("unknown target CPU 'generic'" on AMD Zen 5; "LLVM ERROR: Cannot
+select" on a double8's sqrt on Zen 4): the default, ``cpu`` and ``gpu`` then pass over it to
+the next device of the rule, and naming it gets that reason.  A
 device that built the probe once is remembered in the program cache and not probed again until
 its driver changes.
 
@@ -44,6 +46,7 @@ import numpy as np
 
 from ..errors import DeviceError, UsageError
 from .programs import cache_dir
+from .vector_probe import SOURCE as VECTOR_SOURCE
 
 __all__ = [
     "Context",
@@ -312,7 +315,7 @@ _probe_contexts: dict = {}
 
 
 def _probe_mark(dev) -> str | None:
-    """The file that records that ``dev`` built :data:`PROBE_SOURCE`: in the program cache
+    """The file that records that ``dev`` built :data:`PROBE_SOURCE` and the vector probe: in the program cache
     (:func:`~clcsg.cl.programs.cache_dir`), named by the hash of the probe and of the device's
     and driver's names and versions, so a new driver or device probes again.  None when the
     disk cache is off."""
@@ -320,7 +323,7 @@ def _probe_mark(dev) -> str | None:
     if folder is None:
         return None
     p = dev.platform
-    ident = repr((PROBE_SOURCE, dev.name, dev.version, dev.driver_version, p.name, p.version))
+    ident = repr((PROBE_SOURCE, VECTOR_SOURCE, dev.name, dev.version, dev.driver_version, p.name, p.version))
     return os.path.join(folder, "probe-" + hashlib.sha256(ident.encode()).hexdigest() + ".ok")
 
 
@@ -350,15 +353,49 @@ def _build_error(dev) -> str | None:
         try:
             ctx = cl.Context([dev])
             cl.Program(ctx, PROBE_SOURCE).build()
-            _probe_results[key] = None
-            _probe_contexts[key] = ctx
-            if mark is not None:
-                _remember_probe(mark)
+            error = None if "oclgrind" in dev.platform.name.lower() else _vector_error(dev)
+            _probe_results[key] = error
+            if error is None:
+                _probe_contexts[key] = ctx
+                if mark is not None:
+                    _remember_probe(mark)
         except (cl.Error, RuntimeError) as e:
             lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
             errors = [ln for ln in lines if ln.lower().startswith("error")]
             _probe_results[key] = (errors or lines or [type(e).__name__])[0]
     return _probe_results[key]
+
+
+#: seconds the 8-wide vector probe's child may take (a build on a slow, busy machine)
+VECTOR_PROBE_TIMEOUT = 300
+
+
+def _vector_error(dev) -> str | None:
+    """None if ``dev`` builds and runs the renderer's 8-wide vector math
+    (:mod:`.vector_probe`, in a child process: the failure it finds aborts its process), else
+    the reason in one line."""
+    p_idx = next(k for k, p in enumerate(_cl().get_platforms()) if p.int_ptr == dev.platform.int_ptr)
+    d_idx = next(k for k, d in enumerate(dev.platform.get_devices()) if d.int_ptr == dev.int_ptr)
+    return vector_probe_error(p_idx, d_idx)
+
+
+def vector_probe_error(platform_index: int, device_index: int) -> str | None:
+    """:func:`_vector_error` of the device at (platform, device) index."""
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    try:
+        r = subprocess.run([sys.executable, "-m", "clcsg.cl.vector_probe", str(platform_index), str(device_index)],
+                           capture_output=True, text=True, timeout=VECTOR_PROBE_TIMEOUT, env=env)
+    except subprocess.TimeoutExpired:
+        return f"its compiler took over {VECTOR_PROBE_TIMEOUT} s on 8-wide vector math"
+    if r.returncode == 0 and r.stdout.startswith("ok"):
+        return None
+    lines = [ln.strip() for ln in (r.stderr + r.stdout).splitlines() if ln.strip()]
+    why = [ln for ln in lines if "LLVM ERROR" in ln or ln.lower().startswith("error")] or lines[-1:] or [f"exit code {r.returncode}"]
+    return f"its compiler fails on 8-wide vector math ({why[0]})"
 
 
 def _by_rule(spec: str | None, env: Mapping[str, str]) -> bool:
