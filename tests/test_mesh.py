@@ -155,6 +155,76 @@ def test_surface_within_tolerance_of_mesh(path):
     assert d.max() <= 3 * m.tolerance
 
 
+def _points_on(m, n, seed):
+    """``n`` area-weighted random points on the triangles of ``m``."""
+    rng = np.random.default_rng(seed)
+    a, b, c = (m.vertices[m.triangles[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    tri = np.minimum(np.searchsorted(np.cumsum(area), rng.random(n) * area.sum()), len(area) - 1)
+    u, v = rng.random(n), rng.random(n)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    return a[tri] + u[:, None] * (b[tri] - a[tri]) + v[:, None] * (c[tri] - a[tri])
+
+
+def check_near_csg_surface(shape, m, n=3000, seed=0):
+    """Points on the triangles lie within the tolerance of the CSG surface itself, not merely
+    of some quadric (a triangle on a quadric's extension, across a gap the quadric does not
+    bound, is near its quadric and far from the solid): around each, the float64 oracle finds
+    points inside the solid and outside it among 64 at distance ``tolerance``."""
+    x = _points_on(m, n, seed)
+    k = np.arange(64) + 0.5
+    z = 1.0 - 2.0 * k / 64
+    phi = k * np.pi * (3.0 - np.sqrt(5.0)) + 0.3
+    d = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
+    ins = oracle.contains(shape, (x[:, None] + m.tolerance * d[None]).reshape(-1, 3)).reshape(n, -1)
+    near = ins.any(axis=1) & ~ins.all(axis=1)
+    assert near.all(), f"{(~near).sum()} of {n} points on the mesh farther than the tolerance from the surface, e.g. {x[~near][:3]}"
+
+
+def _turret():
+    """A tube with six crenels cut through its wall from the top (a chess rook's turret): the
+    crenels' corners lie on the outer cylinder on both sides of each gap."""
+    tube = clcsg.difference(clcsg.cylinder(height=11.0, radius=10.5),
+                            clcsg.cylinder(height=7.5, radius=7.0, center=(0.0, 0.0, 3.25)))
+    gaps = [clcsg.box((12.0, 4.2, 6.0), center=(6.0, 0.0, 4.0)).rotate((0, 0, 1), 60.0 * i) for i in range(6)]
+    return clcsg.difference(tube, clcsg.union(*gaps))
+
+
+def _bevelled_hub():
+    """A tapered hub whose top is bevelled by a steeper cone that meets the hub's cone below
+    the bevel's cap: between them a 0.79-wide annulus on the cap's plane, thinner than the
+    grid's cells, and the two cones' own curve lies inside the solid."""
+    hub = clcsg.cone(height=56.0, r1=95.0, r2=84.0, center=(0.0, 0.0, 28.0))
+    ring = clcsg.difference(clcsg.cylinder(height=5.0, radius=90.0, center=(0.0, 0.0, 54.5)),
+                            clcsg.cone(height=5.02, r1=84.0, r2=80.15, center=(0.0, 0.0, 54.5)))
+    return clcsg.difference(hub, ring)
+
+
+@pytest.mark.parametrize("make", [_turret, _bevelled_hub], ids=["turret", "bevelled_hub"])
+def test_faces_a_quadric_does_not_bound_are_not_spanned(make):
+    """Sharp edges only where both quadrics bound the solid: no triangle crosses a crenel on
+    the outer cylinder's extension, and the annulus between two cones gets its own triangles
+    (their own curve, inside the solid, is no edge); the mesh stays within the tolerance of
+    the CSG surface and no triangle spans a sharp edge."""
+    shape = make()
+    sc = clcsg.Scene(shape)
+    m = clcsg.mesh(sc)
+    check_closed_manifold(m)
+    check_vertices_on_surface(sc, m)
+    assert m.stats["spanning_triangles"] == 0
+    check_near_csg_surface(shape, m)
+
+
+@pytest.mark.parametrize("path", ["examples/l_bracket.csg", "examples/zoo/flange.json"])
+def test_examples_within_tolerance_of_the_csg_surface(path):
+    """The countersinks' rims (a cone standing on a cylinder, patch vertices just above the
+    rim) and the flange's fillet cone, whose extension below its cap lies inside the disc."""
+    sc, m = _mesh(path)
+    check_near_csg_surface(sc.shape, m)
+    assert m.stats["spanning_triangles"] == 0
+
+
 def test_volume_box_minus_cylinder():
     shape = clcsg.difference(clcsg.box((2.0, 2.0, 1.0)), clcsg.cylinder(radius=0.5, height=3.0))
     sc = clcsg.Scene(shape)

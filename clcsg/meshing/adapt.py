@@ -28,7 +28,7 @@ from .bisect import MAX_BISECTIONS, SCALE, TET_EDGES, Tets, isin_sorted, kuhn_te
 from .box_states import _LIVE, box_states
 from .crossings import crossings, thin_stretches
 from .project import first_order_distance
-from .refine import REACH, Surface, _solve, edge_planes, edges_of, on_boundary
+from .refine import REACH, Surface, _solve, edge_planes, edges_of, on_curve
 from .tetra import triangulate
 
 
@@ -143,12 +143,15 @@ def _march(tape, tets: Tets, labels, solved, point) -> tuple:
 
 def _unresolved_spans(tape, marched: Marched, tri_tet, check, tol) -> np.ndarray:
     """Triangles' tetrahedra (indices) with a triangle edge whose ends lie on two quadrics that
-    no intersection curve joins near it: :func:`~.refine.refine` would find none either, since
-    the surface between them is on a third quadric no vertex is on (the step face between two
-    coaxial cylinders or two parallel planes that no tetrahedron edge crosses).  Only the
-    triangles of the tetrahedra ``check`` (bool) are tested, and only edges whose middle is
-    farther than ``tol`` from both quadrics (where two quadrics touch, a cylinder tangent to a
-    plane, the edge is as close to the surface as a chord, and Newton has no crossing)."""
+    no intersection curve on the solid's surface joins near it: :func:`~.refine.refine` would
+    find none either, since the surface between them is on a third quadric no vertex is on
+    (the step face between two coaxial cylinders or two parallel planes that no tetrahedron
+    edge crosses, or the annulus between two cones whose own curve lies off the solid).  Only
+    the triangles of the tetrahedra ``check`` (bool) are tested.  An edge whose quadrics have
+    no curve near it at all is exempt when its middle is within ``tol`` of both (where two
+    quadrics touch, a cylinder tangent to a plane, the edge is as close to the surface as a
+    chord, and Newton has no crossing); a curve that Newton finds but that is no edge of the
+    solid (:func:`~.refine.on_curve`) is not."""
     sets = np.full((len(marched.quadric), 3), -1, dtype=np.int64)
     sets[:, 0] = marched.quadric
     m = Surface(tape, marched.points, sets, marched.triangles)
@@ -157,19 +160,19 @@ def _unresolved_spans(tape, marched: Marched, tri_tet, check, tol) -> np.ndarray
     tested = np.zeros(len(edges), dtype=bool)
     tested[tri_edge[check[tri_tet]].ravel()] = True
     span = np.flatnonzero(tested & (marched.quadric[a] != marched.quadric[b]))
+    if not len(span):
+        return np.zeros(0, dtype=np.int64)
     mid = 0.5 * (m.vertices[a[span]] + m.vertices[b[span]])
     far = np.minimum(first_order_distance(tape.quadrics[marched.quadric[a[span]]][:, None], mid),
                      first_order_distance(tape.quadrics[marched.quadric[b[span]]][:, None], mid)) > tol
-    span, mid = span[far], mid[far]
-    if not len(span):
-        return np.zeros(0, dtype=np.int64)
     sets = np.stack([marched.quadric[a[span]], marched.quadric[b[span]], np.full(len(span), -1)], axis=1)
     length = np.linalg.norm(m.vertices[a[span]] - m.vertices[b[span]], axis=1)
-    x, ok = _solve(tape, sets, mid, edge_planes(m, edges, tri_edge)[span])
-    ok &= np.linalg.norm(x - mid, axis=1) <= REACH * length
-    ok[ok] = on_boundary(tape, x[ok])
+    x, found = _solve(tape, sets, mid, edge_planes(m, edges, tri_edge)[span])
+    found &= np.linalg.norm(x - mid, axis=1) <= REACH * length
+    ok = found.copy()
+    ok[found] = on_curve(tape, x[found], sets[found, 0], sets[found, 1], 2.0 * tol)
     bad = np.zeros(len(edges), dtype=bool)
-    bad[span[~ok]] = True
+    bad[span[(found & ~ok) | (~found & far)]] = True
     return np.unique(tri_tet[bad[tri_edge].any(axis=1)])
 
 

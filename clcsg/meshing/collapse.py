@@ -6,6 +6,7 @@ collapsed, b into a, when the link condition holds: the vertices adjacent to bot
 exactly the two opposite the edge.  Then the two triangles of the edge (zero area) disappear,
 every other triangle of b takes a, and the mesh stays closed, oriented and 2-manifold (the
 link condition is what guarantees it).  The merged vertex lies on the quadrics of both.
+Coincident vertices that no edge joins are merged as well, where the mesh stays closed.
 """
 
 from __future__ import annotations
@@ -14,10 +15,13 @@ from collections import defaultdict
 
 import numpy as np
 
+from .planar import closed
 from .refine import edges_of
 
 #: ends closer than this, relative to max(1, largest |coordinate|), coincide
 COINCIDENT = 1e-12
+#: groups of coincident vertices tried for a merge at most (each a check of the whole mesh)
+MAX_MERGE_GROUPS = 1000
 
 
 def collapse_coincident(m, stats: dict) -> None:
@@ -27,7 +31,7 @@ def collapse_coincident(m, stats: dict) -> None:
     length = np.linalg.norm(m.vertices[edges[:, 0]] - m.vertices[edges[:, 1]], axis=1)
     cand = edges[length <= COINCIDENT * scale]
     if not len(cand):
-        stats.update(collapsed_edges=0)
+        stats.update(collapsed_edges=0, merged_vertices=_merge_unjoined(m, scale))
         return
     tri = [list(t) for t in m.triangles]
     alive = [True] * len(tri)
@@ -47,7 +51,37 @@ def collapse_coincident(m, stats: dict) -> None:
         m.sets[a] = (own + [-1, -1, -1])[:3]
         done += 1
     m.triangles = np.array([t for t, ok in zip(tri, alive) if ok], dtype=np.int64).reshape(-1, 3)
-    stats.update(collapsed_edges=done)
+    stats.update(collapsed_edges=done, merged_vertices=_merge_unjoined(m, scale))
+
+
+def _merge_unjoined(m, scale) -> int:
+    """Coincident vertices (one corner solved for two neighbouring triangles) become one,
+    group by group: the triangles of the others take the first, those left with a repeated
+    vertex or folded onto a twin of opposite orientation disappear.  A group is merged only
+    if the mesh stays closed (:func:`~.planar.closed`; where two sheets of the solid touch at
+    a point, it does not); returns how many vertices merged."""
+    key = np.round(m.vertices / (COINCIDENT * scale)).astype(np.int64)
+    _, which, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    which = which.ravel()
+    merged = 0
+    for g in np.flatnonzero(count > 1)[:MAX_MERGE_GROUPS]:
+        group = np.flatnonzero(which == g)
+        keep, rest = group[0], group[1:]
+        target = np.arange(len(m.vertices))
+        target[rest] = keep
+        tri = target[m.triangles]
+        tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 2] != tri[:, 0])]
+        _, inv, twins = np.unique(np.sort(tri, axis=1), axis=0, return_inverse=True, return_counts=True)
+        tri = tri[twins[inv.ravel()] == 1]
+        if not len(tri) or not closed(tri):
+            continue
+        own = [q for q in m.sets[keep] if q >= 0]
+        for v in rest:
+            own += [q for q in m.sets[v] if q >= 0 and q not in own]
+        m.sets[keep] = (own + [-1, -1, -1])[:3]
+        m.triangles = tri
+        merged += len(rest)
+    return merged
 
 
 def _root(merged, v):

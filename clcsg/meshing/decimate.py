@@ -15,7 +15,10 @@ edge (v, u) disappear) when
   vertices share, measured (first order, |K| / |grad K|) at its centroid, its edges'
   midpoints and three interior points; it turns its normal by less than :data:`MAX_TURN` and is
   not degenerate.  On a plane the chord error is zero: a flat face keeps only what its boundary
-  needs.
+  needs;
+* the first quadric its vertices share bounds the solid at its centroid (moved onto that
+  quadric), or the solid's surface is within the rest of the tolerance of that point: three
+  vertices on a face do not make the triangle between them part of it.
 
 Each pass takes the vertices with a collapse that passes the quadric and topology rules,
 keeps an independent set of them (no two within two edges of each other, so their
@@ -29,8 +32,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csr_matrix
 
+from ..compile.interpret import member_per_point
 from .planar import closed, flat_quadrics
-from .refine import common, edges_of
+from .refine import PROBES, common, edges_of, straddles
 
 #: the largest chord error, as a fraction of the tolerance, at a new triangle's sample points
 CHORD_FRACTION = 0.7
@@ -167,7 +171,45 @@ def _geometry_ok(m, v, u, tol, flat):
     ok = np.bincount(row[~good], minlength=len(v)) == 0
     test = good & ok[row]  # a candidate already out needs no chord errors
     ok[row[test][~(_chord_error(m, c_new[test], shared[test], flat) <= CHORD_FRACTION * tol)]] = False  # NaN fails
+    test &= ok[row]
+    ok[row[test][~_bounds_at_centroid(m, c_new[test], shared[test], tol)]] = False
     return ok
+
+
+def _bounds_at_centroid(m, corners, shared, tol):
+    """Per new triangle (corners (R, 3, 3)) whether its centroid, moved onto the first quadric
+    its vertices share (``shared`` (R, 3), one step along the gradient), lies where that
+    quadric bounds the solid (its substituted sides differ).  Vertices on a quadric's face do
+    not make the triangle between them part of that face: three corners of a crenel's gap lie
+    on the turret's cylinder, the triangle across the gap does not."""
+    q = _first_shared(shared)
+    has = q >= 0
+    out = np.ones(len(corners), dtype=bool)
+    if not has.any():
+        return out
+    c = corners[has].mean(axis=1)
+    k = m.tape.quadrics[q[has]]
+    kx = np.einsum("rij,rj->ri", k, np.concatenate([c, np.ones((len(c), 1))], axis=1))
+    f = np.einsum("ri,ri->r", kx[:, :3], c) + kx[:, 3]
+    g = 2.0 * kx[:, :3]
+    gg = np.einsum("ri,ri->r", g, g)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = c - np.where(gg > 0, f / gg, 0.0)[:, None] * g
+    neg, pos = member_per_point(m.tape.ops, m.tape.quadrics, p, q[has])
+    bounds = neg != pos
+    off = np.flatnonzero(~bounds)
+    # a face of the solid within the rest of the tolerance of the point still bounds the
+    # triangle's error: a step below the tolerance (a 0.01 rim between two primitives) need
+    # not be kept
+    bounds[off] = straddles(m.tape, p[off], (1.0 - CHORD_FRACTION) * tol, PROBES[::4])
+    out[has] = bounds
+    return out
+
+
+def _first_shared(shared):
+    """The first quadric of each row of ``shared`` (R, 3), -1 if none."""
+    first = np.argmax(shared >= 0, axis=1)
+    return np.where((shared >= 0).any(axis=1), shared[np.arange(len(shared)), first], -1)
 
 
 def _independent(n, edges, tri, v, rounds=LUBY_ROUNDS):

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..compile.interpret import contains, member
-from .project import first_order_distance, newton
+from ..compile.interpret import contains, member, member_per_point
+from .project import first_order_distance, newton, residuals
 
 #: an edge is split when its midpoint is farther than this fraction of the tolerance from its
 #: quadric (a triangle's interior sags about 4/3 as far as its edges' midpoints)
@@ -42,6 +42,19 @@ MAX_PASSES = 16
 MIN_EDGE = 1e-3
 #: the probe distance of :func:`on_boundary`, relative to the coordinates' scale
 PROBE = 1e-7
+#: the probe distances of :func:`on_curve`: from this times the coordinates' scale, by factors
+#: of :data:`CURVE_PROBE_STEP`, below :data:`CURVE_PROBE_MAX` times the scale and half the
+#: tolerance.  Small: a quadric's extension a step below the tolerance away from its face (a
+#: 0.01 rim where a cone stands on a cylinder) is no edge; the faces on both sides of the step
+#: are found instead (:func:`_through_third`)
+CURVE_PROBE = 1e-6
+CURVE_PROBE_STEP = 10.0
+CURVE_PROBE_MAX = 1e-4
+#: two quadrics whose normals at a curve point make an angle with a sine below this touch
+#: there (a fillet's cylinder tangent to a face): Newton's point is off the contact line by
+#: about the square root of the rounding, so :func:`on_curve` probes the solid around it
+#: (:func:`on_boundary`) instead of across a curve that is not there
+TANGENT_SINE = 1e-3
 #: a curve point up to this many edge lengths from the edge's midpoint may split it (a thin
 #: wedge's apex projects beyond the chord that crosses it)
 REACH = 3.0
@@ -101,11 +114,53 @@ def _candidates(sa, sb):
     return np.concatenate(rows), np.concatenate(sets)
 
 
-def _nearest_on_boundary(tape, rows, n, x, dist):
-    """Per row (0..n-1) the candidate (index into ``x``) of lowest ``dist`` among
-    those with a finite ``dist`` that lie on the solid's boundary (:func:`on_boundary`, its
-    probe radius from all of them), -1 if
-    none.  The same pick as testing every candidate, but the boundary test (the costly part)
+def _onto_rim(tape, tol, rows, sets, x, ok, mid, length):
+    """Chord splits on one quadric whose midpoint, moved onto it, is off the solid's face on
+    it (an edge along the face's rim, its ends just inside): the split goes onto the rim, the
+    curve of that quadric and another near the midpoint (:func:`_through_third`'s candidates,
+    Newton from the midpoint), the nearest on the surface within one edge length.  ``sets``,
+    ``x`` and ``ok`` (rows of the chord edges) are updated in place."""
+    if not len(rows):
+        return
+    none = np.full((len(rows), 3), -1)
+    cand, csets = _through_third(tape, sets[rows], none, mid[rows], length[rows])
+    cx, cok = _solve(tape, csets, mid[rows[cand]])
+    dist = np.where(cok, np.linalg.norm(cx - mid[rows[cand]], axis=1), np.inf)
+    dist[dist > length[rows[cand]]] = np.inf
+    pick = _nearest_on_surface(tape, cand, len(rows), cx, csets, tol, dist)
+    found = pick >= 0
+    r = rows[found]
+    x[r], sets[r], ok[r] = cx[pick[found]], csets[pick[found]], True
+
+
+def _through_third(tape, sa, sb, mid, length):
+    """Candidates for edges spanning two patches that no curve of theirs joins on the surface
+    (their quadrics' own curve lies off the solid): the surface between the ends is on a third
+    quadric C (the annulus on a plane between two near-parallel cones), so each curve of one
+    end's quadric and a C whose first-order distance from the edge's middle is within one
+    edge length.  (rows into the edges, sets (3,) -1 padded)."""
+    f, j = residuals(tape.quadrics[None], mid)  # (N, U), (N, U, 3)
+    g = np.linalg.norm(j, axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        near = np.abs(f) <= length[:, None] * g
+    ends = np.concatenate([sa, sb], axis=1)
+    for k in range(6):
+        valid = ends[:, k] >= 0
+        near[np.flatnonzero(valid), ends[valid, k]] = False
+    rows, third = np.nonzero(near)
+    out_rows, out_sets = [], []
+    for k in range(6):
+        own = ends[rows, k]
+        sel = own >= 0
+        out_rows.append(rows[sel])
+        out_sets.append(np.stack([own[sel], third[sel], np.full(sel.sum(), -1)], axis=1))
+    return np.concatenate(out_rows), np.concatenate(out_sets)
+
+
+def _nearest_on_surface(tape, rows, n, x, sets, tol, dist):
+    """Per row (0..n-1) the candidate (index into ``x``, on the quadrics of ``sets``) of lowest
+    ``dist`` among those with a finite ``dist`` that lie on the solid's surface through their
+    quadrics (:func:`on_surface`, its probe radius from all of them), -1 if none.  The same pick as testing every candidate, but the boundary test (the costly part)
     runs on each row's best remaining candidate only, round after round."""
     best = np.full(n, -1)
     alive = np.isfinite(dist)
@@ -116,7 +171,7 @@ def _nearest_on_boundary(tape, rows, n, x, dist):
         first = np.ones(len(order), dtype=bool)
         first[1:] = rows[order][1:] != rows[order][:-1]
         pick = order[first]
-        ok = on_boundary(tape, x[pick], scale)
+        ok = on_surface(tape, x[pick], sets[pick], tol, scale)
         best[rows[pick[ok]]] = pick[ok]
         alive[pick] = False
         alive &= best[rows] < 0
@@ -188,10 +243,10 @@ def _probe_directions(n: int = 64):
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-_PROBES = _probe_directions()
+PROBES = _probe_directions()
 
 
-def _straddles(tape, x, radius, directions) -> np.ndarray:
+def straddles(tape, x, radius, directions) -> np.ndarray:
     """Points (N, 3) with some probes ``x + radius d`` inside the solid and some outside."""
     if not len(x):
         return np.zeros(0, dtype=bool)
@@ -213,10 +268,62 @@ def on_boundary(tape, x, scale=None) -> np.ndarray:
     out = np.ones(len(x), dtype=bool)
     for r in (PROBE, 100 * PROBE):  # two radii: a rounding-level disagreement of one probe is not enough
         sel = np.flatnonzero(out)
-        got = _straddles(tape, x[sel], r * scale, _PROBES[::4])
+        got = straddles(tape, x[sel], r * scale, PROBES[::4])
         rest = sel[~got]
         if len(rest):
-            out[rest] = _straddles(tape, x[rest], r * scale, _PROBES)
+            out[rest] = straddles(tape, x[rest], r * scale, PROBES)
+    return out
+
+
+def on_curve(tape, x, qa, qb, tol, scale=None) -> np.ndarray:
+    """Points ``x`` (N, 3) on the intersection curve of quadrics ``qa`` and ``qb`` (N,) where
+    both bound the solid: for each of the two, on one side of the curve within its tangent
+    plane (direction d = t x n, t = n_a x n_b the curve's tangent) switching its membership
+    switches the solid's (the quadric substituted at x + r d or x - r d).  A curve point where
+    one of them does not bound the solid (a quadric's extension beyond the face it contributes,
+    inside or outside the solid) is no sharp edge of it, though :func:`on_boundary` holds there
+    through the other quadric.  Probed at r from :data:`CURVE_PROBE` x scale up (below half the
+    tolerance ``tol``), the smallest first, so that a corner close by does not hide the edge."""
+    n = len(x)
+    out = np.zeros(n, dtype=bool)
+    if not n:
+        return out
+    scale = max(1.0, float(np.abs(x).max())) if scale is None else scale
+    _, j = residuals(tape.quadrics[np.stack([qa, qb], axis=1)], x)  # (N, 2, 3) gradients
+    t = np.cross(j[:, 0], j[:, 1])
+    radii = [CURVE_PROBE * scale]
+    while radii[-1] * CURVE_PROBE_STEP < min(0.5 * tol, CURVE_PROBE_MAX * scale):
+        radii.append(radii[-1] * CURVE_PROBE_STEP)
+    g = np.linalg.norm(j, axis=2)
+    tangent = np.linalg.norm(t, axis=1) <= TANGENT_SINE * g[:, 0] * g[:, 1]  # no side within the tangent planes
+    out[tangent] = on_boundary(tape, x[tangent], scale)
+    bounds = np.zeros((n, 2), dtype=bool)
+    bounds[tangent] = out[tangent, None]
+    for k, q in enumerate((qa, qb)):
+        d = np.cross(t, j[:, k])
+        ln = np.linalg.norm(d, axis=1, keepdims=True)
+        d = np.divide(d, ln, out=np.zeros_like(d), where=ln > 0)
+        for r in radii:
+            sel = np.flatnonzero(~bounds[:, k] & ~tangent)
+            if not len(sel):
+                break
+            probes = np.concatenate([x[sel] + r * d[sel], x[sel] - r * d[sel]])
+            neg, pos = member_per_point(tape.ops, tape.quadrics, probes, np.concatenate([q[sel], q[sel]]))
+            switch = (neg != pos).reshape(2, -1).any(axis=0)
+            bounds[sel[switch], k] = True
+    return bounds.all(axis=1)
+
+
+def on_surface(tape, x, sets, tol, scale=None) -> np.ndarray:
+    """Points ``x`` (N, 3) on the quadrics of ``sets`` (N, 3), -1 padded, that lie on the
+    solid's surface through them: on one quadric, its substituted sides differ; on two, both
+    bound the solid (:func:`on_curve`); at a corner of three, :func:`on_boundary`."""
+    out = np.zeros(len(x), dtype=bool)
+    k = (sets >= 0).sum(axis=1)
+    one, two, three = (np.flatnonzero(k == c) for c in (1, 2, 3))
+    out[one] = _on_csg(tape, x[one], sets[one, 0])
+    out[two] = on_curve(tape, x[two], sets[two, 0], sets[two, 1], tol, scale)
+    out[three] = on_boundary(tape, x[three], scale)
     return out
 
 
@@ -240,22 +347,39 @@ def _edge_splits(m, tol, edges, tri_edge):
     if single.any():
         cok[single] = _on_csg(m.tape, cx[single], shared[chord[single], 0])
     curve = ~single & cok
-    cok[curve] = on_boundary(m.tape, cx[curve])
+    cok[curve] = on_curve(m.tape, cx[curve], shared[chord[curve], 0], shared[chord[curve], 1], tol)
+    cset = shared[chord].copy()
+    _onto_rim(m.tape, tol, np.flatnonzero((shared[chord, 1] < 0) & ~cok), cset, cx, cok, mid[chord], length[chord])
     span = np.flatnonzero((n_shared == 0) & long_enough)
     rows, sets = _candidates(s[a[span]], s[b[span]])
     sx, sok = _solve(m.tape, sets, mid[span[rows]], edge_planes(m, edges, tri_edge)[span[rows]])
     dist = np.where(sok, np.linalg.norm(sx - mid[span[rows]], axis=1), np.inf)
     dist[dist > REACH * length[span[rows]]] = np.inf
-    corner = sets[:, 2] >= 0  # a corner ends the edge's chain of splits: the only choice where there is one
-    has_corner = np.zeros(len(span), dtype=bool)
-    has_corner[rows[corner]] = True
-    dist[has_corner[rows] & ~corner] = np.inf
-    best = _nearest_on_boundary(m.tape, rows, len(span), sx, dist)
+    # a corner on the surface ends the edge's chain of splits: the only choice where there is
+    # one; where the three quadrics meet off the surface or not at all, a curve of two
+    corner = sets[:, 2] >= 0
+    best = _nearest_on_surface(m.tape, rows, len(span), sx, sets, tol, np.where(corner, dist, np.inf))
+    rest = (best[rows] < 0) & ~corner
+    if rest.any():
+        best_pair = _nearest_on_surface(m.tape, rows, len(span), sx, sets, tol, np.where(rest, dist, np.inf))
+        best = np.where(best >= 0, best, best_pair)
+    lost = np.flatnonzero(best < 0)
+    if len(lost):
+        rows3, sets3 = _through_third(m.tape, s[a[span[lost]]], s[b[span[lost]]], mid[span[lost]], length[span[lost]])
+        r3 = lost[rows3]
+        x3, ok3 = _solve(m.tape, sets3, mid[span[r3]], edge_planes(m, edges, tri_edge)[span[r3]])
+        d3 = np.where(ok3, np.linalg.norm(x3 - mid[span[r3]], axis=1), np.inf)
+        d3[d3 > length[span[r3]]] = np.inf  # between the ends: a curve farther off is another edge's
+        pick = _nearest_on_surface(m.tape, np.searchsorted(lost, r3), len(lost), x3, sets3, tol, d3)
+        found = pick >= 0
+        best[lost[found]] = len(sx) + np.arange(found.sum())
+        sx = np.concatenate([sx, x3[pick[found]]])
+        sets = np.concatenate([sets, sets3[pick[found]]])
     got = best >= 0
     _upgrade_ends(m, tol, edges[span[got]], sx[best[got]], sets[best[got]], got, np.flatnonzero(got))
     e_idx = np.concatenate([chord[cok], span[got]])
     pts = np.concatenate([cx[cok], sx[best[got]]])
-    new_sets = np.concatenate([shared[chord[cok]], sets[best[got]]])
+    new_sets = np.concatenate([cset[cok], sets[best[got]]])
     missed = int((~cok).sum() + (~got).sum())
     return e_idx, pts, new_sets, missed
 
