@@ -8,12 +8,15 @@ three at a corner).  An edge is split at a new vertex when
   ends' three quadrics if Newton (:func:`~.project.newton`) finds one on the solid within
   reach, else the point where the intersection curve of one quadric of each end crosses the
   edge's plane (the plane through the edge that holds the mesh normal there: Newton on the two
-  quadrics and that plane), the closest converged candidate on the solid within
+  quadrics and that plane), the closest converged candidate on the solid's surface within
   :data:`REACH` edge lengths (a curve running almost along the edge, or the apex of a thin
-  wedge, still crosses that plane near the edge);
+  wedge, still crosses that plane near the edge); a curve point counts only where both its
+  quadrics bound the solid (:func:`on_curve`), and where the ends' quadrics meet off the
+  surface the edge goes through a third quadric (:func:`_through_third`);
 * its ends share quadrics (it runs on a patch or along a curve) and its midpoint is farther
   than :data:`CHORD_FRACTION` of the tolerance from them (the chord error): the new vertex is
-  the midpoint projected onto them.
+  the midpoint projected onto them, or onto the face's rim where that point is off the face
+  (:func:`_onto_rim`).
 
 Splits are keyed by edge, so both triangles of an edge split at the same vertex; a triangle
 with one, two or three split edges becomes two, three or four (the red-green patterns), which
@@ -160,8 +163,9 @@ def _through_third(tape, sa, sb, mid, length):
 def _nearest_on_surface(tape, rows, n, x, sets, tol, dist):
     """Per row (0..n-1) the candidate (index into ``x``, on the quadrics of ``sets``) of lowest
     ``dist`` among those with a finite ``dist`` that lie on the solid's surface through their
-    quadrics (:func:`on_surface`, its probe radius from all of them), -1 if none.  The same pick as testing every candidate, but the boundary test (the costly part)
-    runs on each row's best remaining candidate only, round after round."""
+    quadrics (:func:`on_surface`, its probe radius from all of them), -1 if none.  The same
+    pick as testing every candidate, but the surface test (the costly part) runs on each row's
+    best remaining candidate only, round after round."""
     best = np.full(n, -1)
     alive = np.isfinite(dist)
     scale = max(1.0, float(np.abs(x[alive]).max())) if alive.any() else 1.0  # the probes' of all
