@@ -1,6 +1,7 @@
 """Shared benchmark plumbing: machine/device description, result files, timing helpers, the
-manifold3d translation of a clcsg shape (:class:`Translator`) and the first-order surface error
-(:func:`surface_error`) that the peer and mesh benchmarks both measure with, and the command and
+manifold3d translation of a clcsg shape (:class:`Translator`), the first-order surface error
+(:func:`surface_error`) that the peer and mesh benchmarks both measure with and the distance to
+the CSG surface itself (:func:`csg_surface_error`), and the command and
 environment of fresh ``clcsg`` processes (:func:`clcsg_command`, :func:`environment_for_runs`).
 
 Every other bench module may import this one and :mod:`bench.zoo`; neither imports another
@@ -406,6 +407,46 @@ def surface_error(tape, points, chunk=20000):
         with np.errstate(divide="ignore", invalid="ignore"):
             d = np.where(g > 0, np.abs(val) / g, np.where(val == 0, 0.0, np.inf))
         out[s:s + chunk] = d.min(axis=1)
+    return out
+
+
+def _sphere_directions(n):
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = k * np.pi * (3.0 - np.sqrt(5.0)) + 0.1234
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+#: directions and growth of :func:`csg_surface_error`'s probe spheres
+CSG_ERROR_DIRECTIONS = _sphere_directions(256)
+CSG_ERROR_STEP = 1.05
+
+
+def csg_surface_error(tape, points, floor, reach=None):
+    """Distance (an upper bound) from each point to the CSG surface itself, not to the nearest
+    quadric: the smallest radius, growing by :data:`CSG_ERROR_STEP` from the first-order quadric
+    distance (:func:`surface_error`, a lower bound to first order) and at least ``floor``, at
+    which some of 256 points on the sphere round the point are inside the solid and some
+    outside (the boundary then passes within the radius).  A triangle on a quadric's extension
+    (across a gap that quadric does not bound) is near its quadric and far from the solid: this
+    sees it, :func:`surface_error` does not.  inf past ``reach`` (default: the bound's
+    diagonal)."""
+    from clcsg.compile.interpret import contains
+
+    points = np.asarray(points, dtype=np.float64)
+    r = np.maximum(surface_error(tape, points), floor)
+    out = np.full(len(points), np.inf)
+    alive = np.arange(len(points))
+    reach = diagonal(tape.bound) if reach is None else reach
+    while len(alive):
+        probes = (points[alive, None] + r[alive, None, None] * CSG_ERROR_DIRECTIONS[None]).reshape(-1, 3)
+        ins = contains(tape.ops, tape.quadrics, probes).reshape(len(alive), -1)
+        hit = ins.any(axis=1) & ~ins.all(axis=1)
+        out[alive[hit]] = r[alive[hit]]
+        alive = alive[~hit]
+        r[alive] *= CSG_ERROR_STEP
+        alive = alive[r[alive] <= reach * CSG_ERROR_STEP]
     return out
 
 

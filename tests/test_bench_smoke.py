@@ -195,3 +195,18 @@ def test_render_many_leaves(cl_context):
     assert rows[0]["after"]["tile_leaves_max"] >= 200
     for r in rows:
         assert r["same_image"] and r["after"]["covered_pixels"] > 0 and r["after"]["cpu_seconds"] > 0
+
+
+def test_csg_surface_error_sees_a_quadric_extension():
+    """The mesh benchmark's distance to the CSG surface: a point on the plane of a box's top
+    face but beside the box is 0 from that quadric and 0.5 from the solid; a point above the
+    face is 0.3 from both.  The bound is from above, within the growth step and the probes'
+    spacing."""
+    from bench.common import CSG_ERROR_STEP, csg_surface_error, surface_error
+
+    tape = clcsg.Scene(clcsg.box(2.0)).compile()
+    x = np.array([[1.5, 0.0, 1.0], [0.0, 0.0, 1.3]])
+    assert surface_error(tape, x)[0] < 1e-12
+    d = csg_surface_error(tape, x, 1e-3)
+    assert 0.5 <= d[0] <= 0.5 * CSG_ERROR_STEP ** 2
+    assert 0.3 <= d[1] <= 0.3 * CSG_ERROR_STEP ** 2
