@@ -53,6 +53,8 @@ PROBE = 1e-7
 CURVE_PROBE = 1e-6
 CURVE_PROBE_STEP = 10.0
 CURVE_PROBE_MAX = 1e-4
+#: (edge, quadric) pairs of :func:`_through_third` evaluated at a time
+NEAR_ENTRIES = 1 << 20
 #: two quadrics whose normals at a curve point make an angle with a sine below this touch
 #: there (a fillet's cylinder tangent to a face): Newton's point is off the contact line by
 #: about the square root of the rounding, so :func:`on_curve` probes the solid around it
@@ -142,10 +144,13 @@ def _through_third(tape, sa, sb, mid, length):
     quadric C (the annulus on a plane between two near-parallel cones), so each curve of one
     end's quadric and a C whose first-order distance from the edge's middle is within one
     edge length.  (rows into the edges, sets (3,) -1 padded)."""
-    f, j = residuals(tape.quadrics[None], mid)  # (N, U), (N, U, 3)
-    g = np.linalg.norm(j, axis=2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        near = np.abs(f) <= length[:, None] * g
+    quadrics = np.asarray(tape.quadrics)
+    near = np.zeros((len(mid), len(quadrics)), dtype=bool)
+    step = max(1, NEAR_ENTRIES // max(len(quadrics), 1))
+    for s in range(0, len(mid), step):  # (rows, U, 4) values at a time: bounded memory
+        f, j = residuals(quadrics[None], mid[s:s + step])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            near[s:s + step] = np.abs(f) <= length[s:s + step, None] * np.linalg.norm(j, axis=2)
     ends = np.concatenate([sa, sb], axis=1)
     for k in range(6):
         valid = ends[:, k] >= 0
