@@ -315,9 +315,9 @@ _probe_contexts: dict = {}
 
 
 def _probe_mark(dev) -> str | None:
-    """The file that records that ``dev`` built :data:`PROBE_SOURCE` and the vector probe: in the program cache
-    (:func:`~clcsg.cl.programs.cache_dir`), named by the hash of the probe and of the device's
-    and driver's names and versions, so a new driver or device probes again.  None when the
+    """The file that records that ``dev`` built :data:`PROBE_SOURCE` and ran the vector probe:
+    in the program cache (:func:`~clcsg.cl.programs.cache_dir`), named by the hash of the probes
+    and of the device's and driver's names and versions, so a new driver or device probes again.  None when the
     disk cache is off."""
     folder = cache_dir()
     if folder is None:

@@ -30,9 +30,12 @@ def collapse_coincident(m, stats: dict) -> None:
     scale = max(1.0, float(np.abs(m.vertices).max(initial=0.0)))
     length = np.linalg.norm(m.vertices[edges[:, 0]] - m.vertices[edges[:, 1]], axis=1)
     cand = edges[length <= COINCIDENT * scale]
-    if not len(cand):
-        stats.update(collapsed_edges=0, merged_vertices=_merge_unjoined(m, scale))
-        return
+    done = _collapse_edges(m, cand) if len(cand) else 0
+    stats.update(collapsed_edges=done, merged_vertices=_merge_unjoined(m, scale))
+
+
+def _collapse_edges(m, cand) -> int:
+    """Collapse the edges ``cand`` (E, 2) where the link condition holds; returns how many."""
     tri = [list(t) for t in m.triangles]
     alive = [True] * len(tri)
     of = defaultdict(set)
@@ -51,7 +54,7 @@ def collapse_coincident(m, stats: dict) -> None:
         m.sets[a] = (own + [-1, -1, -1])[:3]
         done += 1
     m.triangles = np.array([t for t, ok in zip(tri, alive) if ok], dtype=np.int64).reshape(-1, 3)
-    stats.update(collapsed_edges=done, merged_vertices=_merge_unjoined(m, scale))
+    return done
 
 
 def _merge_unjoined(m, scale) -> int:

@@ -107,9 +107,7 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     _timed(stats, "decimate", decimate, m, tol, stats)
     _timed(stats, "planar", planar.coarsen, m, stats)
     quad, prim, colors = _timed(stats, "owners", triangle_owners, tape, m, tol)
-    s = m.sets[m.triangles]
-    spanning = ~(refine.common(refine.common(s[:, 0], s[:, 1]), s[:, 2]) >= 0).any(axis=1)
-    stats["spanning_triangles"] = int(spanning.sum())  # of the final mesh: no quadric common to its vertices
+    stats["spanning_triangles"] = int(refine.spanning(m.sets, m.triangles).sum())  # of the final mesh
     stats.update(triangles=int(len(m.triangles)), vertices=int(len(m.vertices)),
                  cpu_s=time.process_time() - t0)
     return Mesh(m.vertices, m.triangles, quad, prim, colors, m.sets, tol, stats)

@@ -93,6 +93,13 @@ def common(sa, sb):
     return np.where(hit & (sa >= 0), sa, -1)
 
 
+def spanning(sets, triangles) -> np.ndarray:
+    """Per triangle whether its vertices (quadric ``sets`` (V, 3), -1 padded) share no quadric:
+    it spans a sharp edge."""
+    s = sets[triangles]
+    return ~(common(common(s[:, 0], s[:, 1]), s[:, 2]) >= 0).any(axis=1)
+
+
 def _compact(sets):
     """Sets with their quadrics first and -1 after (stable)."""
     order = np.argsort(sets < 0, axis=1, kind="stable")
@@ -294,9 +301,8 @@ def on_curve(tape, x, qa, qb, tol, scale=None) -> np.ndarray:
     through the other quadric.  Probed at r from :data:`CURVE_PROBE` x scale up (below half the
     tolerance ``tol``), the smallest first, so that a corner close by does not hide the edge."""
     n = len(x)
-    out = np.zeros(n, dtype=bool)
     if not n:
-        return out
+        return np.zeros(0, dtype=bool)
     scale = max(1.0, float(np.abs(x).max())) if scale is None else scale
     _, j = residuals(tape.quadrics[np.stack([qa, qb], axis=1)], x)  # (N, 2, 3) gradients
     t = np.cross(j[:, 0], j[:, 1])
@@ -305,9 +311,8 @@ def on_curve(tape, x, qa, qb, tol, scale=None) -> np.ndarray:
         radii.append(radii[-1] * CURVE_PROBE_STEP)
     g = np.linalg.norm(j, axis=2)
     tangent = np.linalg.norm(t, axis=1) <= TANGENT_SINE * g[:, 0] * g[:, 1]  # no side within the tangent planes
-    out[tangent] = on_boundary(tape, x[tangent], scale)
     bounds = np.zeros((n, 2), dtype=bool)
-    bounds[tangent] = out[tangent, None]
+    bounds[tangent] = on_boundary(tape, x[tangent], scale)[:, None]
     for k, q in enumerate((qa, qb)):
         d = np.cross(t, j[:, k])
         ln = np.linalg.norm(d, axis=1, keepdims=True)
@@ -360,8 +365,9 @@ def _edge_splits(m, tol, edges, tri_edge):
     cset = shared[chord].copy()
     _onto_rim(m.tape, tol, np.flatnonzero((shared[chord, 1] < 0) & ~cok), cset, cx, cok, mid[chord], length[chord])
     span = np.flatnonzero((n_shared == 0) & long_enough)
+    planes = edge_planes(m, edges, tri_edge)[span]
     rows, sets = _candidates(s[a[span]], s[b[span]])
-    sx, sok = _solve(m.tape, sets, mid[span[rows]], edge_planes(m, edges, tri_edge)[span[rows]])
+    sx, sok = _solve(m.tape, sets, mid[span[rows]], planes[rows])
     dist = np.where(sok, np.linalg.norm(sx - mid[span[rows]], axis=1), np.inf)
     dist[dist > REACH * length[span[rows]]] = np.inf
     # a corner on the surface ends the edge's chain of splits: the only choice where there is
@@ -376,7 +382,7 @@ def _edge_splits(m, tol, edges, tri_edge):
     if len(lost):
         rows3, sets3 = _through_third(m.tape, s[a[span[lost]]], s[b[span[lost]]], mid[span[lost]], length[span[lost]])
         r3 = lost[rows3]
-        x3, ok3 = _solve(m.tape, sets3, mid[span[r3]], edge_planes(m, edges, tri_edge)[span[r3]])
+        x3, ok3 = _solve(m.tape, sets3, mid[span[r3]], planes[r3])
         d3 = np.where(ok3, np.linalg.norm(x3 - mid[span[r3]], axis=1), np.inf)
         d3[d3 > length[span[r3]]] = np.inf  # between the ends: a curve farther off is another edge's
         pick = _nearest_on_surface(m.tape, np.searchsorted(lost, r3), len(lost), x3, sets3, tol, d3)
@@ -496,7 +502,6 @@ def refine(m: Surface, tol: float, stats: dict) -> None:
         m.triangles = split_triangles(m.triangles, tri_edge, mid_vertex, m.vertices)
         splits += len(e_idx)
         per_pass.append(int(len(e_idx)))
-    s = m.sets[m.triangles]
-    no_common = ~(common(common(s[:, 0], s[:, 1]), s[:, 2]) >= 0).any(axis=1)
+    no_common = spanning(m.sets, m.triangles)
     stats.update(splits_per_pass=per_pass, edge_splits=int(splits), corner_splits=int(corners), unsplit_edges=int(missed),
-                 spanning_triangles=int(no_common.sum()))
+                 spanning_after_refine=int(no_common.sum()))
