@@ -477,8 +477,29 @@ def _needs(b: _Builder, root: int) -> dict:
     return need
 
 
-def _emit(b: _Builder, root: int) -> tuple[np.ndarray, int]:
-    """SSA instructions in evaluation order, then linear-scan register allocation."""
+#: a tape that needs more than REMATERIALIZE_PAST registers is emitted again with every leaf
+#: used more than REMATERIALIZE instructions after its last evaluation evaluated again,
+#: instead of holding a register all the way (a large mesh's face plane is a leaf in each k-d
+#: cell it spans: held, such planes took 295 registers, evaluated again 22)
+REMATERIALIZE_PAST = 32
+REMATERIALIZE = 64
+
+
+def _emit(b: _Builder, root: int, registers: int | None = None) -> tuple[np.ndarray, int]:
+    """SSA instructions in evaluation order, then linear-scan register allocation (see
+    :data:`REMATERIALIZE_PAST`; ``registers``: a lower count past which to try, the budget of
+    a tape that must fit another's registers)."""
+    ops, n_regs = _emit_once(b, root, None)
+    if n_regs > min(REMATERIALIZE_PAST, registers if registers is not None else REMATERIALIZE_PAST):
+        again, regs = _emit_once(b, root, REMATERIALIZE)
+        if regs < n_regs:
+            return again, regs
+    return ops, n_regs
+
+
+def _emit_once(b: _Builder, root: int, remat: int | None) -> tuple[np.ndarray, int]:
+    """:func:`_emit` with leaves evaluated again past ``remat`` instructions (None: never)."""
+    remat = float("inf") if remat is None else remat
     need = _needs(b, root)
     value: dict = {}  # expression id -> SSA value
     ssa: list = []  # (op, a, b) with SSA operands for AND/OR
@@ -492,7 +513,7 @@ def _emit(b: _Builder, root: int) -> tuple[np.ndarray, int]:
     while stack:
         fr = stack[-1]
         i = fr[0]
-        if i in value:
+        if i in value and not (b.kind[i] == _LEAF and len(ssa) - value[i] > remat):
             stack.pop()
             continue
         kind = b.kind[i]
@@ -510,7 +531,7 @@ def _emit(b: _Builder, root: int) -> tuple[np.ndarray, int]:
         kids = fr[1]
         if fr[2] < len(kids):
             c = kids[fr[2]]
-            if c not in value:
+            if c not in value or (b.kind[c] == _LEAF and len(ssa) - value[c] > remat):
                 stack.append([c, None, 0, None])
                 continue
             v = value[c]
