@@ -99,11 +99,20 @@ def _region_points(lo, hi, rng, n):
     return rng.uniform(lo, hi, (n, 3))
 
 
-def _faceted_sphere_minus_bore():
+def _faceted_sphere_minus_bore(partitioned=False):
+    """A convex mesh of 1,280 faces minus a bore: one intersection of its face planes (held
+    half-spaces, what these tests are about), or with ``partitioned`` a k-d tree of local BSPs
+    (its face planes bounded by their cells, tests/test_mesh_partition.py)."""
     from test_operands import faceted_sphere
+    import clcsg.model.polyhedron as P
 
     v, f = faceted_sphere(3)
-    return clcsg.polyhedron(v, f) - clcsg.cylinder(3, 0.3)
+    limit = P.PARTITION_PLANES
+    P.PARTITION_PLANES = limit if partitioned else len(f)
+    try:
+        return clcsg.polyhedron(v, f) - clcsg.cylinder(3, 0.3)
+    finally:
+        P.PARTITION_PLANES = limit
 
 
 def _random_mesh_minus_bore():
@@ -113,7 +122,7 @@ def _random_mesh_minus_bore():
     return clcsg.polyhedron(v, f) - clcsg.cylinder(4, 0.3)
 
 
-@pytest.mark.parametrize("scene", ["plate", "union", "mesh", "concave_mesh", "pen_stand"])
+@pytest.mark.parametrize("scene", ["plate", "union", "mesh", "kd_mesh", "concave_mesh", "pen_stand"])
 def test_root_tapes_are_exact_over_their_regions(scene):
     """Per quadric, the pruned root tape gives the full tape's membership on both sides of the
     quadric (the substitution of eq. 22 on the tree) at random points of its region.  The mesh
@@ -122,7 +131,8 @@ def test_root_tapes_are_exact_over_their_regions(scene):
     FALSE.  The concave mesh (rotated boxes cut from and added to a cube: a BSP of many convex
     cells) has regions that many half-spaces miss."""
     shape = {"plate": lambda: perforated_plate(8), "union": lambda: sphere_union(216),
-             "mesh": _faceted_sphere_minus_bore, "concave_mesh": _random_mesh_minus_bore,
+             "mesh": _faceted_sphere_minus_bore, "kd_mesh": lambda: _faceted_sphere_minus_bore(True),
+             "concave_mesh": _random_mesh_minus_bore,
              # hulls and a Minkowski sum: half-spaces of one plane in several instances, and
              # neighbouring regions (one root tape) that one half-space holds and another misses
              "pen_stand": lambda: clcsg.load(os.path.join(EXAMPLES, "pen_stand.csg")).shape}[scene]()
@@ -135,12 +145,14 @@ def test_root_tapes_are_exact_over_their_regions(scene):
     pruned = [q for q, (first, _) in spans.items() if first > 0]
     if scene in ("pen_stand", "concave_mesh"):  # most of their quadrics' regions hold most of their few primitives
         assert len(pruned) >= 10
+    elif scene == "kd_mesh":  # regions grown this much meet several of its few cells
+        assert len(pruned) > 0.6 * len(spans)
     else:
         assert len(pruned) > 0.8 * len(spans)
     for q in (pruned if len(pruned) <= 40 else rng.choice(pruned, 25, replace=False)):
         first, count = spans[q]
         ops = rows[first:first + count]
-        assert count < len(tape.ops) * {"mesh": 0.6, "pen_stand": 1.0, "concave_mesh": 1.0}.get(scene, 1 / 3)
+        assert count < len(tape.ops) * {"mesh": 0.6, "kd_mesh": 0.6, "pen_stand": 1.0, "concave_mesh": 1.0}.get(scene, 1 / 3)
         x = _region_points(*regions[q], rng, 400)
         full = member(tape.ops, tape.quadrics, x, int(q))
         part = member(ops, tape.quadrics, x, int(q))
@@ -148,7 +160,7 @@ def test_root_tapes_are_exact_over_their_regions(scene):
         np.testing.assert_array_equal(part[1], full[1])
 
 
-@pytest.mark.parametrize("scene", ["mesh", "concave_mesh", "pen_stand"])
+@pytest.mark.parametrize("scene", ["mesh", "kd_mesh", "concave_mesh", "pen_stand"])
 def test_root_tapes_are_exact_where_the_world_and_frame_boxes_meet(scene):
     """The sampler's regions as it makes them (its tasks' patches grown by the radius, as a
     world box and as a box in each quadric's principal frame, which for a tilted face plane is
@@ -157,7 +169,8 @@ def test_root_tapes_are_exact_where_the_world_and_frame_boxes_meet(scene):
     alone on the faceted sphere."""
     from clcsg.sampling.sampler import _task_regions
 
-    shape = {"mesh": _faceted_sphere_minus_bore, "concave_mesh": _random_mesh_minus_bore,
+    shape = {"mesh": _faceted_sphere_minus_bore, "kd_mesh": lambda: _faceted_sphere_minus_bore(True),
+             "concave_mesh": _random_mesh_minus_bore,
              "pen_stand": lambda: clcsg.load(os.path.join(EXAMPLES, "pen_stand.csg")).shape}[scene]()
     tape = Scene(shape).compile()
     packed = pack(tape, np.float64)

@@ -22,22 +22,26 @@ _ORDER = ("plane", "cylinder", "elliptic cylinder", "cone", "sphere", "ellipsoid
 
 
 class Construction(Union):
-    __slots__ = ("label", "surfaces", "vertices", "kind", "spec", "disks")
+    __slots__ = ("label", "surfaces", "vertices", "kind", "spec", "disks", "bounds_proxy")
 
-    def __init__(self, kind: str, label: str, body: Shape, vertices=None, box=None, spec=None, disks=None):
+    def __init__(self, kind: str, label: str, body: Shape, vertices=None, box=None, spec=None, disks=None,
+                 surfaces=None):
         #: for a cylinder or cone built otherwise (an extruded circle): its two cap disks
         #: ((center, radius), (center, radius)), perpendicular to z; what hull() needs
         self.disks = disks
         #: how to build it again (scene files): {"extrude": {...}} with a JSON profile, or
         #: ("hull" | "minkowski", operand shapes); None: saved as its expansion
         self.spec = spec
-        self.surfaces = count_surfaces(body)
+        #: unique surfaces by type (``surfaces``: known to the builder, else counted)
+        self.surfaces = count_surfaces(body) if surfaces is None else dict(surfaces)
         if box is not None:
             body = bounded(body, *box)
         super().__init__([body])
         self.kind = kind
         self.label = label
         self.vertices = None if vertices is None else np.asarray(vertices, dtype=np.float64)
+        #: a shape holding this one that the bounds use in its place (None: itself)
+        self.bounds_proxy = None
 
     def describe(self) -> str:
         """'hull of 8 spheres: 6 planes, 12 cylinders, 8 spheres'."""

@@ -11,7 +11,9 @@ source and the first bad face or edge.
 
 The solid is exact: :func:`clcsg.model.bsp.bsp_expression` writes it as a Boolean expression of
 its face planes, which the rest of the pipeline samples, prunes and ray traces like any planes
-(a mesh box is the quadric box).  Coplanar faces share one plane.
+(a mesh box is the quadric box).  Coplanar faces share one plane.  A mesh of many planes is a
+k-d tree of such expressions, one per cell (:mod:`clcsg.model.mesh_partition`), so that the
+planes a region's tapes hold are those of the cells near it.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 
 from ..errors import LimitError, SceneError
 from .bsp import bsp_expression, triangle_planes
+from .mesh_partition import partition_expression
 from .construction import Construction, plane
 from .mesh_intersections import first_bad_shell, first_intersection
 from .csg import Complement, Intersection, Primitive, Union
@@ -33,11 +36,11 @@ class MeshError(SceneError):
 
 #: relative tolerance (of the mesh's size) for points on a plane
 PLANE_EPS = 1e-9
-#: the most distinct face planes a mesh operand may have (compiling is near linear in them, but
-#: sampling a convex mesh grows faster, with the planes near each cell: on the 2-core machine a
-#: sphere of 5,120 takes about 5 s, one of 20,480 about 40 s, and the exact ray tracer 2 s and
-#: 23 s at 320x240)
-MAX_FACE_PLANES = 16384
+#: the most distinct face planes a mesh operand may have
+MAX_FACE_PLANES = 1 << 20
+#: a mesh of more distinct face planes than this is a k-d tree of local BSPs
+#: (:mod:`clcsg.model.mesh_partition`), so that a region's tapes hold the planes near it only
+PARTITION_PLANES = 2048
 #: relative tolerance below which two triangles' planes are one face plane
 FACE_PLANE_EPS = 1e-6
 #: relative depth by which two faces must cross to be a self-intersection (above float32's
@@ -207,14 +210,29 @@ class FacePlane(Primitive):
     bounded by the plane only on those triangles, so the bounds take the plane's face there
     (:func:`~clcsg.compile.bounds.exact_boxes.kind_face_boxes`): the sampler's tasks on the
     plane start from that box, not from the mesh's, and their tapes hold only the face planes
-    near it.  Saved, it is a plain half-space (the mesh is saved as its points and faces)."""
+    near it.  ``support`` (lo, hi), for a face plane of a k-d cell of a large mesh
+    (:mod:`clcsg.model.mesh_partition`): the cell, outside which the expression holding the
+    plane is never used, so that the primitive's box is the cell (a region that misses it
+    prunes the plane away).  Saved, it is a plain half-space (the mesh is saved as its points
+    and faces)."""
 
-    __slots__ = ("face_box",)
+    __slots__ = ("face_box", "support")
 
-    def __init__(self, normal, offset, face_box, color=None):
+    def __init__(self, normal, offset, face_box, color=None, support=None):
         base = plane(normal, offset, color)
         super().__init__(base.kind, base.params, base.color)
         self.face_box = (np.asarray(face_box[0], dtype=np.float64), np.asarray(face_box[1], dtype=np.float64))
+        self.support = None if support is None else (np.asarray(support[0], dtype=np.float64),
+                                                     np.asarray(support[1], dtype=np.float64))
+
+
+def split_plane(axis: int, c: float, cell, color=None) -> FacePlane:
+    """The half-space x_axis <= c of a k-d split of ``cell`` (lo, hi), its support
+    (:mod:`clcsg.model.mesh_partition`): it bounds no surface, so its face box is empty and the
+    sampler starts no task on it."""
+    n = np.zeros(3)
+    n[axis] = 1.0
+    return FacePlane(n, c, (np.full(3, np.inf), np.full(3, -np.inf)), color, support=cell)
 
 
 def _face_boxes(tri, owner, k, pad):
@@ -225,15 +243,28 @@ def _face_boxes(tri, owner, k, pad):
     return lo - pad, hi + pad
 
 
-def _shape(expr, normals, offsets, color, faces):
-    """The nested tuple expression of :func:`bsp_expression` as Shapes (without recursion);
-    ``faces`` ((k, 3), (k, 3)): each face plane's triangles' box."""
-    leaves = {}
+def _shape(expr, normals, offsets, color, faces, leaves=None, splits=None, pad=0.0):
+    """The nested tuple expression of :func:`bsp_expression` (or of
+    :func:`~clcsg.model.mesh_partition.partition_expression`, whose ``leaves`` give each
+    cell's box and its planes' face boxes and ``splits`` each split cell's box, all padded by
+    ``pad``) as Shapes (without recursion); ``faces`` ((k, 3), (k, 3)): each face plane's
+    triangles' box."""
+    made = {}
 
-    def leaf(p):
-        if p not in leaves:
-            leaves[p] = FacePlane(normals[p], offsets[p], (faces[0][p], faces[1][p]), color)
-        return leaves[p]
+    def leaf(e):
+        key = e[1:]
+        if key not in made:
+            if e[0] == "split":
+                lo, hi = splits[e[3]]
+                made[key] = split_plane(e[1], e[2], (lo - pad, hi + pad), color)
+            elif e[0] == "face":
+                lo, hi, boxes = leaves[e[2]]
+                flo, fhi = boxes[e[1]]
+                made[key] = FacePlane(normals[e[1]], offsets[e[1]], (flo - pad, fhi + pad), color,
+                                      support=(lo - pad, hi + pad))
+            else:
+                made[key] = FacePlane(normals[e[1]], offsets[e[1]], (faces[0][e[1]], faces[1][e[1]]), color)
+        return made[key]
 
     out: dict = {}
     stack = [(expr, False)]
@@ -241,8 +272,8 @@ def _shape(expr, normals, offsets, color, faces):
         e, done = stack.pop()
         if not done and id(e) in out:  # shared (the consensus terms): built once
             continue
-        if e[0] == "plane":
-            out[id(e)] = leaf(e[1])
+        if e[0] in ("plane", "face", "split"):
+            out[id(e)] = leaf(e)
         elif not done:
             stack.append((e, True))
             stack.extend((c, False) for c in (e[1] if e[0] in ("and", "or") else [e[1]]))
@@ -258,21 +289,28 @@ def polyhedron(vertices, faces, color=None, source: str = "polyhedron", label: s
                max_planes: int = MAX_FACE_PLANES) -> Construction:
     """The solid bounded by a closed, consistently oriented mesh (faces: lists of point
     indices, convex planar polygons, either orientation), exactly: a Boolean expression of its
-    face planes (:mod:`clcsg.model.bsp`), bounded by the mesh's box.  More than ``max_planes``
-    distinct face planes is a :class:`~clcsg.errors.LimitError`."""
+    face planes (:mod:`clcsg.model.bsp`; past :data:`PARTITION_PLANES` of them a k-d tree of
+    local ones, :mod:`clcsg.model.mesh_partition`), bounded by the mesh's box.  More than
+    ``max_planes`` distinct face planes is a :class:`~clcsg.errors.LimitError`."""
     v, t = check_mesh(vertices, faces, source)
     scale = float(np.abs(v).max()) or 1.0
     tri = v[t]
     normals, offsets, owner, dev = _planes(tri, scale)
     if len(normals) > max_planes:
         raise LimitError(f"{source}: the mesh has {len(normals)} distinct face planes; at most {max_planes} are "
-                         "sampled (a mesh operand is an expression of its face planes, and the cost grows faster "
-                         "than their number): simplify or decimate the mesh")
+                         "sampled (a mesh operand is an expression of its face planes): simplify or decimate the mesh")
     eps = max(PLANE_EPS * scale, 2.0 * dev)
-    expr = bsp_expression(tri, owner, normals, offsets, eps)
-    body = _shape(expr, normals, offsets, color, _face_boxes(tri, owner, len(normals), 2.0 * eps))
     lo, hi = v.min(axis=0), v.max(axis=0)
+    if len(normals) > PARTITION_PLANES:
+        grow = 2e-3 * np.linalg.norm(hi - lo) + 4.0 * eps  # past the box of `bounded`
+        expr, leaves, splits = partition_expression(tri, owner, normals, offsets, eps, lo - grow, hi + grow)
+        body = _shape(expr, normals, offsets, color, None, leaves, splits, 2.0 * eps)
+    else:
+        expr = bsp_expression(tri, owner, normals, offsets, eps)
+        body = _shape(expr, normals, offsets, color, _face_boxes(tri, owner, len(normals), 2.0 * eps))
     what = label or f"mesh of {len(t)} triangles"
-    c = Construction("mesh", what, body, v, (lo, hi))
+    c = Construction("mesh", what, body, v, (lo, hi), surfaces={"plane": len(normals)})
+    if len(normals) > PARTITION_PLANES:  # the bounds see the mesh's (grown) box, its bound
+        c.bounds_proxy = c.operands[0].operands[1]
     c.spec = {"mesh": {"points": v.tolist(), "faces": t.tolist()}}
     return c

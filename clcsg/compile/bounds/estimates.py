@@ -472,6 +472,10 @@ def check_estimate(est: Estimate, info=None, *, max_samples=None, max_memory=Non
 REFINE_LEVELS = 3
 REFINE_BOXES = 20_000
 REFINE_FROM = 1e6
+#: a tape longer than this keeps the first estimate (an upper bound of the refined one): its
+#: host pruning per group of boxes would cost minutes (a mesh of 80,000 face planes: 155 s),
+#: and such tapes are large meshes, whose face boxes already follow their surface
+REFINE_MAX_ROWS = 100_000
 
 #: a refusal is checked by sampling at a radius whose estimate is this many samples ...
 PROBE_SAMPLES = 2e5
@@ -527,11 +531,12 @@ def estimate_tape(tape, radius: float, real_itemsize: int = 8) -> Estimate:
     """The :class:`Estimate` of sampling a compiled tape: the regions of its quadrics are the
     face boxes of the primitive instances holding them, within the scene bound
     (:func:`clcsg.compile.bounds.regions.quadric_regions`), refined by tape pruning
-    (:func:`refine_regions`) when the first estimate is past :data:`REFINE_FROM` samples."""
+    (:func:`refine_regions`) when the first estimate is past :data:`REFINE_FROM` samples and the
+    tape has at most :data:`REFINE_MAX_ROWS` rows."""
     if tape.empty:
         return _make_estimate(float(radius), 0.0, 0.0, 0, real_itemsize)
     est = _tape_estimate(tape, "regions", radius, real_itemsize)
-    if est.finite and est.samples > REFINE_FROM:
+    if est.finite and est.samples > REFINE_FROM and len(tape.ops) <= REFINE_MAX_ROWS:
         est = _tape_estimate(tape, "refined", radius, real_itemsize)
     return est
 

@@ -403,6 +403,10 @@ def kind_boxes(nodes, matrices):
             lo[rows], hi[rows] = _frusta_boxes(kind, params, lin[rows], t[rows])
         elif kind == "halfspace":
             lo[rows], hi[rows] = _halfspace_own_boxes(params, m[rows])
+            for r in rows.tolist():  # a k-d cell's face plane: its box is the cell
+                support = getattr(nodes[r], "support", None)
+                if support is not None:
+                    lo[r], hi[r] = _hinted(np.array([lo[r], hi[r]]), support, m[r])
     done = np.isin(np.array([node.kind for node in nodes]), list(_CLOSED_FORM)) if n else np.zeros(0, bool)
     size = 1.0 + np.abs(np.where(done[:, None] & np.isfinite(np.concatenate([lo, hi], axis=1)),
                                  np.concatenate([lo, hi], axis=1), 0.0)).max(axis=1, initial=0.0)
@@ -512,6 +516,8 @@ def _hinted(box, face_box, m):
     if face_box is None:
         return box
     lo, hi = face_box
+    if np.any(lo > hi):  # none (a k-d split plane bounds no surface)
+        return np.array([np.full(3, np.inf), np.full(3, -np.inf)])
     corners = np.array([[(lo, hi)[(c >> i) & 1][i] for i in range(3)] for c in range(8)])
     w = corners @ m[:3, :3].T + m[:3, 3]
     return np.array([np.maximum(box[0], w.min(axis=0)), np.minimum(box[1], w.max(axis=0))])

@@ -106,9 +106,13 @@ class TreeBounds:
 
 
 def _resolve(node, m, neg):
-    """Skip Transformed and Complement edges: (node, world matrix, negated)."""
+    """Skip Transformed and Complement edges: (node, world matrix, negated); a node with a
+    ``bounds_proxy`` (a large mesh: its grown box) stands for it."""
     while True:
-        if isinstance(node, Transformed):
+        proxy = getattr(node, "bounds_proxy", None)
+        if proxy is not None:
+            node = proxy
+        elif isinstance(node, Transformed):
             m = m @ node.matrix
             node = node.operand
         elif isinstance(node, Complement):
@@ -499,6 +503,7 @@ class _Leaves:
             m = self.world[self.first_array[self.leaf_index[ids[k]]]]
             b = m[:, :3, 3]
             lo[k], hi[k] = halfspace_boxes(2.0 * b, -m[:, 3, 3], rlo[k], rhi[k])
+            lo[k], hi[k] = np.maximum(lo[k], olo[k]), np.minimum(hi[k], ohi[k])  # a k-d cell's plane: in its cell
             slow &= ~half
         for k in np.flatnonzero(slow):
             lo[k], hi[k] = self.box(int(ids[k]), (rlo[k], rhi[k]))
