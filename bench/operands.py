@@ -3,20 +3,24 @@
 Each model is a closed triangle mesh minus 20 cylinders:
 
 * ``bosses_k``: a plate with k x k square bosses (a CAD-like mesh: many triangles, few face
-  planes), built and meshed by manifold3d; k = 80 is the 100k-triangle STL (103,244 triangles,
-  327 face planes);
+  planes), built and meshed by manifold3d; k = 80 has 103,244 triangles on 327 face planes;
 * ``icosphere_s``: a tessellated sphere (subdivision s; every triangle its own plane: the case
-  where clcsg's cost grows fastest, since a mesh operand is an expression of its face planes).
+  where clcsg's cost grows fastest, since a mesh operand is an expression of its face planes);
+  s = 6 has 81,920;
+* ``torus_100000``: a torus of 100,000 triangles, each its own plane, not convex: the issue's
+  100k-triangle STL.
 
-Per model, process CPU time (``time.process_time``; PoCL runs its kernels in this process's
-threads) of: building the operand (the checks and the BSP), compiling, sampling at 1/200 of
-the bound's diagonal (warm: the kernels built once before), rendering the splats and ray
-tracing at 320x240; and manifold3d's Boolean of the same mesh minus the cylinders (32
-segments) with ``to_mesh``.  Ratios are clcsg's sampling path (build + compile + sample)
-over manifold3d's Boolean.  ``--quick``: the smallest model of each family.  The icospheres
-go to subdivision 5 (20,480 faces) past the default plane limit of ``clcsg.polyhedron``: the
-compile is near linear in the face planes; sampling is not (a cell's tape of a convex mesh
-carries the planes that cross it, more of them the larger the cell).
+Meshes of more than ``clcsg.model.polyhedron.PARTITION_PLANES`` face planes are k-d trees of
+local BSPs (:mod:`clcsg.model.mesh_partition`), so that a region's tapes hold the planes of
+the cells near it.  Per model, process CPU time (``time.process_time``; PoCL runs its kernels
+in this process's threads) of: building the operand (the checks and the expression),
+compiling, sampling at 1/200 of the bound's diagonal (warm: the kernels built once before; the
+sampler's own split ``host_s`` (the resource guard's estimate and the root tapes) and
+``device_s`` (its levels and the finish pass) beside it), rendering the splats and ray tracing
+at 320x240; and manifold3d's Boolean of the same mesh minus the cylinders (32 segments) with
+``to_mesh``.  Ratios are clcsg's sampling path (build + compile + sample) over manifold3d's
+Boolean.  ``--quick``: the smallest model of each family.  The point-cloud operands have
+their own benchmark (``python -m bench surfels``).
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from clcsg.cl.device import get_context
 
 from .common import Load, diagonal, environment, fmt, write
 
-FULL = {"bosses": (4, 8, 12, 80), "icosphere": (1, 2, 3, 4, 5)}
+FULL = {"bosses": (4, 8, 12, 80), "icosphere": (1, 2, 3, 4, 5, 6), "torus": (100_000,)}
 QUICK = {"bosses": (4,), "icosphere": (1,)}
 N_CYLINDERS = 20
 SEGMENTS = 32
@@ -62,6 +66,18 @@ def _icosphere(s):
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64), holes
 
 
+def _torus(n):
+    """A torus of ``n`` triangles (500 x n / 1000 sections), minus cylinders through its ring."""
+    import trimesh
+
+    minor = max(8, int(round((n / 2.5) ** 0.5)))
+    major = max(8, n // (2 * minor))
+    m = trimesh.creation.torus(1.0, 0.4, major_sections=major, minor_sections=minor)
+    ang = np.linspace(0, 2 * np.pi, N_CYLINDERS, endpoint=False)
+    holes = [(np.cos(a), np.sin(a), 0.0, 0.12, 3.0) for a in ang]
+    return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64), holes
+
+
 def _cpu(fn):
     t = time.process_time()
     out = fn()
@@ -78,6 +94,8 @@ def _ours(v, f, holes, ctx):
     scene = clcsg.Scene(clcsg.difference(clcsg.polyhedron(v, f, max_planes=len(f)), *cyl))
     scene.compile()
     sample_s, samples = _cpu(lambda: clcsg.sample(scene, radius, device=ctx, progress=False))
+    st = samples.stats
+    device_s = float(st.get("subdivide_s", 0.0)) + float(st.get("finish_s", 0.0))
     cam = clcsg.Camera.fit(tape, W, H)
     clcsg.render(samples, cam, device=ctx)
     render_s, img = _cpu(lambda: clcsg.render(samples, cam, device=ctx))
@@ -87,6 +105,7 @@ def _ours(v, f, holes, ctx):
             "instructions": tape.stats["instructions"], "radius": radius, "samples": len(samples),
             "unresolved_cells": int(samples.stats.get("unresolved", 0)),
             "build_cpu_s": build_s, "compile_cpu_s": compile_s, "sample_cpu_s": sample_s,
+            "sample_device_s": device_s, "sample_host_s": max(0.0, float(st.get("total_s", 0.0)) - device_s),
             "render_cpu_s": render_s, "raytrace_cpu_s": trace_s,
             "mask_agreement": float((img.mask == exact.mask).mean())}
 
@@ -112,7 +131,8 @@ def run(quick=False, device=None):
     rows = []
     for family, sizes in (QUICK if quick else FULL).items():
         for k in sizes:
-            v, f, holes = _bosses(mf, k) if family == "bosses" else _icosphere(k)
+            v, f, holes = {"bosses": lambda: _bosses(mf, k), "icosphere": lambda: _icosphere(k),
+                           "torus": lambda: _torus(k)}[family]()
             ours = _ours(v, f, holes, ctx)
             peer = _manifold(mf, v, f, holes)
             path = ours["build_cpu_s"] + ours["compile_cpu_s"] + ours["sample_cpu_s"]
@@ -120,11 +140,7 @@ def run(quick=False, device=None):
                          "ratio_sample_path_over_manifold": path / max(peer["boolean_cpu_s"], 1e-9)})
     env = load.into(environment(ctx))
     env["timer"] = "process CPU time (one warm run each)"
-    payload = {"environment": env, "quick": quick, "rows": rows,
-               "not_measured": ["the issue's 100k-triangle mesh: a mesh operand is an expression of its face planes; "
-                                "the compile grows near linearly (icosphere_s), but sampling grows with cells x planes "
-                                "(every cell's tape of a convex mesh carries all its planes), so 100k is out of reach",
-                                "the 500k-surfel cloud: point operands are not implemented"]}
+    payload = {"environment": env, "quick": quick, "rows": rows}
     print(write("operands", payload))
     print("| model | triangles | planes | build s | compile s | sample s | samples | render s | raytrace s "
           "| manifold3d s | ratio |")
