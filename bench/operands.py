@@ -19,10 +19,8 @@ sampler's own split ``host_s`` (the resource guard's estimate and the root tapes
 ``device_s`` (its levels and the finish pass) beside it), rendering the splats and ray tracing
 at 320x240; and manifold3d's Boolean of the same mesh minus the cylinders (32 segments) with
 ``to_mesh``.  Ratios are clcsg's sampling path (build + compile + sample) over manifold3d's
-Boolean.  In the same run, the point-cloud operands: a sphere of 50k to 500k surfels minus a
-box against manifold3d on an icosphere of as many vertices (``surfel_rows``,
-:func:`bench.surfel_operands.measure`; alone: ``python -m bench surfels``).  ``--quick``: the
-smallest model of each family.
+Boolean.  ``--quick``: the smallest model of each family.  The point-cloud operands have
+their own benchmark (``python -m bench surfels``).
 """
 
 from __future__ import annotations
@@ -35,7 +33,6 @@ import numpy as np
 import clcsg
 from clcsg.cl.device import get_context
 
-from . import surfel_operands
 from .common import Load, diagonal, environment, fmt, write
 
 FULL = {"bosses": (4, 8, 12, 80), "icosphere": (1, 2, 3, 4, 5, 6), "torus": (100_000,)}
@@ -141,13 +138,10 @@ def run(quick=False, device=None):
             path = ours["build_cpu_s"] + ours["compile_cpu_s"] + ours["sample_cpu_s"]
             rows.append({"model": f"{family}_{k}", "triangles": int(len(f)), "clcsg": ours, "manifold3d": peer,
                          "ratio_sample_path_over_manifold": path / max(peer["boolean_cpu_s"], 1e-9)})
-    surfel_rows = surfel_operands.measure(ctx, quick)
     env = load.into(environment(ctx))
     env["timer"] = "process CPU time (one warm run each)"
-    payload = {"environment": env, "quick": quick, "rows": rows, "surfel_rows": surfel_rows,
-               "surfel_box": {"size": surfel_operands.BOX[0], "center": surfel_operands.BOX[1]}}
+    payload = {"environment": env, "quick": quick, "rows": rows}
     print(write("operands", payload))
-    print(surfel_operands.table(surfel_rows))
     print("| model | triangles | planes | build s | compile s | sample s | samples | render s | raytrace s "
           "| manifold3d s | ratio |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
