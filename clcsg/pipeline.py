@@ -25,7 +25,6 @@ import numpy as np
 from .model.scene import Scene
 from .readers import scenes
 from .sampling.radius import Radius
-from .errors import UsageError
 from .model.surfels import has_surfels
 from .sampling.surfel_csg import proxy_scene, sample
 
@@ -108,9 +107,7 @@ class Pipeline:
         from .rendering.raytracer import raytrace
         from .rendering.splat import render
 
-        if method == "raytrace":
-            if has_surfels(self.scene.shape):
-                raise UsageError(f"{self.scene.source}: the exact ray tracer needs quadric operands; a scene with point "
-                                 "operands (surfels) is drawn by splats (--method splat)")
-            return raytrace(self.tape, camera, device=self.device, **options)
+        if method == "raytrace":  # a point operand is traced as the mesh of its surface
+            tape = self.scene.compile(self.normal_form, self.term_limit)
+            return raytrace(tape, camera, device=self.device, **options)
         return render(samples, camera, device=self.device, **options)

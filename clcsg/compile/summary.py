@@ -9,6 +9,7 @@ import numpy as np
 from ..model.construction import Construction
 from ..model.csg import walk
 from ..model.scene import Scene
+from ..model.surfels import with_surfaces
 
 
 def _plain(v):
@@ -41,7 +42,7 @@ def scene_info(scene, normal_form: str = "tree", term_limit: int | None = None, 
         "user_bound": None if sc.bound is None else np.asarray(sc.bound, dtype=float).tolist(),
         "user_bound_from": None if sc.bound is None else ("--bound" if bound is not None else "scene"),
     }
-    out["constructions"] = constructions(sc.shape)
+    out["constructions"] = constructions(with_surfaces(sc.shape))  # a point operand: its surface mesh
     if normal_form == "dnf":
         dnf = sc.compile("dnf", term_limit)
         out["dnf"] = {

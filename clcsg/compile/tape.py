@@ -45,6 +45,7 @@ from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_NAMES, OP_OR
 from ..errors import ParameterError, SceneError, UnboundedError
 from ..model.csg import Complement, Difference, Intersection, Primitive, Shape, Transformed, Union
 from ..model.quadric import COEFFICIENT_INDEX, Quadric
+from ..model.surfels import with_surfaces
 from .bounds.exact_boxes import kind_boxes, kind_face_boxes
 from .bounds.term_boxes import term_box
 from .bounds import tree as bounds
@@ -206,6 +207,11 @@ class Tape:
                     out[q].append(inst.index)
         return out
 
+    def exact(self) -> "Tape":
+        """The tape of the solid itself, which the exact ray tracer traces: this tape (a
+        sampler's tape with point operands overrides it)."""
+        return self
+
     def describe(self, limit: int = 40) -> str:
         lines = []
         for k, (op, out, a, b) in enumerate(self.ops[:limit]):
@@ -297,8 +303,8 @@ def _children(node, m, neg):
         ops = [(node.operands[0], m, neg)] + [(c, m, not neg) for c in node.operands[1:]]
         return (_OR if neg else _AND), ops
     if hasattr(node, "normals") and hasattr(node, "radii"):
-        raise SceneError("a point operand (surfels) is only sampled (clcsg.sample, then clcsg.render): the exact "
-                         "ray tracer, meshing and queries need quadric operands")
+        raise SceneError("a point operand (surfels) is compiled as the mesh of its surface (compile_scene), "
+                         "or replaced by the sampler's substitutions")
     raise SceneError(f"not a CSG node: {type(node).__name__}")
 
 
@@ -673,15 +679,18 @@ NORMAL_FORMS = ("tree", "dnf")
 
 
 def compile_scene(scene, normal_form: str = "tree", term_limit: int | None = None) -> Tape:
-    """The tape of a :class:`~clcsg.model.scene.Scene` in the given normal form."""
+    """The tape of a :class:`~clcsg.model.scene.Scene` in the given normal form.  A point
+    operand is compiled as the mesh of its surface (:func:`~clcsg.model.surfels.with_surfaces`);
+    the sampler compiles its own tapes of such scenes (:mod:`clcsg.sampling.surfel_csg`)."""
     if normal_form not in NORMAL_FORMS:
         raise UsageError(f"normal form must be one of {', '.join(NORMAL_FORMS)}, got {normal_form!r}")
     table = QuadricTable()
-    tree = compile_shape(scene.shape, scene.bound, scene.source, table)
+    shape = with_surfaces(scene.shape)
+    tree = compile_shape(shape, scene.bound, scene.source, table)
     if normal_form == "tree":
         return tree
 
-    dnf = normalize(scene.shape, DEFAULT_TERM_LIMIT if term_limit is None else term_limit, scene.bound,
+    dnf = normalize(shape, DEFAULT_TERM_LIMIT if term_limit is None else term_limit, scene.bound,
                     scene.source, table=table)
     tape = dnf_tape(dnf, tree.instances, tree.bound, table.matrices())
     tape.stats.update({f"dnf_{k}": v for k, v in dnf.stats.items()})

@@ -29,7 +29,7 @@ from .box_states import _LIVE, box_states
 from .crossings import crossings, thin_stretches
 from .project import first_order_distance
 from .refine import REACH, Surface, _solve, edge_planes, edges_of, on_curve
-from .tetra import triangulate
+from ..model.marching_tetrahedra import triangulate
 
 
 #: rounds of bisection at most: tetrahedra the closure made coarser than their neighbours are

@@ -1,6 +1,6 @@
 """A conforming tetrahedral mesh of the grid cells, refined locally by newest-vertex bisection.
 
-The cells' Kuhn tetrahedra (:data:`~.tetra.KUHN`: 0 -> e_a -> e_a + e_b -> 7, tag 3) are
+The cells' Kuhn tetrahedra (:data:`~clcsg.model.marching_tetrahedra.KUHN`: 0 -> e_a -> e_a + e_b -> 7, tag 3) are
 refined by Maubach's rule: a tetrahedron (x0, x1, x2, x3) with tag k is cut at the midpoint
 z of its edge x0 x_k into
 
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .tetra import CORNERS, KUHN
+from ..model.marching_tetrahedra import CORNERS, KUHN
 
 #: bisections of a grid cell's tetrahedra at most (three halve the size)
 MAX_BISECTIONS = 9

@@ -4,7 +4,7 @@ The stages, one module each:
 
 1. :mod:`.octree`: the grid cells the surface may cross (octree descent over the pruned tape);
 2. :mod:`.adapt`: their Kuhn tetrahedra, bisected (:mod:`.bisect`) where a feature is
-   thinner than they are; :mod:`.tetra`: marching tetrahedra on them: a closed, oriented
+   thinner than they are; :mod:`~clcsg.model.marching_tetrahedra`: marching tetrahedra on them: a closed, oriented
    2-manifold;
 3. :mod:`.crossings`: every vertex moved onto the exact surface along its crossing edge;
 4. :mod:`.refine`: edges split onto the intersection curves of the quadrics (sharp edges and

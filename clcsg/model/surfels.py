@@ -29,7 +29,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ParameterError
-from .csg import Shape, _color
+from .polyhedron import polyhedron
+from .surfel_surface import surface_mesh
+from .csg import Complement, Difference, Intersection, Shape, Transformed, Union, _color
 
 
 class Surfels(Shape):
@@ -37,13 +39,15 @@ class Surfels(Shape):
     (n, 3), ``radii`` (n,).  A leaf of the CSG graph; :func:`clcsg.sample` keeps or drops its
     surfels by the rest of the tree and classifies the other operands' samples against it."""
 
-    __slots__ = ("points", "normals", "radii", "color", "source", "_tree")
+    __slots__ = ("points", "normals", "radii", "color", "source", "_tree", "_solid", "_moved")
 
     def __init__(self, points, normals, radii, color=None, source: str = "surfels"):
         self.points, self.normals, self.radii = checked(points, normals, radii, source)
         self.color = _color(color)
         self.source = source
         self._tree = None
+        self._solid = None
+        self._moved: dict = {}  # transform bytes -> transformed copy (keeps its tree and solid)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -62,6 +66,16 @@ class Surfels(Shape):
             self._tree = cKDTree(self.points, compact_nodes=False)
         return self._tree
 
+    def solid(self):
+        """The solid as a mesh operand (:func:`~clcsg.model.polyhedron.polyhedron` of
+        :func:`~clcsg.model.surfel_surface.surface_mesh`), built on first use: what the exact
+        ray tracer, ``clcsg.mesh``, the point queries and ``clcsg info`` see of the cloud."""
+        if self._solid is None:
+            v, f = surface_mesh(self)
+            self._solid = polyhedron(v, f, self.color, self.source,
+                                     label=f"surfel surface of {len(self)} points ({len(f)} triangles)")
+        return self._solid
+
     def box(self) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) of the centers grown by the largest radius: it holds every disk."""
         r = float(self.radii.max())
@@ -73,12 +87,17 @@ class Surfels(Shape):
         m = np.asarray(matrix, dtype=np.float64)
         if np.allclose(m, np.eye(4)):
             return self
+        moved = self._moved.get(m.tobytes())
+        if moved is not None:
+            return moved
         a = m[:3, :3]
         p = self.points @ a.T + m[:3, 3]
         n = self.normals @ np.linalg.inv(a)
         n /= np.linalg.norm(n, axis=1, keepdims=True)
         r = self.radii * abs(np.linalg.det(a)) ** (1.0 / 3.0)
-        return Surfels(p, n, r, self.color, self.source)
+        moved = self._moved[m.tobytes()] = Surfels(p, n, r, self.color, self.source)
+        return moved
+
 
     def nearest(self, x, k: int = 1):
         """(distances, indices) of the ``k`` centers nearest to each point of ``x`` (m, 3)."""
@@ -162,3 +181,60 @@ def has_surfels(shape: Shape) -> bool:
             return True
         stack.extend(s.children())
     return False
+
+
+def operands(shape) -> dict:
+    """The point operands of ``shape``: (node id, world transform bytes) -> the surfels in
+    world coordinates, in tree order."""
+    out: dict = {}
+    stack = [(shape, np.eye(4))]
+    seen = set()
+    while stack:
+        node, m = stack.pop()
+        key = (id(node), m.tobytes())
+        if key in seen:
+            continue
+        seen.add(key)
+        if isinstance(node, Surfels):
+            out[key] = node.transformed(m)
+        elif isinstance(node, Transformed):
+            stack.append((node.operand, m @ node.matrix))
+        else:
+            stack.extend((c, m) for c in reversed(node.children()))
+    return out
+
+
+def substitute(shape, replace):
+    """``shape`` with every point operand replaced by ``replace(key, surfels)``, a shape in
+    world coordinates (the accumulated transform is undone around it)."""
+    memo: dict = {}
+    ops = operands(shape)
+
+    def walk(node, m):
+        key = (id(node), m.tobytes())
+        if key in memo:
+            return memo[key]
+        if isinstance(node, Surfels):
+            out = replace(key, ops[key])
+            if not np.allclose(m, np.eye(4)):
+                out = Transformed(out, np.linalg.inv(m))
+        elif isinstance(node, Transformed):
+            out = Transformed(walk(node.operand, m @ node.matrix), node.matrix)
+        elif isinstance(node, Complement):
+            out = Complement(walk(node.operand, m))
+        elif isinstance(node, (Union, Intersection, Difference)):
+            out = type(node)([walk(c, m) for c in node.operands])  # a Construction is a Union of its body
+        else:
+            out = node
+        memo[key] = out
+        return out
+
+    return walk(shape, np.eye(4))
+
+
+def with_surfaces(shape):
+    """``shape`` with every point operand replaced by its :meth:`Surfels.solid` (in world
+    coordinates), or ``shape`` itself when it has none: the solid the exact paths see."""
+    if not has_surfels(shape):
+        return shape
+    return substitute(shape, lambda key, cloud: cloud.solid())

@@ -65,12 +65,13 @@ def pixel_range(width: int, height: int) -> tuple[tuple[int, int], tuple[int, in
 
 
 def as_tape(obj, normal_form: str = "tree"):
-    """A :class:`~clcsg.compile.tape.Tape` from a Tape, Samples, Scene, Shape or scene file path."""
+    """The :class:`~clcsg.compile.tape.Tape` to trace (:meth:`~clcsg.compile.tape.Tape.exact`)
+    of a Tape, Samples, Scene, Shape or scene file path."""
     if isinstance(obj, Tape):
-        return obj
+        return obj.exact()
     tape = getattr(obj, "tape", None)
     if isinstance(tape, Tape):
-        return tape
+        return tape.exact()
     return as_scene(obj).compile(normal_form)
 
 

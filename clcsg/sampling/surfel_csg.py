@@ -48,11 +48,11 @@ from ..compile.tape import Tape, compile_shape
 from ..cl.constants import OP_LEAF
 from ..errors import LimitError
 from ..cl.records import pack
-from ..model.csg import Complement, Intersection, Difference, Primitive, Transformed, Union
+from ..model.csg import Complement, Primitive, Union
 from ..model.quadric import Quadric
 from ..model.scene import Scene
 from ..model.solids import box, halfspace
-from ..model.surfels import Surfels, has_surfels
+from ..model.surfels import Surfels, has_surfels, operands, substitute
 from ..readers.scenes import as_scene
 from . import sampler
 from .sampler import dedupe_programs
@@ -74,55 +74,6 @@ def _timed(stats: dict, phase: str):
     finally:
         cpu = stats.setdefault("host_cpu_s", dict.fromkeys(PHASES, 0.0))
         cpu[phase] += time.process_time() - t
-
-
-def operands(shape) -> dict:
-    """The point operands of ``shape``: (node id, world transform bytes) -> the surfels in
-    world coordinates, in tree order."""
-    out: dict = {}
-    stack = [(shape, np.eye(4))]
-    seen = set()
-    while stack:
-        node, m = stack.pop()
-        key = (id(node), m.tobytes())
-        if key in seen:
-            continue
-        seen.add(key)
-        if isinstance(node, Surfels):
-            out[key] = node.transformed(m)
-        elif isinstance(node, Transformed):
-            stack.append((node.operand, m @ node.matrix))
-        else:
-            stack.extend((c, m) for c in reversed(node.children()))
-    return out
-
-
-def substitute(shape, replace):
-    """``shape`` with every point operand replaced by ``replace(key, surfels)``, a shape in
-    world coordinates (the accumulated transform is undone around it)."""
-    memo: dict = {}
-    ops = operands(shape)
-
-    def walk(node, m):
-        key = (id(node), m.tobytes())
-        if key in memo:
-            return memo[key]
-        if isinstance(node, Surfels):
-            out = replace(key, ops[key])
-            if not np.allclose(m, np.eye(4)):
-                out = Transformed(out, np.linalg.inv(m))
-        elif isinstance(node, Transformed):
-            out = Transformed(walk(node.operand, m @ node.matrix), node.matrix)
-        elif isinstance(node, Complement):
-            out = Complement(walk(node.operand, m))
-        elif isinstance(node, (Union, Intersection, Difference)):
-            out = type(node)([walk(c, m) for c in node.operands])  # a Construction is a Union of its body
-        else:
-            out = node
-        memo[key] = out
-        return out
-
-    return walk(shape, np.eye(4))
 
 
 def everything():
@@ -154,6 +105,13 @@ class SurfelTape(Tape):
     first_surfel_quadric: int = 0
     #: per operand the instance its surfels are samples of (its marker's)
     operand_instances: list = field(default_factory=list)
+    #: the scene sampled (for :meth:`exact`)
+    scene: object = None
+
+    def exact(self) -> Tape:
+        """The tape of the scene with each point operand compiled as the mesh of its surface
+        (:func:`~clcsg.compile.tape.compile_scene`): what the exact ray tracer traces."""
+        return self.scene.compile(self.shape)
 
     def contains(self, points) -> np.ndarray:
         """Membership of ``points`` in the solid: F_sigma with sigma the classification."""
@@ -198,7 +156,7 @@ def marker_tape(scene: Scene, radius: float) -> tuple[SurfelTape, np.ndarray]:
     tape = compile_shape(substitute(scene.shape, lambda key, s: markers[key]), bound, scene.source)
     literal = {id(i.node): (i.index, i.literals[0]) for i in tape.instances if id(i.node) in map(id, markers.values())}
     tape = SurfelTape(**{f: getattr(tape, f) for f in Tape.__dataclass_fields__}, operands=clouds,
-                      markers=[literal[id(markers[k])][1] for k in keys])
+                      markers=[literal[id(markers[k])][1] for k in keys], scene=scene)
     tape.first_surfel_quadric = tape.n_quadrics
     tape.operand_instances = [literal[id(markers[k])][0] for k in keys]
     return tape, bound

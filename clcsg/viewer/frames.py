@@ -118,7 +118,7 @@ def render(context, model, camera, method: str = "splat", aa: int = 1, complete:
                              read=OUTPUTS if complete else ("rgba", "ids"))
     elif method == "raytrace":
         def at(cam):
-            return trace(context, model.tape, cam, shading)
+            return trace(context, model.tape.exact(), cam, shading)
     else:
         raise UsageError(f"method must be 'splat' or 'raytrace', got {method!r}")
     return supersample(at, camera, aa, shading.gamma, centre=complete)

@@ -4,7 +4,7 @@
 Each cube is split into the six tetrahedra of its Kuhn (Freudenthal) triangulation, all
 sharing the diagonal from corner 000 to corner 111; neighbouring cubes then induce the same
 diagonal on their common face, so the tetrahedra form a simplicial complex of the grid (and
-stay one under :mod:`.bisect`'s refinement).  With
+stay one under :mod:`clcsg.meshing.bisect`'s refinement).  With
 a binary label per mesh vertex (inside the closed solid or not) the surface is the zero set of
 the piecewise-linear interpolant of the labels: one triangle per tetrahedron with one or three
 inside corners, two (a quad) with two.  That set separates inside from outside labels, is a
