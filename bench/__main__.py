@@ -14,13 +14,14 @@ reload), ``mesh`` (``clcsg mesh`` against ``openscad -o part.stl`` and manifold3
 CPU time and measured error on the everyday parts and the zoo), ``compile`` (host compile, tree
 bounds and root tapes against the number of primitives: a perforated plate and a union of
 spheres, 100 to 5,000 primitives), ``operands`` (meshes minus 20 cylinders: a CAD-like plate with
-bosses and tessellated spheres, against manifold3d's Boolean), ``surfels`` (a sphere of 50k to
-500k surfels minus a box: sampling split by phase and rendering, against manifold3d on an
-icosphere), ``startup`` (the fixed cost of a process: ``clcsg --version`` and ``clcsg sample`` of
-two cubes against a bare numpy + pyopencl start), ``load`` (reading 0.5, 5 and 50 MB ``.csg`` and
-``.json`` scenes: CPU time and peak memory per byte of the file, ``openscad`` on the same
-``.csg``), ``progress`` (the sampling bar's ETA against the time actually left over the second
-half of real runs, its percentage, and the expected sample count against the real one).  Each writes
+bosses, tessellated spheres and a 100k-triangle torus; and a sphere of 50k to 500k surfels minus
+a box: sampling split by phase and rendering; each against manifold3d's Boolean, the cloud on
+an icosphere), ``surfels`` (the surfel rows of ``operands`` alone), ``startup`` (the fixed cost
+of a process: ``clcsg --version`` and ``clcsg sample`` of two cubes against a bare numpy +
+pyopencl start), ``load`` (reading 0.5, 5 and 50 MB ``.csg`` and ``.json`` scenes: CPU time
+and peak memory per byte of the file, ``openscad`` on the same ``.csg``), ``progress`` (the
+sampling bar's ETA against the time actually left over the second half of real runs, its
+percentage, and the expected sample count against the real one).  Each writes
 ``bench/results/PART.json`` (``--out`` elsewhere) and prints a Markdown table.  ``--quick``
 keeps each part under about a minute on a 2-core machine.
 """
@@ -30,7 +31,8 @@ from __future__ import annotations
 import argparse
 import importlib
 
-MODULES = {"surfels": "surfel_operands"}
+#: parts that are a function of another part's module: (module, function)
+ENTRIES = {"surfels": ("operands", "run_surfels")}
 PARTS = ("micro", "sampler", "models", "render", "peers", "plots", "batch", "bounds", "view", "mesh", "compile", "operands",
          "surfels", "startup", "load", "progress")
 
@@ -50,11 +52,12 @@ def main(argv=None):
 
     if a.out:
         common.RESULTS = a.out
-    module = importlib.import_module(f".{MODULES.get(a.part, a.part)}", __package__)
+    name, entry = ENTRIES.get(a.part, (a.part, "run"))
+    module = importlib.import_module(f".{name}", __package__)
     kw = {"gallery": True} if a.gallery and a.part == "render" else {}
     if a.part == "bounds" and a.programs is not None:
         kw["programs"] = a.programs
-    module.run(quick=a.quick, device=a.device, **kw)
+    getattr(module, entry)(quick=a.quick, device=a.device, **kw)
 
 
 if __name__ == "__main__":
