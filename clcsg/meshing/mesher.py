@@ -34,6 +34,7 @@ from .collapse import collapse_coincident
 from .decimate import decimate
 from .owners import triangle_owners
 from .octree import surface_cells
+from .operand_booleans import mesh_by_booleans, needs_booleans
 
 #: default tolerance: 0.1% of the bound's diagonal
 DEFAULT_TOLERANCE = "0.1%"
@@ -89,6 +90,8 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     diag = float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
     tol = spec.of(diag if diag > 0 and math.isfinite(diag) else 1.0)
     stats = {"tolerance": tol, "stage_cpu_s": {}}
+    if needs_booleans(sc.shape):
+        return _by_booleans(sc, tol, cells, stats, t0)
     grid = _timed(stats, "cells", surface_cells, tape, cells)
     stats.update(cells=int(len(grid.ijk)), boxes_tested=int(grid.visited), h=grid.h)
 
@@ -111,3 +114,15 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     stats.update(triangles=int(len(m.triangles)), vertices=int(len(m.vertices)),
                  cpu_s=time.process_time() - t0)
     return Mesh(m.vertices, m.triangles, quad, prim, colors, m.sets, tol, stats)
+
+
+def _by_booleans(sc, tol: float, cells: int, stats: dict, t0: float) -> Mesh:
+    """The mesh of a scene with point or large mesh operands (:mod:`.operand_booleans`)."""
+    v, tri, colors = _timed(stats, "booleans", mesh_by_booleans, sc, tol, cells,
+                            lambda scene, t, c: mesh(scene, tolerance=t, cells=c))
+    if not len(tri):
+        raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
+    none = np.full(len(tri), -1, dtype=np.int64)
+    stats.update(method="booleans", triangles=int(len(tri)), vertices=int(len(v)), spanning_triangles=0,
+                 cpu_s=time.process_time() - t0)
+    return Mesh(v, tri, none, none.copy(), colors, np.full((len(v), 3), -1, dtype=np.int64), tol, stats)

@@ -1,0 +1,180 @@
+"""Meshes of scenes with point operands or large mesh operands: the operands' own meshes
+combined with the meshes of the quadric parts by manifold3d's Booleans.
+
+The mesher (:mod:`.mesher`) places every vertex on the exact surface and every sharp edge on
+the exact curve where two quadrics meet; its cost grows with the surfaces a cell holds, and a
+cloud's surface mesh (:mod:`clcsg.model.surfel_surface`) or an imported STL brings thousands
+of face planes.  Such an operand already is a closed triangle mesh, so the scene is meshed by
+its tree instead, clipped to a box K that holds the solid (the tape's bound grown by 1% of its
+diagonal):
+
+* a sub-graph without such operands is meshed by the mesher within the tolerance, an
+  unbounded one (a complement, a half-space) as ``sub & K``; the variadic Booleans group
+  their plain operands into one sub-graph, so each group is meshed once;
+* a point operand is its surface mesh, a mesh operand its own triangles, in world
+  coordinates;
+* union, intersection and difference are manifold3d's exact Booleans of those meshes, a
+  complement is K minus its operand (Booleans commute with the clip to K:
+  (A - B) & K = (A & K) - (B & K), ~A & K = K - (A & K)).
+
+The result is closed and 2-manifold (manifold3d's guarantee); vertices of the quadric parts
+lie on their surfaces, those where a quadric part meets an operand lie on the quadric part's
+triangles, within the tolerance of the quadric.  Each triangle keeps the colour of the piece it
+comes from; ``quadric``, ``primitive`` and ``vertex_quadrics`` are -1 (they name entries of one
+tape, and the pieces have their own).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import SceneError, UnboundedError
+from ..model.construction import Construction
+from ..model.csg import DEFAULT_COLOR, Complement, Difference, Intersection, Primitive, Transformed, Union, walk
+from ..model.scene import Scene
+from ..model.solids import box
+from ..model.surfel_surface import surface_mesh
+from ..model.surfels import Surfels
+
+#: a mesh operand of more distinct face planes than this is combined by Booleans, not meshed
+#: by the mesher (whose cost grows with the planes a cell holds)
+MESH_OPERAND_PLANES = 64
+
+
+def is_operand(node) -> bool:
+    """Is ``node`` a point operand, or a mesh operand past :data:`MESH_OPERAND_PLANES` planes?"""
+    if isinstance(node, Surfels):
+        return True
+    return (isinstance(node, Construction) and node.kind == "mesh"
+            and node.surfaces.get("plane", 0) > MESH_OPERAND_PLANES)
+
+
+def needs_booleans(shape) -> bool:
+    """Does the graph of ``shape`` hold an operand that :func:`mesh_by_booleans` combines?"""
+    return any(is_operand(n) for n in walk(shape))
+
+
+def _color(node):
+    """RGBA of an operand: its own colour, or its first primitive's."""
+    color = getattr(node, "color", None)
+    if color is None:
+        color = next((n.color for n in walk(node) if isinstance(n, Primitive) and n.color is not None), None)
+    return np.asarray(DEFAULT_COLOR if color is None else color, dtype=np.float64)
+
+
+class _Pieces:
+    """The manifolds built so far and, per manifold3d original ID, the colours of its
+    triangles (one colour per input triangle)."""
+
+    def __init__(self, manifold3d):
+        self.m3d = manifold3d
+        self.colors: dict[int, np.ndarray] = {}
+
+    def add(self, vertices, triangles, colors):
+        """A manifold of ``vertices`` (n, 3) and outward ``triangles`` (k, 3), colours (k, 4)."""
+        if not len(triangles):
+            return self.m3d.Manifold()
+        mesh = self.m3d.Mesh64(vert_properties=np.ascontiguousarray(vertices, dtype=np.float64),
+                               tri_verts=np.ascontiguousarray(triangles, dtype=np.uint64))
+        m = self.m3d.Manifold(mesh).as_original()
+        if m.status() != self.m3d.Error.NoError:
+            raise SceneError(f"a piece of {len(triangles)} triangles is not a closed 2-manifold for the Booleans "
+                             f"({m.status().name})")
+        self.colors[m.original_id()] = np.asarray(colors, dtype=np.float64)
+        return m
+
+
+def mesh_by_booleans(sc: Scene, tol: float, cells: int, mesh_plain):
+    """(vertices, triangles, colours) of ``sc``'s solid, see the module docstring;
+    ``mesh_plain(scene, tol, cells)`` is the mesher on a scene without such operands."""
+    import manifold3d  # the mesh extra: only scenes with point or large mesh operands need it
+
+    tape = sc.compile()
+    if tape.empty:
+        raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in tape.bound)
+    grow = 0.01 * float(np.linalg.norm(hi - lo))
+    lo, hi = lo - grow, hi + grow
+    clip = box(hi - lo, center=0.5 * (lo + hi))
+    pieces = _Pieces(manifold3d)
+    OpType = manifold3d.OpType
+    memo: dict = {}
+    mixed: dict = {}
+
+    def holds_operand(node) -> bool:
+        got = mixed.get(id(node))
+        if got is None:
+            got = mixed[id(node)] = needs_booleans(node)
+        return got
+
+    def plain(node, m):
+        """The mesher's mesh of a sub-graph without operands; an unbounded one clipped to K."""
+        world = node if np.allclose(m, np.eye(4)) else Transformed(node, m)
+        try:
+            try:
+                got = mesh_plain(Scene(world, None, sc.source), tol, cells)
+            except UnboundedError:
+                got = mesh_plain(Scene(Intersection([world, clip]), None, sc.source), tol, cells)
+        except SceneError as e:
+            if "is empty" in str(e):
+                return manifold3d.Manifold()
+            raise
+        return pieces.add(got.vertices, got.triangles, got.colors)
+
+    def operand(node, m):
+        if isinstance(node, Surfels):
+            v, f = surface_mesh(node.transformed(m))
+        else:
+            mesh = node.spec["mesh"]
+            v = np.asarray(mesh["points"], dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
+            f = np.asarray(mesh["faces"], dtype=np.int64)
+            if np.linalg.det(m[:3, :3]) < 0:
+                f = f[:, ::-1]
+        return pieces.add(v, f, np.tile(_color(node), (len(f), 1)))
+
+    def build(node, m):
+        key = (id(node), m.tobytes())
+        if key not in memo:
+            memo[key] = _build(node, m)
+        return memo[key]
+
+    def _build(node, m):
+        if not holds_operand(node):
+            return plain(node, m)
+        if is_operand(node):
+            return operand(node, m)
+        if isinstance(node, Transformed):
+            return build(node.operand, m @ node.matrix)
+        if isinstance(node, Complement):
+            return manifold3d.Manifold.cube(hi - lo).translate(lo) - build(node.operand, m)
+        ops = list(node.children())
+        if isinstance(node, Difference):
+            head, rest = build(ops[0], m), group(Union, ops[1:], m)
+            return manifold3d.Manifold.batch_boolean([head, *rest], OpType.Subtract)
+        if isinstance(node, Intersection):
+            return manifold3d.Manifold.batch_boolean(group(Intersection, ops, m), OpType.Intersect)
+        if isinstance(node, Union):  # a Construction is a Union too
+            return manifold3d.Manifold.batch_boolean(group(Union, ops, m), OpType.Add)
+        raise SceneError(f"{sc.source}: cannot mesh a {type(node).__name__} node")
+
+    def group(kind, ops, m):
+        """The manifolds of ``ops``: the plain ones meshed together as one ``kind`` node."""
+        plain_ops = [c for c in ops if not holds_operand(c)]
+        out = [build(c, m) for c in ops if holds_operand(c)]
+        if plain_ops:
+            out.append(plain(plain_ops[0] if len(plain_ops) == 1 else kind(plain_ops), m))
+        return out
+
+    solid = build(sc.shape, np.eye(4))
+    got = solid.to_mesh64()
+    v = np.array(np.asarray(got.vert_properties)[:, :3], dtype=np.float64)  # owned, writable copies
+    tri = np.array(got.tri_verts, dtype=np.int64).reshape(-1, 3)
+    colors = np.tile(np.asarray(DEFAULT_COLOR, dtype=np.float64), (len(tri), 1))
+    run_index = np.asarray(got.run_index, dtype=np.int64)
+    face_id = np.asarray(got.face_id, dtype=np.int64)
+    for k, oid in enumerate(np.asarray(got.run_original_id, dtype=np.int64)):
+        lo_t, hi_t = run_index[k] // 3, run_index[k + 1] // 3
+        table = pieces.colors.get(int(oid))
+        if table is not None:
+            colors[lo_t:hi_t] = table[face_id[lo_t:hi_t]]
+    return v, tri, colors
