@@ -166,3 +166,25 @@ def test_cli_raytrace_and_info_of_a_surfel_scene(tmp_path, capsys):
     assert cli.main(["info", str(tmp_path / "s.json"), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert "surfel surface of 6000 points" in json.dumps(info)
+
+
+def test_viewer_exact_frame_of_a_surfel_scene(tmp_path):
+    """The viewer's exact frame of a scene with a point operand traces the cloud's surface
+    mesh: its mask equals the splat frame's off the silhouette band."""
+    from clcsg.cl.device import context_of
+    from clcsg.viewer import frames
+    from clcsg.viewer.session import Session
+
+    p, n = sphere_cloud(6000)
+    write_ply(tmp_path / "cloud.ply", p, n, radius=0.05)
+    scene = {"clcsg": 1, "root": {"difference": [{"surfels": {"file": "cloud.ply"}},
+                                                 {"cylinder": {"height": 3, "radius": 0.4}}]}}
+    (tmp_path / "s.json").write_text(json.dumps(scene))
+    ctx = context_of(None)
+    model = Session(tmp_path / "s.json", ctx).load()
+    cam = clcsg.Camera.look_at((2.2, -2.6, 1.9), (0, 0, 0), width=120, height=90)
+    exact = frames.render(ctx, model, cam, "raytrace")
+    splat = frames.render(ctx, model, cam, "splat")
+    a, b = splat.ids >= 0, exact.ids >= 0
+    band = ndimage.binary_dilation(b ^ ndimage.binary_erosion(b), iterations=2)
+    assert b.sum() > 2000 and ((a ^ b) & ~band).sum() == 0
