@@ -110,15 +110,15 @@ def mesh_by_booleans(sc: Scene, tol: float, cells: int, mesh_plain):
     def plain(node, m):
         """The mesher's mesh of a sub-graph without operands; an unbounded one clipped to K."""
         world = node if np.allclose(m, np.eye(4)) else Transformed(node, m)
+        sub = Scene(world, None, sc.source)
         try:
-            try:
-                got = mesh_plain(Scene(world, None, sc.source), tol, cells)
-            except UnboundedError:
-                got = mesh_plain(Scene(Intersection([world, clip]), None, sc.source), tol, cells)
-        except SceneError as e:
-            if "is empty" in str(e):
-                return manifold3d.Manifold()
-            raise
+            empty = sub.compile().empty
+        except UnboundedError:
+            sub = Scene(Intersection([world, clip]), None, sc.source)
+            empty = sub.compile().empty
+        if empty:
+            return manifold3d.Manifold()
+        got = mesh_plain(sub, tol, cells)
         return pieces.add(got.vertices, got.triangles, got.colors)
 
     def operand(node, m):
