@@ -62,13 +62,19 @@ def _color(node):
     return np.asarray(DEFAULT_COLOR if color is None else color, dtype=np.float64)
 
 
-class _Pieces:
-    """The manifolds built so far and, per manifold3d original ID, the colours of its
-    triangles (one colour per input triangle)."""
+class _Booleans:
+    """The manifolds of the pieces, built by the scene's tree (see the module docstring), and
+    per manifold3d original ID the colours of its input triangles."""
 
-    def __init__(self, manifold3d):
-        self.m3d = manifold3d
+    def __init__(self, manifold3d, sc: Scene, tol: float, cells: int, mesh_plain):
+        self.m3d, self.sc, self.tol, self.cells, self.mesh_plain = manifold3d, sc, tol, cells, mesh_plain
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in sc.compile().bound)
+        grow = 0.01 * float(np.linalg.norm(hi - lo))
+        self.lo, self.hi = lo - grow, hi + grow
+        self.clip = box(self.hi - self.lo, center=0.5 * (self.lo + self.hi))
         self.colors: dict[int, np.ndarray] = {}
+        self.memo: dict = {}
+        self.mixed: dict = {}
 
     def add(self, vertices, triangles, colors):
         """A manifold of ``vertices`` (n, 3) and outward ``triangles`` (k, 3), colours (k, 4)."""
@@ -78,50 +84,33 @@ class _Pieces:
                                tri_verts=np.ascontiguousarray(triangles, dtype=np.uint64))
         m = self.m3d.Manifold(mesh).as_original()
         if m.status() != self.m3d.Error.NoError:
-            raise SceneError(f"a piece of {len(triangles)} triangles is not a closed 2-manifold for the Booleans "
-                             f"({m.status().name})")
+            raise SceneError(f"{self.sc.source}: a piece of {len(triangles)} triangles is not a closed 2-manifold for "
+                             f"the Booleans ({m.status().name})")
         self.colors[m.original_id()] = np.asarray(colors, dtype=np.float64)
         return m
 
-
-def mesh_by_booleans(sc: Scene, tol: float, cells: int, mesh_plain):
-    """(vertices, triangles, colours) of ``sc``'s solid, see the module docstring;
-    ``mesh_plain(scene, tol, cells)`` is the mesher on a scene without such operands."""
-    import manifold3d  # the mesh extra: only scenes with point or large mesh operands need it
-
-    tape = sc.compile()
-    if tape.empty:
-        raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in tape.bound)
-    grow = 0.01 * float(np.linalg.norm(hi - lo))
-    lo, hi = lo - grow, hi + grow
-    clip = box(hi - lo, center=0.5 * (lo + hi))
-    pieces = _Pieces(manifold3d)
-    OpType = manifold3d.OpType
-    memo: dict = {}
-    mixed: dict = {}
-
-    def holds_operand(node) -> bool:
-        got = mixed.get(id(node))
+    def holds_operand(self, node) -> bool:
+        got = self.mixed.get(id(node))
         if got is None:
-            got = mixed[id(node)] = needs_booleans(node)
+            got = self.mixed[id(node)] = needs_booleans(node)
         return got
 
-    def plain(node, m):
+    def plain(self, node, m):
         """The mesher's mesh of a sub-graph without operands; an unbounded one clipped to K."""
         world = node if np.allclose(m, np.eye(4)) else Transformed(node, m)
-        sub = Scene(world, None, sc.source)
+        sub = Scene(world, None, self.sc.source)
         try:
             empty = sub.compile().empty
         except UnboundedError:
-            sub = Scene(Intersection([world, clip]), None, sc.source)
+            sub = Scene(Intersection([world, self.clip]), None, self.sc.source)
             empty = sub.compile().empty
         if empty:
-            return manifold3d.Manifold()
-        got = mesh_plain(sub, tol, cells)
-        return pieces.add(got.vertices, got.triangles, got.colors)
+            return self.m3d.Manifold()
+        got = self.mesh_plain(sub, self.tol, self.cells)
+        return self.add(got.vertices, got.triangles, got.colors)
 
-    def operand(node, m):
+    def operand(self, node, m):
+        """A point operand's surface mesh, or a mesh operand's triangles, in world coordinates."""
         if isinstance(node, Surfels):
             v, f = surface_mesh(node.transformed(m))
         else:
@@ -130,51 +119,64 @@ def mesh_by_booleans(sc: Scene, tol: float, cells: int, mesh_plain):
             f = np.asarray(mesh["faces"], dtype=np.int64)
             if np.linalg.det(m[:3, :3]) < 0:
                 f = f[:, ::-1]
-        return pieces.add(v, f, np.tile(_color(node), (len(f), 1)))
+        return self.add(v, f, np.tile(_color(node), (len(f), 1)))
 
-    def build(node, m):
+    def build(self, node, m):
+        """The manifold of ``node`` under the world transform ``m`` (shared nodes once)."""
         key = (id(node), m.tobytes())
-        if key not in memo:
-            memo[key] = _build(node, m)
-        return memo[key]
+        if key not in self.memo:
+            self.memo[key] = self._build(node, m)
+        return self.memo[key]
 
-    def _build(node, m):
-        if not holds_operand(node):
-            return plain(node, m)
+    def _build(self, node, m):
+        if not self.holds_operand(node):
+            return self.plain(node, m)
         if is_operand(node):
-            return operand(node, m)
+            return self.operand(node, m)
         if isinstance(node, Transformed):
-            return build(node.operand, m @ node.matrix)
+            return self.build(node.operand, m @ node.matrix)
         if isinstance(node, Complement):
-            return manifold3d.Manifold.cube(hi - lo).translate(lo) - build(node.operand, m)
-        ops = list(node.children())
+            return self.m3d.Manifold.cube(self.hi - self.lo).translate(self.lo) - self.build(node.operand, m)
+        ops, op = list(node.children()), self.m3d.OpType
         if isinstance(node, Difference):
-            head, rest = build(ops[0], m), group(Union, ops[1:], m)
-            return manifold3d.Manifold.batch_boolean([head, *rest], OpType.Subtract)
+            head = self.build(ops[0], m)
+            return self.m3d.Manifold.batch_boolean([head, *self.group(Union, ops[1:], m)], op.Subtract)
         if isinstance(node, Intersection):
-            return manifold3d.Manifold.batch_boolean(group(Intersection, ops, m), OpType.Intersect)
+            return self.m3d.Manifold.batch_boolean(self.group(Intersection, ops, m), op.Intersect)
         if isinstance(node, Union):  # a Construction is a Union too
-            return manifold3d.Manifold.batch_boolean(group(Union, ops, m), OpType.Add)
-        raise SceneError(f"{sc.source}: cannot mesh a {type(node).__name__} node")
+            return self.m3d.Manifold.batch_boolean(self.group(Union, ops, m), op.Add)
+        raise SceneError(f"{self.sc.source}: cannot mesh a {type(node).__name__} node")
 
-    def group(kind, ops, m):
+    def group(self, kind, ops, m):
         """The manifolds of ``ops``: the plain ones meshed together as one ``kind`` node."""
-        plain_ops = [c for c in ops if not holds_operand(c)]
-        out = [build(c, m) for c in ops if holds_operand(c)]
+        plain_ops = [c for c in ops if not self.holds_operand(c)]
+        out = [self.build(c, m) for c in ops if self.holds_operand(c)]
         if plain_ops:
-            out.append(plain(plain_ops[0] if len(plain_ops) == 1 else kind(plain_ops), m))
+            out.append(self.plain(plain_ops[0] if len(plain_ops) == 1 else kind(plain_ops), m))
         return out
 
-    solid = build(sc.shape, np.eye(4))
-    got = solid.to_mesh64()
+    def triangle_colors(self, got) -> np.ndarray:
+        """(T, 4) colours of the result's triangles, through manifold3d's runs and face IDs."""
+        n = len(np.asarray(got.tri_verts))
+        colors = np.tile(np.asarray(DEFAULT_COLOR, dtype=np.float64), (n, 1))
+        run_index = np.asarray(got.run_index, dtype=np.int64) // 3
+        face_id = np.asarray(got.face_id, dtype=np.int64)
+        for k, oid in enumerate(np.asarray(got.run_original_id, dtype=np.int64)):
+            table = self.colors.get(int(oid))
+            if table is not None:
+                colors[run_index[k]:run_index[k + 1]] = table[face_id[run_index[k]:run_index[k + 1]]]
+        return colors
+
+
+def mesh_by_booleans(sc: Scene, tol: float, cells: int, mesh_plain):
+    """(vertices, triangles, colours) of ``sc``'s solid, see the module docstring;
+    ``mesh_plain(scene, tol, cells)`` is the mesher on a scene without such operands."""
+    import manifold3d  # the mesh extra: only scenes with point or large mesh operands need it
+
+    if sc.compile().empty:
+        raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
+    booleans = _Booleans(manifold3d, sc, tol, cells, mesh_plain)
+    got = booleans.build(sc.shape, np.eye(4)).to_mesh64()
     v = np.array(np.asarray(got.vert_properties)[:, :3], dtype=np.float64)  # owned, writable copies
     tri = np.array(got.tri_verts, dtype=np.int64).reshape(-1, 3)
-    colors = np.tile(np.asarray(DEFAULT_COLOR, dtype=np.float64), (len(tri), 1))
-    run_index = np.asarray(got.run_index, dtype=np.int64)
-    face_id = np.asarray(got.face_id, dtype=np.int64)
-    for k, oid in enumerate(np.asarray(got.run_original_id, dtype=np.int64)):
-        lo_t, hi_t = run_index[k] // 3, run_index[k + 1] // 3
-        table = pieces.colors.get(int(oid))
-        if table is not None:
-            colors[lo_t:hi_t] = table[face_id[lo_t:hi_t]]
-    return v, tri, colors
+    return v, tri, booleans.triangle_colors(got)
