@@ -8,9 +8,10 @@ A cloud's solid S is known only through its membership test (the two-nearest-sur
 h by marching tetrahedra (:mod:`~clcsg.model.marching_tetrahedra`) on the labels ``x in S`` of
 the grid points:
 
-* h is :data:`SPACING` times the median surfel radius, grown by 2^(1/3) until the cubes that
-  hold a surfel center number at most :data:`MAX_CUBES` (the mesh then has a few triangles per
-  such cube, so its face planes stay within what a mesh operand samples and traces quickly);
+* h is :data:`SPACING` times the median surfel radius, grown (:func:`spacing`) until the cubes
+  that hold a surfel center number at most :data:`MAX_CUBES` (the mesh then has a few
+  triangles per such cube, so its face planes stay within what a mesh operand samples and
+  traces quickly);
 * only cubes near the surfels are labelled: those within the largest radius plus a cube of a
   center, then every cube across a face of the region whose four corners disagree, until no
   face of the region's boundary is crossed, so the triangles of the region are closed;
@@ -46,12 +47,25 @@ _FACES = (  # per axis: the corners of a cube's low face on that axis, and the s
 )
 
 
+def _held(points, lo, h) -> np.ndarray:
+    """The grid cubes (m, 3) of spacing ``h`` from ``lo`` that hold a point (one sort of int64 keys)."""
+    ijk = np.floor((points - lo) / h).astype(np.int64)
+    n = ijk.max(axis=0) + 1
+    keys = np.unique((ijk[:, 0] * n[1] + ijk[:, 1]) * n[2] + ijk[:, 2])
+    return np.stack([keys // (n[1] * n[2]), keys // n[2] % n[1], keys % n[2]], axis=1)
+
+
 def spacing(surfels) -> float:
-    """The grid spacing h of ``surfels`` (see the module docstring)."""
+    """The grid spacing h of ``surfels`` (see the module docstring).  A surface's held cubes
+    fall about as h^-2, so a count over the limit first jumps h by the square root of the
+    excess, then grows it by steps of 2^(1/3) while the limit is passed."""
     h = SPACING * float(np.median(surfels.radii))
     lo = surfels.points.min(axis=0)
-    while len(np.unique(np.floor((surfels.points - lo) / h).astype(np.int64), axis=0)) > MAX_CUBES:
-        h *= 2.0 ** (1.0 / 3.0)
+    count = len(_held(surfels.points, lo, h))
+    if count > MAX_CUBES:
+        h *= 0.9 * np.sqrt(count / MAX_CUBES)
+        while len(_held(surfels.points, lo, h)) > MAX_CUBES:
+            h *= 2.0 ** (1.0 / 3.0)
     return h
 
 
@@ -91,7 +105,7 @@ def _region(grid: _Grid) -> np.ndarray:
     """The cubes (m, 3) whose triangles make a closed surface (see the module docstring)."""
     s = grid.surfels
     reach = int(np.ceil(float(s.radii.max()) / grid.h)) + 1
-    held = np.unique(np.floor((s.points - grid.lo) / grid.h).astype(np.int64), axis=0)
+    held = _held(s.points, grid.lo, grid.h)
     steps = np.arange(-reach, reach + 1)
     offsets = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
     cubes = np.unique((held[:, None, :] + offsets).reshape(-1, 3), axis=0)
