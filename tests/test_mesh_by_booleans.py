@@ -5,8 +5,6 @@ colours of the pieces, and the CLI."""
 
 from __future__ import annotations
 
-import json
-
 import manifold3d
 import numpy as np
 import pytest
@@ -16,7 +14,8 @@ import clcsg
 from clcsg.cli import app as cli
 from clcsg.meshing import operand_booleans
 from clcsg.model.surfel_surface import spacing
-from test_surfels import SURFEL_R, sphere_cloud, write_ply
+from test_surfel_surface import bored_cloud_file
+from test_surfels import SURFEL_R, sphere_cloud
 
 
 def closed_manifold(m) -> trimesh.Trimesh:
@@ -121,11 +120,7 @@ def test_small_mesh_operand_keeps_the_exact_mesher():
 
 
 def test_cli_mesh_of_a_surfel_scene(tmp_path):
-    p, n = sphere_cloud(6000)
-    write_ply(tmp_path / "cloud.ply", p, n, radius=0.05)
-    scene = {"clcsg": 1, "root": {"difference": [{"surfels": {"file": "cloud.ply"}},
-                                                 {"cylinder": {"height": 3, "radius": 0.4}}]}}
-    (tmp_path / "s.json").write_text(json.dumps(scene))
+    bored_cloud_file(tmp_path)
     out = tmp_path / "s.3mf"
     assert cli.main(["mesh", str(tmp_path / "s.json"), "-o", str(out), "-q"]) == 0
     back = trimesh.load(str(out), force="mesh")

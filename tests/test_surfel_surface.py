@@ -18,6 +18,16 @@ from clcsg.model.surfel_surface import spacing, surface_mesh
 from test_surfels import SURFEL_R, box_cloud, depth_edges, sphere_cloud, write_ply
 
 
+def bored_cloud_file(folder):
+    """``folder``/s.json: a 6,000-surfel sphere (``cloud.ply``, radius 0.05) minus a cylinder."""
+    p, n = sphere_cloud(6000)
+    write_ply(folder / "cloud.ply", p, n, radius=0.05)
+    scene = {"clcsg": 1, "root": {"difference": [{"surfels": {"file": "cloud.ply"}},
+                                                 {"cylinder": {"height": 3, "radius": 0.4}}]}}
+    (folder / "s.json").write_text(json.dumps(scene))
+    return folder / "s.json"
+
+
 def closed_and_oriented(v, f):
     m = trimesh.Trimesh(v, f, process=False)
     return m.is_watertight and m.is_winding_consistent and m.volume > 0, m
@@ -152,11 +162,7 @@ def test_queries_of_a_cloud_scene(sphere):
 
 
 def test_cli_raytrace_and_info_of_a_surfel_scene(tmp_path, capsys):
-    p, n = sphere_cloud(6000)
-    write_ply(tmp_path / "cloud.ply", p, n, radius=0.05)
-    scene = {"clcsg": 1, "root": {"difference": [{"surfels": {"file": "cloud.ply"}},
-                                                 {"cylinder": {"height": 3, "radius": 0.4}}]}}
-    (tmp_path / "s.json").write_text(json.dumps(scene))
+    bored_cloud_file(tmp_path)
     out = tmp_path / "rt.png"
     assert cli.main(["render", str(tmp_path / "s.json"), "-o", str(out), "--method", "raytrace",
                      "--size", "64x48", "-q", "--ids", str(tmp_path / "ids.npy")]) == 0
@@ -175,11 +181,7 @@ def test_viewer_exact_frame_of_a_surfel_scene(tmp_path):
     from clcsg.viewer import frames
     from clcsg.viewer.session import Session
 
-    p, n = sphere_cloud(6000)
-    write_ply(tmp_path / "cloud.ply", p, n, radius=0.05)
-    scene = {"clcsg": 1, "root": {"difference": [{"surfels": {"file": "cloud.ply"}},
-                                                 {"cylinder": {"height": 3, "radius": 0.4}}]}}
-    (tmp_path / "s.json").write_text(json.dumps(scene))
+    bored_cloud_file(tmp_path)
     ctx = context_of(None)
     model = Session(tmp_path / "s.json", ctx).load()
     cam = clcsg.Camera.look_at((2.2, -2.6, 1.9), (0, 0, 0), width=120, height=90)
