@@ -84,13 +84,13 @@ class Primitive(Shape):
 
     def __init__(self, kind: str, params: dict, color=None):
         params = dict(params)
-        _literals(kind, params)  # raises the solid's own errors now, not when it is compiled
+        # raises the solid's own errors now, not when it is compiled; kept for quadrics()
+        self._quadrics = tuple(_literals(kind, params))
         self.kind = kind
         names = tuple(params)
         self._names = _NAMES.setdefault(names, names)
         self._values = tuple(params.values())
         self.color = _color(color)
-        self._quadrics = None
 
     @property
     def params(self) -> dict:
@@ -98,10 +98,7 @@ class Primitive(Shape):
         return dict(zip(self._names, self._values))
 
     def quadrics(self) -> tuple[Quadric, ...]:
-        q = self._quadrics
-        if q is None:
-            q = self._quadrics = tuple(_literals(self.kind, self.params))
-        return q
+        return self._quadrics
 
     def __repr__(self) -> str:
         return f"{self.kind}({', '.join(f'{k}={_short(v)}' for k, v in self.params.items())})"

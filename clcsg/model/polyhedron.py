@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import LimitError, SceneError
 from .bsp import bsp_expression, triangle_planes
 from .mesh_partition import partition_expression
-from .construction import Construction, plane
+from .construction import Construction
 from .mesh_intersections import first_bad_shell, first_intersection
 from .csg import Complement, Intersection, Primitive, Union
 
@@ -219,8 +219,7 @@ class FacePlane(Primitive):
     __slots__ = ("face_box", "support")
 
     def __init__(self, normal, offset, face_box, color=None, support=None):
-        base = plane(normal, offset, color)
-        super().__init__(base.kind, base.params, base.color)
+        super().__init__("halfspace", {"normal": [float(v) for v in normal], "offset": float(offset)}, color)
         self.face_box = (np.asarray(face_box[0], dtype=np.float64), np.asarray(face_box[1], dtype=np.float64))
         self.support = None if support is None else (np.asarray(support[0], dtype=np.float64),
                                                      np.asarray(support[1], dtype=np.float64))
