@@ -65,17 +65,14 @@ def _split(tri: np.ndarray, dist: np.ndarray, eps: float):
 
 def _choose(tri_plane: np.ndarray, normals, offsets, tris, eps, rng) -> int:
     """Index (into ``tri_plane``) of a splitter among a few candidates: fewest cut triangles."""
-    best, best_cost = 0, None
     picks = rng.choice(len(tri_plane), size=min(_CANDIDATES, len(tri_plane)), replace=False)
-    for k in picks:
-        p = tri_plane[k]
-        dist = tris @ normals[p] - offsets[p]
-        cut = int(np.sum((dist.max(axis=1) > eps) & (dist.min(axis=1) < -eps)))
-        front = int(np.sum(dist.min(axis=1) >= -eps))
-        cost = cut * 8 + abs(2 * front - len(tris))
-        if best_cost is None or cost < best_cost:
-            best, best_cost = int(k), cost
-    return best
+    p = tri_plane[picks]
+    dist = tris @ normals[p].T - offsets[p]  # (k, 3, candidates)
+    hi, lo = dist.max(axis=1), dist.min(axis=1)
+    cut = np.sum((hi > eps) & (lo < -eps), axis=0)
+    front = np.sum(lo >= -eps, axis=0)
+    cost = cut * 8 + np.abs(2 * front - len(tris))
+    return int(picks[int(np.argmin(cost))])  # the first of the cheapest, as one at a time
 
 
 def _partition(tris, planes, p, normals, offsets, eps):
@@ -142,8 +139,9 @@ _CHUNK = 1 << 22
 
 
 def _behind_all(tris, uniq, normals, offsets, eps) -> np.ndarray:
-    """The planes of ``uniq`` with every corner of ``tris`` behind or on them."""
-    pts = np.unique(tris.reshape(-1, 3), axis=0)
+    """The planes of ``uniq`` with every corner of ``tris`` behind or on them (a corner shared
+    by several triangles is tested once per triangle: cheaper than finding the shared ones)."""
+    pts = tris.reshape(-1, 3)
     step = max(1, _CHUNK // max(1, len(pts)))
     out = []
     for s in range(0, len(uniq), step):
