@@ -169,9 +169,15 @@ def measure(ctx, quick=False) -> list:
             ours = _ours(v, f, holes, ctx)
             peer = _manifold(mf, v, f, holes)
             path = ours["build_cpu_s"] + ours["compile_cpu_s"] + ours["sample_cpu_s"]
-            rows.append({"model": f"{family}_{k}", "triangles": int(len(f)), "clcsg": ours, "manifold3d": peer,
-                         "ratio_sample_path_over_manifold": path / max(peer["boolean_cpu_s"], 1e-9)})
+            rows.append(_row(f"{family}_{k}", ours, peer, path, triangles=int(len(f))))
     return rows
+
+
+def _row(model: str, ours: dict, peer: dict, path: float, **extra) -> dict:
+    """A result row: clcsg's figures, manifold3d's, and clcsg's sampling path (CPU s) over
+    manifold3d's Boolean."""
+    return {"model": model, **extra, "clcsg": ours, "manifold3d": peer,
+            "ratio_sample_path_over_manifold": path / max(peer["boolean_cpu_s"], 1e-9)}
 
 
 def table(rows) -> str:
@@ -263,8 +269,7 @@ def measure_surfels(ctx, quick=False) -> list:
         ours = _surfels_ours(n, ctx)
         peer = _surfels_manifold(mf, n)
         path = ours["build_cpu_s"] + ours["tree_cpu_s"] + ours["sample_cpu_s"]
-        rows.append({"model": f"sphere_cloud_{n}_minus_box", "clcsg": ours, "manifold3d": peer,
-                     "ratio_sample_path_over_manifold": path / max(peer["boolean_cpu_s"], 1e-9)})
+        rows.append(_row(f"sphere_cloud_{n}_minus_box", ours, peer, path))
     return rows
 
 

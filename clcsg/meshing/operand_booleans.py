@@ -54,6 +54,24 @@ def needs_booleans(shape) -> bool:
     return any(is_operand(n) for n in walk(shape))
 
 
+def _holding(shape) -> set:
+    """The ids of the nodes of ``shape``'s graph with an operand at or below them: one
+    post-order walk (a node's children are done before it), so each node is visited once."""
+    out, done, stack = set(), set(), [(shape, False)]
+    while stack:
+        node, expanded = stack.pop()
+        if id(node) in done:
+            continue
+        if not expanded:
+            stack.append((node, True))
+            stack.extend((c, False) for c in node.children() if id(c) not in done)
+            continue
+        done.add(id(node))
+        if is_operand(node) or any(id(c) in out for c in node.children()):
+            out.add(id(node))
+    return out
+
+
 def _color(node):
     """RGBA of an operand: its own colour, or its first primitive's."""
     color = getattr(node, "color", None)
@@ -74,7 +92,7 @@ class _Booleans:
         self.clip = box(self.hi - self.lo, center=0.5 * (self.lo + self.hi))
         self.colors: dict[int, np.ndarray] = {}
         self.memo: dict = {}
-        self.mixed: dict = {}
+        self.mixed = _holding(sc.shape)
 
     def add(self, vertices, triangles, colors):
         """A manifold of ``vertices`` (n, 3) and outward ``triangles`` (k, 3), colours (k, 4)."""
@@ -90,10 +108,7 @@ class _Booleans:
         return m
 
     def holds_operand(self, node) -> bool:
-        got = self.mixed.get(id(node))
-        if got is None:
-            got = self.mixed[id(node)] = needs_booleans(node)
-        return got
+        return id(node) in self.mixed
 
     def plain(self, node, m):
         """The mesher's mesh of a sub-graph without operands; an unbounded one clipped to K."""

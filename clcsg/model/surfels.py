@@ -98,7 +98,6 @@ class Surfels(Shape):
         moved = self._moved[m.tobytes()] = Surfels(p, n, r, self.color, self.source)
         return moved
 
-
     def nearest(self, x, k: int = 1):
         """(distances, indices) of the ``k`` centers nearest to each point of ``x`` (m, 3)."""
         k = min(k, len(self))
