@@ -74,8 +74,9 @@ CHECKS = {
 BENIGN = {
     "api-probe": "pyopencl asks every device for CL_DEVICE_COMPUTE_CAPABILITY_MAJOR_NV (0x4000) when it "
                  "creates a kernel; Oclgrind answers CL_INVALID_VALUE, which pyopencl expects",
-    "splat-pre-read": "splat.cl reads a framebuffer slot with a plain load (`return *slot;` in "
-                      "splat_peek, documented in the kernel) before its atom_min and for its early depth "
+    "splat-pre-read": "splat.cl reads framebuffer slots with plain loads (`return *slot;` in splat_peek, "
+                      "`return vload8(0, row);` in splat_peek8, documented in the kernel) before its atom_min "
+                      "and for its early depth "
                       "rejection: the slot only decreases, so a stale read only costs an extra solve or "
                       "atomic (docs/robustness.md)",
 }
@@ -288,7 +289,7 @@ def classify(block: str) -> str:
         src = {ln.strip() for ln in block.splitlines()[1:]
                if ln.strip() and not re.match(r"(Kernel|First entity|Second entity|At line|%|store|load)", ln.strip())
                and "addrspace" not in ln}
-        if src and src <= {"return *slot;", "atom_min(slot, key);"}:
+        if src and src <= {"return *slot;", "return vload8(0, row);", "atom_min(slot, key);"}:
             return "splat-pre-read"
     return "error"
 

@@ -2,15 +2,16 @@
  * (float depth bits << 32 | sample index) of the nearest accepted fragment (splat.cl).  Outputs
  * the depth (distance along the unit view ray), the quadric and primitive ids and the colour of
  * the primitive whose boundary holds the hit (primitives.h), shaded with shade.h (the
- * primitives' albedos computed once per view by the albedo kernel; the lighting and encoding
- * as float8 over the lanes, one body with the ray tracer's scalar shade_light): the same
- * shading as the ray tracer.
+ * primitives' albedos computed once per view by the albedo kernel; the view rays, normals,
+ * lighting and encoding as float8 over the lanes, one body with the ray tracer's scalar
+ * shade_light): the same shading as the ray tracer, whose normals are double where the device
+ * has fp64 (the normal's float rounding is far below the 8-bit output's).
  *
  * Where the sample's splat_primitive is set (the colour rule gives one primitive over its whole
  * ball), the depth is the stored float z and the shaded point e + z v: the splat pass computed
- * z as (float)((s - e).v + tau) from the same ray, so this is its own depth output, and the
+ * z as (float)(t |d|) from the same ray, so this is its own depth output, and the
  * point is within half a float ulp of depth of the root, which the 8-bit shading does not
- * resolve (one pixel of the gear's 808,182 at 1080p moves by one level).  Elsewhere the hit is
+ * resolve.  Elsewhere the hit is
  * recomputed from the winning sample's quadric, solved near the sample as in splat.cl
  * (o = e + ((s - e).v) v, Q(o + tau v) = 0, eqs. 5, 6) in `real` precision, taking the root
  * whose depth (s - e).v + tau is nearest the stored depth, for the colour rule at the exact
@@ -87,7 +88,7 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
         }                                                                                           \
     }
 
-/* One work-item per RESOLVE_LANES pixels of a row: RESOLVE_GATHER per pixel, then, as real8 /
+/* One work-item per RESOLVE_LANES pixels of a row: RESOLVE_GATHER per pixel, then, as
  * float8 vectors over the pixels, the view rays, the shaded points e + depth v, the normals
  * (grad Q / |grad Q|, eq. 4), the lighting (shade_light8) and the encoding (shade_encode8). */
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
@@ -102,7 +103,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     pixel_out out = PIXEL_OUT;
     real3 e = view_eye(view);
     /* the lanes not shown keep a unit sphere at the origin: harmless */
-    real8 Z = 0, PX = 0, PY = 0, PZ = 0, XX = 1, XY = 0, XZ = 0, YY = 1, YZ = 0, ZZ = 1, BX = 0, BY = 0, BZ = 0;
+    float8 Z = 0, PX = 0, PY = 0, PZ = 0, XX = 1, XY = 0, XZ = 0, YY = 1, YZ = 0, ZZ = 1, BX = 0, BY = 0, BZ = 0;
     float8 AX = 0, AY = 0, AZ = 0, AW = 0;
     float8 DEPTH = INFINITY; /* the outputs, as pixel_miss where no fragment reached */
     int8 QID = -1, PRIM = -1;
@@ -112,25 +113,25 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     uchar4 bg = shade_background(view);
     uchar8 rx = bg.x, ry = bg.y, rz = bg.z, ra = bg.w;
     if (hits) {
-        /* the view rays of the lanes (view_ray), the points e + z v or the exact ones */
-        real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
-        real8 dX = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
-        real8 dY = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
-        real8 dZ = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
-        real8 il = 1 / sqrt(dX * dX + dY * dY + dZ * dZ);
-        real8 vX = dX * il, vY = dY * il, vZ = dZ * il;
-        realmask8 use = (((realmask8)(exact) >> (realmask8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
-        real8 pX = select(e.x + Z * vX, PX, use);
-        real8 pY = select(e.y + Z * vY, PY, use);
-        real8 pZ = select(e.z + Z * vZ, PZ, use);
+        /* in float (shading needs no more): the view rays of the lanes (view_ray), the points
+         * e + z v or the exact ones, the normals grad Q / |grad Q| */
+        float8 jj = (float8)(j0) + (float8)(0, 1, 2, 3, 4, 5, 6, 7), ii = (float8)((float)i);
+        float8 dX = (float)view->d00[0] + jj * (float)view->dx[0] + ii * (float)view->dy[0];
+        float8 dY = (float)view->d00[1] + jj * (float)view->dx[1] + ii * (float)view->dy[1];
+        float8 dZ = (float)view->d00[2] + jj * (float)view->dx[2] + ii * (float)view->dy[2];
+        float8 il = 1.0f / sqrt(dX * dX + dY * dY + dZ * dZ);
+        float8 vX = dX * il, vY = dY * il, vZ = dZ * il;
+        int8 use = (((int8)(exact) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
+        float8 pX = select((float)e.x + Z * vX, PX, use);
+        float8 pY = select((float)e.y + Z * vY, PY, use);
+        float8 pZ = select((float)e.z + Z * vZ, PZ, use);
         /* grad Q / 2 = A p - b (layout.h: the w column holds -b) */
-        real8 gX = XX * pX + XY * pY + XZ * pZ + BX;
-        real8 gY = XY * pX + YY * pY + YZ * pZ + BY;
-        real8 gZ = XZ * pX + YZ * pY + ZZ * pZ + BZ;
-        real8 gl = 1 / sqrt(gX * gX + gY * gY + gZ * gZ);
+        float8 gX = XX * pX + XY * pY + XZ * pZ + BX;
+        float8 gY = XY * pX + YY * pY + YZ * pZ + BY;
+        float8 gZ = XZ * pX + YZ * pY + ZZ * pZ + BZ;
+        float8 gl = 1.0f / sqrt(gX * gX + gY * gY + gZ * gZ);
         float8 cx, cy, cz;
-        shade_light8(view, AX, AY, AZ, convert_float8(gX * gl), convert_float8(gY * gl),
-                     convert_float8(gZ * gl), convert_float8(vX), convert_float8(vY), convert_float8(vZ), &cx, &cy, &cz);
+        shade_light8(view, AX, AY, AZ, gX * gl, gY * gl, gZ * gl, vX, vY, vZ, &cx, &cy, &cz);
         char8 hit = (((char8)((char)hits) >> (char8)(0, 1, 2, 3, 4, 5, 6, 7)) & (char8)(1)) != (char8)(0);
         rx = select(rx, shade_encode8(view, cx), hit);
         ry = select(ry, shade_encode8(view, cy), hit);

@@ -6,21 +6,20 @@
  *    holds the quadric patch inside the ball (splat_slab; paper section 6.1), intersected;
  * 2. per row of the bound, the span of pixels whose ray meets the ball (with SURFACE_ALIGNED:
  *    whose chord through the ball meets the slab), both grown by a margin, found with
- *    un-normalized rays d (without square roots, divisions or branches); per pixel
- *    of the span, with unit view ray v = d / |d| from the eye e: skip rays that miss the ball;
- *    then solve near the
- *    sample: o = e + ((s - e).v) v, Q(o + tau v) = 0 (eqs. 5, 6), depth = (s - e).v + tau.
- *    The root nearer the eye is tried first, the other one if it fails: |p - s| <= r,
- *    depth > 0, and the clip program: C is the sample's tape pruned over B(s, r) with Q
- *    substituted, and p (on Q) is on the CSG surface iff C's membership differs between Q's two
- *    sides.  This is exact from any eye position, inside the solid included.  An empty C
- *    means the whole ball is surface on Q: no clipping;
- *    Before the solve, a ray whose chord through the ball starts behind the pixel's stored
- *    depth is skipped, and before the clip program a root whose key already loses to the
- *    stored one ends the pixel (early depth rejection: no fragment there can win);
+ *    un-normalized rays d (without square roots, divisions or branches); then the span eight
+ *    rays at a time, as vectors: skip rays that miss the ball; solve near the sample, with
+ *    the ray e + t d (d not normalized) and tc = (s - e).d / |d|^2: o = e + tc d,
+ *    Q(o + tau d) = 0 (eqs. 5, 6), depth = (tc + tau) |d|.  The root nearer the eye is tried
+ *    first, the other one if it fails: |p - s| <= r, depth > 0, and the clip program: C is the
+ *    sample's tape pruned over B(s, r) with Q substituted, and p (on Q) is on the CSG surface
+ *    iff C's membership differs between Q's two sides (tape_member8).  This is exact from any
+ *    eye position, inside the solid included.  An empty C means the whole ball is surface on
+ *    Q: no clipping.  A ray whose chord through the ball starts behind the pixel's stored
+ *    depth is dropped (splat_occluded8), and before the clip program a root whose key already
+ *    loses to the stored one ends the pixel (early depth rejection: no fragment there can win);
  * 3. depth test: atom_min of ((ulong)as_uint((float)depth) << 32 | sample index) into the
- *    64-bit framebuffer (positive floats order like their bit patterns), after a plain read
- *    that skips atomics which cannot win.
+ *    64-bit framebuffer (positive floats order like their bit patterns), only for keys below
+ *    the word read before the solve (a plain read: atomics that cannot win are skipped).
  *
  * BACKFACE_CULLING (outside views only; the host turns it off when the eye is inside the
  * solid) skips splats whose patch faces away from the eye everywhere (splat_backfacing; for
@@ -225,107 +224,99 @@ inline rect splat_bound(__global const view_rec *view, quadric q, real lam_min, 
     return bound;
 }
 
-/* Step 2 on the unit view ray e + t v whose point nearest s is o = e + tc v, given the nr roots
- * tau0 <= tau1 of Q(o + tau v) = a tau^2 + 2 h tau + c = 0: the depth of the splat's fragment,
- * 0 if none (nearer root first; radius, depth, clip and facing tests).  o - s is orthogonal to
- * v, so |p - s|^2 = |o - s|^2 + tau^2 and the radius test is tau^2 <= m2 = r^2 - |o - s|^2;
- * the outward normal's component along the ray is sign grad Q(p).v = 2 sign (a tau + h).
- * word: the pixel's framebuffer word as read; a root whose key (with sample index idx) is not
- * below it loses, and so does the farther root. */
-inline real splat_fragment(int sign, int qid, __global const tape_op *clip, int nc,
-                           __global const quadric_rec *quadrics, real m2, real3 v, real tc, real3 o,
-                           int nr, real tau0, real tau1, real a, real h, ulong word, int idx, ulong *cnt)
-{
-    for (int k = 0; k < nr; ++k) { /* nearer the eye first */
-        real tau = k ? tau1 : tau0;
-        real depth = tc + tau;
-        if (tau * tau > m2 || !(depth > 0)) continue;
-        if ((((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx) >= word) return 0; /* loses, as the far root */
-        real3 p = o + tau * v;
-        int side = sign;
-        if (nc > 0) {
-            cnt[PC_CLIP_EVALUATIONS]++;
-            uint bits = tape_member(clip, nc, quadrics, p, qid);
-            if (bits == 0 || bits == 3) continue; /* same membership on both sides */
-            side = (bits & 1) ? 1 : -1;
-        }
-#if BACKFACE_CULLING
-        if (side * (a * tau + h) > 0) continue;
-#endif
-        return depth;
-    }
-    return 0;
-}
-
-/* The plain read of a framebuffer slot before any atomic on it (early depth rejection and
+/* The plain reads of framebuffer slots before any atomic on them (early depth rejection and
  * the skipped atomics): a slot only decreases, so a stale word costs at most an extra solve
- * or atomic.  All such reads go through here, on a line of their own. */
+ * or atomic.  All such reads go through splat_peek and splat_peek8, on lines of their own. */
 inline ulong splat_peek(__global const ulong *slot)
 {
     return *slot;
 }
 
-/* Early depth rejection: can no fragment of depth >= zc - m (m = sqrt(m2): the ball's chord
- * starts there) beat the pixel's word?  float rounding is monotone, so such a fragment's key
- * is at least as_uint((float)(zc - m)) << 32, above the word if zc - m exceeds the next float
- * after the stored depth.  Without a square root: zc - m > z  <=>  zc - z > 0 and
- * (zc - z)^2 > m2. */
-inline bool splat_occluded(real zc, real m2, ulong word)
+/* The eight slots from row (all in the framebuffer), as splat_peek. */
+inline ulong8 splat_peek8(__global const ulong *row)
 {
-    uint hi = (uint)(word >> 32);
-    if (hi >= 0x7f800000u) return false; /* nothing stored (EMPTY_KEY) */
-    real u = zc - (real)as_float(hi + 1);
-    return u > 0 && u * u > m2;
+    return vload8(0, row);
 }
 
-/* splat_occluded on four pixels (words: their framebuffer words): a lane mask. */
-inline int4 splat_occluded4(real4 zc, real4 m2, ulong4 word)
+/* Early depth rejection on eight pixels (a lane mask): can no fragment of depth >= zc - m
+ * (m = sqrt(m2): the ball's chord starts there) beat the pixel's word?  float rounding is
+ * monotone, so such a fragment's key is at least as_uint((float)(zc - m)) << 32, above the word
+ * if zc - m exceeds the next float after the stored depth.  Without a square root:
+ * zc - m > z  <=>  zc - z > 0 and (zc - z)^2 > m2.  An empty word (EMPTY_KEY) never occludes. */
+inline int8 splat_occluded8(real8 zc, real8 m2, ulong8 word)
 {
-    uint4 hi = convert_uint4(word >> 32);
-    real4 u = zc - convert_real4(as_float4(hi + 1));
-    return (hi < 0x7f800000u) & convert_int4(u > 0) & convert_int4(u * u > m2);
+    uint8 hi = convert_uint8(word >> 32);
+    real8 u = zc - convert_real8(as_float8(hi + 1));
+    return (hi < 0x7f800000u) & convert_int8(u > 0) & convert_int8(u * u > m2);
 }
 
-/* The 64-bit keys (float depth bits << 32 | idx) of four depths. */
-inline ulong4 splat_keys4(real4 depth, int idx)
+/* The 64-bit keys (float depth bits << 32 | idx) of eight depths. */
+inline ulong8 splat_keys8(real8 depth, int idx)
 {
-    return (convert_ulong4(as_uint4(convert_float4(depth))) << 32) | (ulong4)((ulong)(uint)idx);
+    return (convert_ulong8(as_uint8(convert_float8(depth))) << 32) | (ulong8)((ulong)(uint)idx);
 }
 
-/* splat_fragment on four rays of a splat without a clip tape (nc = 0, side = sign), as vectors:
- * per lane the depth of the fragment, 0 if none.  The nearer root tau0 wins if it passes
- * the radius, depth and facing tests and its key is below the word; one that passes the
- * first two but whose key is not below the word ends the lane (the farther root cannot win
- * either); else the farther root tau1 (nr = 2) under the same tests. */
-inline real4 splat_fragment4(int sign, real4 m2, real4 tc, real4 a, real4 h, int4 nr, real4 tau0, real4 tau1,
-                             ulong4 word, int idx)
+/* The lanes of a mask (-1 / 0 per lane) as the bits of an int. */
+inline int splat_lane_bits(int8 m)
 {
-    int4 ok[2], loses[2], faces[2];
-    real4 depth[2];
-    for (int k = 0; k < 2; ++k) {
-        real4 tau = k ? tau1 : tau0;
-        depth[k] = tc + tau;
-        ok[k] = (nr > k) & convert_int4(tau * tau <= m2) & convert_int4(depth[k] > 0);
-        loses[k] = convert_int4(splat_keys4(depth[k], idx) >= word);
+    int8 b = m & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 h = b.lo | b.hi;
+    int2 k = h.lo | h.hi;
+    return k.x | k.y;
+}
+
+/* The clip program at the points e + t d of the lanes in `wins` (those still in the running):
+ * clears the lanes whose point is not on the CSG surface (membership equal on both sides of Q)
+ * and returns the side the solid is on at each point (+1: the negative side). */
+inline real8 splat_clip8(int qid, __global const tape_op *clip, int nc, __global const quadric_rec *quadrics,
+                         real3 e, real8 dX, real8 dY, real8 dZ, real8 t, int8 *wins, ulong *cnt)
+{
+    cnt[PC_CLIP_EVALUATIONS] += popcount((uint)splat_lane_bits(*wins));
+    uchar8 bits = tape_member8(clip, nc, quadrics, e.x + t * dX, e.y + t * dY, e.z + t * dZ, qid);
+    *wins &= convert_int8((bits != (uchar8)(0)) & (bits != (uchar8)(3)));
+    return select((real8)(-1), (real8)(1), convert_realmask8((bits & (uchar8)(1)) != (uchar8)(0)));
+}
+
+/* Step 2 on eight rays e + t d of a splat (lanes `live`), d not normalized, given the nr roots
+ * t0 <= t1 of Q(e + t d) = a t^2 + 2 h t + c = 0: per lane the depth t |d| (len = |d|,
+ * dd = |d|^2) of the splat's fragment, 0 if none.  The ray's point nearest s is o = e + tc d;
+ * o - s is orthogonal to d, so |p - s|^2 = |o - s|^2 + (t - tc)^2 |d|^2 and the radius test is
+ * (t - tc)^2 dd <= m2 = r^2 - |o - s|^2; the outward normal's component along the ray is
+ * sign grad Q(p).d = 2 sign (a t + h).  Root k (t0 the nearer) is a candidate if it passes the
+ * radius and depth tests; a candidate whose key (with sample index idx) is not below the
+ * pixel's word as read loses, and the nearer one losing ends the lane (the farther root cannot
+ * win either); a candidate wins if it is on the CSG surface (the clip program at the point,
+ * splat_clip8; without one it is, on side sign) and faces the eye.  The farther root is tried
+ * where the nearer is no candidate or does not win for the clip or the facing. */
+__attribute__((always_inline)) inline real8 splat_fragment8(int sign, int qid, __global const tape_op *clip, int nc,
+                                                            __global const quadric_rec *quadrics, real3 e, real8 dX,
+                                                            real8 dY, real8 dZ, real8 dd, real8 len, real8 tc,
+                                                            real8 m2, real8 a, real8 h, int8 nr, real8 t0, real8 t1,
+                                                            ulong8 word, int idx, int8 live, ulong *cnt)
+{
+    real8 depth0 = t0 * len, depth1 = t1 * len, u0 = t0 - tc, u1 = t1 - tc;
+    int8 ok0 = live & convert_int8(u0 * u0 * dd <= m2) & convert_int8(depth0 > 0);
+    int8 ok1 = live & (nr > 1) & convert_int8(u1 * u1 * dd <= m2) & convert_int8(depth1 > 0);
+    int8 loses0 = convert_int8(splat_keys8(depth0, idx) >= word);
+    int8 wins0 = ok0 & ~loses0, wins1 = ok1 & convert_int8(splat_keys8(depth1, idx) < word);
+    real8 side0 = (real8)(sign), side1 = side0;
+    if (nc > 0 && any(wins0)) side0 = splat_clip8(qid, clip, nc, quadrics, e, dX, dY, dZ, t0, &wins0, cnt);
 #if BACKFACE_CULLING
-        faces[k] = convert_int4(sign * (a * tau + h) <= 0);
-#else
-        faces[k] = (int4)(-1);
+    wins0 &= convert_int8(side0 * (a * t0 + h) <= 0);
 #endif
-    }
-    int4 win0 = ok[0] & ~loses[0] & faces[0];
-    int4 win1 = (~ok[0] | (~loses[0] & ~faces[0])) & ok[1] & ~loses[1] & faces[1];
-    return select(select((real4)(0), depth[1], convert_realmask4(win1)), depth[0], convert_realmask4(win0));
+    wins1 &= ~ok0 | (~loses0 & ~wins0);
+    if (nc > 0 && any(wins1)) side1 = splat_clip8(qid, clip, nc, quadrics, e, dX, dY, dZ, t1, &wins1, cnt);
+#if BACKFACE_CULLING
+    wins1 &= convert_int8(side1 * (a * t1 + h) <= 0);
+#endif
+    return select(select((real8)(0), depth1, convert_realmask8(wins1)), depth0, convert_realmask8(wins0));
 }
 
-/* Step 3: the 64-bit depth test, after a plain read that skips atomics which cannot win. */
-inline void splat_depth_test(__global ulong *slot, real depth, int idx, ulong *cnt)
+/* Step 3: the 64-bit depth test of a fragment whose key was below the slot's word as read. */
+inline void splat_depth_test(__global ulong *slot, ulong key, ulong *cnt)
 {
-    ulong key = ((ulong)as_uint((float)depth) << 32) | (ulong)(uint)idx;
-    if (key < splat_peek(slot)) {
-        cnt[PC_ATOMICS]++;
-        atom_min(slot, key);
-    }
+    cnt[PC_ATOMICS]++;
+    atom_min(slot, key);
 }
 
 __kernel void splat(__global const quadric_rec *quadrics, __global const sample_rec *samples, int n_samples,
@@ -363,85 +354,80 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     real3 n = has_slab ? slab.n : (real3)(0, 0, 1);
     real mid = has_slab ? 0.5 * (slab.h_lo + slab.h_hi) : 0, width = has_slab ? 0.5 * (slab.h_hi - slab.h_lo) + pad : 0;
     real3 cx = cross(a, ddx), ndx = cross(n, ddx);
+    /* Q along the rays from the eye, Q(e + t d) = (d^T A d) t^2 + 2 (g.d) t + Q(e) with
+     * g = A e - b: d^T A d = a0 + 2 a1 x + a2 x^2 and g.d = b0 + b1 x along a row (double
+     * precision keeps the roots far below the float depth's rounding) */
+    real3 ge = quadric_Ap(q, e) + quadric_minus_b(q), Addx = quadric_Ap(q, ddx);
+    real qe = quadric_value(q, e), a2 = dot(ddx, Addx), b1 = dot(ge, ddx);
     for (int y = bound.y0; y <= bound.y1; ++y) {
         /* the rays through the ball and slab (convex) are a span of the row: found without
          * branches, square roots or divisions, then walked with the tests below */
         int first = bound.x1 + 1, last = bound.x0 - 1;
         real3 dy = d00 + (real)y * ddy;
         real3 cy = cross(a, dy), ndy = cross(n, dy);
-        for (int x = bound.x0; x <= bound.x1; x += 4) { /* four pixels per step, as vectors */
-            int4 xi = x + (int4)(0, 1, 2, 3);
-            real4 xs = (real)x + (real4)(0, 1, 2, 3);
-            real4 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
-            real4 cX = cy.x + xs * cx.x, cY = cy.y + xs * cx.y, cZ = cy.z + xs * cx.z; /* a x d */
-            real4 nX = ndy.x + xs * ndx.x, nY = ndy.y + xs * ndx.y, nZ = ndy.z + xs * ndx.z; /* n x d */
-            real4 dd = dX * dX + dY * dY + dZ * dZ, nd = n.x * dX + n.y * dY + n.z * dZ;
-            real4 E = R * R * dd - (cX * cX + cY * cY + cZ * cZ); /* |d|^2 m^2, the grown ball */
-            real4 Y = fabs(-(cX * nX + cY * nY + cZ * nZ) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
-            int4 hit = convert_int4(E >= 0) & (xi <= bound.x1);
-            if (has_slab) hit &= convert_int4((Y <= 0) | (Y * Y <= E * nd * nd));
-            int4 lo = select((int4)(INT_MAX), xi, hit), hi = select((int4)(INT_MIN), xi, hit);
-            first = min(first, min(min(lo.x, lo.y), min(lo.z, lo.w)));
-            last = max(last, max(max(hi.x, hi.y), max(hi.z, hi.w)));
+        real a0 = dot(dy, quadric_Ap(q, dy)), a1 = dot(dy, Addx), b0 = dot(ge, dy);
+        for (int x = bound.x0; x <= bound.x1; x += 8) { /* eight pixels per step, as vectors */
+            int8 xi = x + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+            real8 xs = (real)x + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+            real8 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
+            real8 cX = cy.x + xs * cx.x, cY = cy.y + xs * cx.y, cZ = cy.z + xs * cx.z; /* a x d */
+            real8 nX = ndy.x + xs * ndx.x, nY = ndy.y + xs * ndx.y, nZ = ndy.z + xs * ndx.z; /* n x d */
+            real8 dd = dX * dX + dY * dY + dZ * dZ, nd = n.x * dX + n.y * dY + n.z * dZ;
+            real8 E = R * R * dd - (cX * cX + cY * cY + cZ * cZ); /* |d|^2 m^2, the grown ball */
+            real8 Y = fabs(-(cX * nX + cY * nY + cZ * nZ) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
+            int8 hit = convert_int8(E >= 0) & (xi <= bound.x1);
+            if (has_slab) hit &= convert_int8((Y <= 0) | (Y * Y <= E * nd * nd));
+            int8 lo = select((int8)(INT_MAX), xi, hit), hi = select((int8)(INT_MIN), xi, hit);
+            int4 l4 = min(lo.lo, lo.hi), h4 = max(hi.lo, hi.hi);
+            first = min(first, min(min(l4.x, l4.y), min(l4.z, l4.w)));
+            last = max(last, max(max(h4.x, h4.y), max(h4.z, h4.w)));
         }
         cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
-        /* the span four pixels per step: the rays, the ball test and the quadric's roots
-         * (quadric_intersect4, eqs. 5, 6 from o = e + tc v) as vectors, then per pixel the
-         * depth tests, the clip and the facing (SPLAT_LANE) */
-        for (int x = first; x <= last; x += 4) {
-            real4 xs = (real)x + (real4)(0, 1, 2, 3);
-            real4 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
-            real4 il = 1 / sqrt(dX * dX + dY * dY + dZ * dZ);
-            real4 vX = dX * il, vY = dY * il, vZ = dZ * il;
-            real4 tc = a.x * vX + a.y * vY + a.z * vZ;
-            real4 wX = tc * vX - a.x, wY = tc * vY - a.y, wZ = tc * vZ - a.z; /* o - s */
-            real4 m2 = r * r - (wX * wX + wY * wY + wZ * wZ);
-            int4 meet = convert_int4(m2 >= 0) & (x + (int4)(0, 1, 2, 3) <= last);
+        /* the span eight pixels per step: the rays, the ball test, the quadric's roots
+         * (quadric_intersect8, eqs. 5, 6 from o = e + tc d), the depth tests, the clip and the
+         * facing (splat_fragment8) as vectors, then the atomics per pixel */
+        for (int x = first; x <= last; x += 8) {
+            real8 xs = (real)x + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+            real8 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
+            /* the ray e + t d, d not normalized: t = tc at the point o nearest s, depth = t |d| */
+            real8 dd = dX * dX + dY * dY + dZ * dZ;
+            real8 tc = (a.x * dX + a.y * dY + a.z * dZ) / dd;
+            real8 len = sqrt(dd);
+            real8 wX = tc * dX - a.x, wY = tc * dY - a.y, wZ = tc * dZ - a.z; /* o - s */
+            real8 m2 = r * r - (wX * wX + wY * wY + wZ * wZ);
+            int8 meet = convert_int8(m2 >= 0) & (x + (int8)(0, 1, 2, 3, 4, 5, 6, 7) <= last);
             if (!any(meet)) continue; /* the rays miss the ball */
-            real4 oX = e.x + tc * vX, oY = e.y + tc * vY, oZ = e.z + tc * vZ;
-            real4 t1, t2, qa, qh;
-            int4 nr = quadric_intersect4(q, oX, oY, oZ, vX, vY, vZ, &t1, &t2, &qa, &qh);
-#define SPLAT_LANE(l, c)                                                                                    \
-            if (meet.c) {                                                                                   \
-                cnt[PC_FRAGMENTS]++;                                                                        \
-                __global ulong *slot = &framebuffer[y * W + x + (l)];                                       \
-                ulong word = splat_peek(slot);                                                              \
-                if (splat_occluded(tc.c - 16 * SLACK * (fabs(tc.c) + r), m2.c, word)) {                     \
-                    cnt[PC_FRAGMENTS_OCCLUDED]++;                                                           \
-                } else if (nr.c) {                                                                          \
-                    real depth = splat_fragment(sign, qid, cp, nc, quadrics, m2.c, (real3)(vX.c, vY.c, vZ.c), \
-                                                tc.c, (real3)(oX.c, oY.c, oZ.c), nr.c, t1.c, t2.c, qa.c,    \
-                                                qh.c, word, idx, cnt);                                      \
-                    if (depth > 0) {                                                                        \
-                        cnt[PC_FRAGMENTS_PASSED]++;                                                         \
-                        splat_depth_test(slot, depth, idx, cnt);                                            \
-                    }                                                                                       \
-                }                                                                                           \
-            }
-            if (nc > 0) {
-                SPLAT_LANE(0, x) SPLAT_LANE(1, y) SPLAT_LANE(2, z) SPLAT_LANE(3, w)
-                continue;
-            }
-#undef SPLAT_LANE
-            /* no clip tape: the tests as vectors too, then the depth test per pixel */
+            real8 qa = a0 + xs * (2 * a1 + xs * a2), qh = b0 + xs * b1, t1, t2;
+            int8 nr = quadratic_roots8(qa, qh, (real8)(qe), &t1, &t2);
             __global ulong *row = &framebuffer[y * W + x];
-            ulong4 word = (ulong4)(EMPTY_KEY);
-            if (meet.x) word.x = splat_peek(row + 0);
-            if (meet.y) word.y = splat_peek(row + 1);
-            if (meet.z) word.z = splat_peek(row + 2);
-            if (meet.w) word.w = splat_peek(row + 3);
-            int4 occluded = meet & splat_occluded4(tc - 16 * SLACK * (fabs(tc) + r), m2, word);
-            int4 live = meet & ~occluded & (nr > 0);
-            cnt[PC_FRAGMENTS] -= meet.x + meet.y + meet.z + meet.w;
-            cnt[PC_FRAGMENTS_OCCLUDED] -= occluded.x + occluded.y + occluded.z + occluded.w;
+            /* the pixels' words (a slot only decreases: a stale word costs an extra solve) */
+            ulong8 word = (ulong8)(EMPTY_KEY);
+            if (x + 8 <= W) {
+                word = select(word, splat_peek8(row), convert_long8(meet) != 0);
+            } else {
+#define SPLAT_PEEK(l, c) if (meet.c) word.c = splat_peek(row + (l));
+                SPLAT_PEEK(0, s0) SPLAT_PEEK(1, s1) SPLAT_PEEK(2, s2) SPLAT_PEEK(3, s3)
+                SPLAT_PEEK(4, s4) SPLAT_PEEK(5, s5) SPLAT_PEEK(6, s6) SPLAT_PEEK(7, s7)
+            }
+#undef SPLAT_PEEK
+            int8 occluded = meet & splat_occluded8(tc * len - 16 * SLACK * (fabs(tc * len) + r), m2, word);
+            int8 live = meet & ~occluded & (nr > 0);
+#if CLCSG_STATS
+            cnt[PC_FRAGMENTS] += popcount((uint)splat_lane_bits(meet));
+            cnt[PC_FRAGMENTS_OCCLUDED] += popcount((uint)splat_lane_bits(occluded));
+#endif
             if (!any(live)) continue;
-            real4 depth = splat_fragment4(sign, m2, tc, qa, qh, nr, t1, t2, word, idx);
-            int4 pass = live & convert_int4(depth > 0);
-            cnt[PC_FRAGMENTS_PASSED] -= pass.x + pass.y + pass.z + pass.w;
-            if (pass.x) splat_depth_test(row, depth.x, idx, cnt);
-            if (pass.y) splat_depth_test(row + 1, depth.y, idx, cnt);
-            if (pass.z) splat_depth_test(row + 2, depth.z, idx, cnt);
-            if (pass.w) splat_depth_test(row + 3, depth.w, idx, cnt);
+            real8 depth = splat_fragment8(sign, qid, cp, nc, quadrics, e, dX, dY, dZ, dd, len, tc, m2, qa, qh, nr, t1,
+                                          t2, word, idx, live, cnt);
+            int8 pass = live & convert_int8(depth > 0);
+#if CLCSG_STATS
+            cnt[PC_FRAGMENTS_PASSED] += popcount((uint)splat_lane_bits(pass));
+#endif
+            ulong8 key = splat_keys8(depth, idx);
+#define SPLAT_TEST(l, c) if (pass.c) splat_depth_test(row + (l), key.c, cnt);
+            SPLAT_TEST(0, s0) SPLAT_TEST(1, s1) SPLAT_TEST(2, s2) SPLAT_TEST(3, s3)
+            SPLAT_TEST(4, s4) SPLAT_TEST(5, s5) SPLAT_TEST(6, s6) SPLAT_TEST(7, s7)
+#undef SPLAT_TEST
         }
     }
 #if CLCSG_STATS

@@ -75,32 +75,21 @@ inline int quadric_intersect(quadric q, real3 o, real3 v, real *t1, real *t2)
     return 0;
 }
 
-/* quadric_intersect on four rays at once, as separate components (o = (oX, oY, oZ), v = ...):
- * per lane the same arithmetic, with selects for its branches.  Returns per lane how many
- * roots (0, 1, 2); t1 <= t2 where there are two, t1 = t2 where one.  Also writes the
- * polynomial's a and h: grad Q(o + t v).v = 2 (a t + h), the slope along the ray at a root. */
-inline int4 quadric_intersect4(quadric q, real4 oX, real4 oY, real4 oZ, real4 vX, real4 vY, real4 vZ, real4 *t1,
-                               real4 *t2, real4 *pa, real4 *ph)
+/* The real roots of a t^2 + 2 h t + c = 0 in eight lanes at once, with quadric_intersect's
+ * arithmetic (selects for its branches): per lane how many (0, 1, 2); t1 <= t2 where there are
+ * two, t1 = t2 where one. */
+inline int8 quadratic_roots8(real8 a, real8 h, real8 c, real8 *t1, real8 *t2)
 {
-    real4 AvX = q.xx * vX + q.xy * vY + q.xz * vZ, AvY = q.xy * vX + q.yy * vY + q.yz * vZ,
-          AvZ = q.xz * vX + q.yz * vY + q.zz * vZ;
-    real4 AoX = q.xx * oX + q.xy * oY + q.xz * oZ, AoY = q.xy * oX + q.yy * oY + q.yz * oZ,
-          AoZ = q.xz * oX + q.yz * oY + q.zz * oZ;
-    real4 a = vX * AvX + vY * AvY + vZ * AvZ;
-    real4 h = vX * (AoX + q.xw) + vY * (AoY + q.yw) + vZ * (AoZ + q.zw);
-    real4 c = oX * (AoX + 2 * q.xw) + oY * (AoY + 2 * q.yw) + oZ * (AoZ + 2 * q.zw) + q.ww;
-    real4 disc = h * h - a * c;
-    real4 sq = sqrt(fmax(disc, (real4)(0)));
-    real4 qq = -(h + select(-sq, sq, h >= 0));
-    real4 r1 = select((real4)(INFINITY), qq / a, a != 0);
-    real4 r2 = select((real4)(INFINITY), c / qq, qq != 0);
-    realmask4 ok1 = isfinite(r1) & (disc >= 0), ok2 = isfinite(r2) & (disc >= 0);
-    realmask4 both = ok1 & ok2;
+    real8 disc = h * h - a * c;
+    real8 sq = sqrt(fmax(disc, (real8)(0)));
+    real8 qq = -(h + select(-sq, sq, h >= 0));
+    real8 r1 = select((real8)(INFINITY), qq / a, a != 0);
+    real8 r2 = select((real8)(INFINITY), c / qq, qq != 0);
+    realmask8 ok1 = isfinite(r1) & (disc >= 0), ok2 = isfinite(r2) & (disc >= 0);
+    realmask8 both = ok1 & ok2;
     *t1 = select(select(r2, r1, ok1), fmin(r1, r2), both);
     *t2 = select(*t1, fmax(r1, r2), both);
-    *pa = a;
-    *ph = h;
-    return convert_int4(-ok1) + convert_int4(-ok2);
+    return convert_int8(-ok1) + convert_int8(-ok2);
 }
 
 /* The roots tau of Q(o + tau v) = 0 solved from o = e + tc v, the point of the ray e + t v

@@ -109,6 +109,31 @@ inline uint tape_member(__global const tape_op *t, int n, __global const quadric
     return r[t[n - 1].out];
 }
 
+/* tape_member at eight points (px, py, pz) at once: per lane the membership bits of
+ * tape_member, one vector per register (quadric_value's arithmetic per leaf). */
+inline uchar8 tape_member8(__global const tape_op *t, int n, __global const quadric_rec *qs, real8 px, real8 py,
+                           real8 pz, int self_q)
+{
+    uchar8 r[TAPE_REGS];
+    for (int k = 0; k < n; ++k) {
+        tape_op o = t[k];
+        if (o.op == OP_LEAF) {
+            if (o.a == self_q) {
+                r[o.out] = (uchar8)(o.b > 0 ? 1 : 2);
+            } else {
+                quadric q = quadric_load(qs, o.a);
+                real8 gx = q.xx * px + q.xy * py + q.xz * pz + 2 * q.xw;
+                real8 gy = q.xy * px + q.yy * py + q.yz * pz + 2 * q.yw;
+                real8 gz = q.xz * px + q.yz * py + q.zz * pz + 2 * q.zw;
+                real8 v = px * gx + py * gy + pz * gz + q.ww;
+                r[o.out] = convert_uchar8(o.b * v <= 0) & (uchar8)(3);
+            }
+        } else
+            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, (uchar8)(3), (uchar8)(0));
+    }
+    return r[t[n - 1].out];
+}
+
 /* The side the solid is on wherever the tape says "surface" on self_q: the tape is a monotone
  * Boolean function of its leaves, so if every leaf on self_q has polarity +1 the membership on
  * the negative side is never below the one on the positive side (the solid is on the negative
