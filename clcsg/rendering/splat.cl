@@ -7,9 +7,12 @@
  * 2. per row of the bound, the span of pixels whose ray meets the ball (with SURFACE_ALIGNED:
  *    whose chord through the ball meets the slab), both grown by a margin, found with
  *    un-normalized rays d (without square roots, divisions or branches); then the span eight
- *    rays at a time, as vectors: skip rays that miss the ball; solve near the sample, with
- *    the ray e + t d (d not normalized) and tc = (s - e).d / |d|^2: o = e + tc d,
- *    Q(o + tau d) = 0 (eqs. 5, 6), depth = (tc + tau) |d|.  The root nearer the eye is tried
+ *    rays at a time, as vectors: skip rays that miss the ball; solve Q(e + t d) = 0 (eqs. 5, 6)
+ *    with d not normalized, whose coefficients are polynomials in the pixel's column (the
+ *    paper solves near the sample to keep float's precision; in double the roots from the
+ *    eye are far more precise than the float depth of the key), depth = t |d|.  All tests are
+ *    scaled by |d|^2, so a ray costs one square root for |d| and the roots' square root
+ *    and divisions.  The root nearer the eye is tried
  *    first, the other one if it fails: |p - s| <= r, depth > 0, and the clip program: C is the
  *    sample's tape pruned over B(s, r) with Q substituted, and p (on Q) is on the CSG surface
  *    iff C's membership differs between Q's two sides (tape_member8).  This is exact from any
@@ -238,16 +241,18 @@ inline ulong8 splat_peek8(__global const ulong *row)
     return vload8(0, row);
 }
 
-/* Early depth rejection on eight pixels (a lane mask): can no fragment of depth >= zc - m
- * (m = sqrt(m2): the ball's chord starts there) beat the pixel's word?  float rounding is
- * monotone, so such a fragment's key is at least as_uint((float)(zc - m)) << 32, above the word
- * if zc - m exceeds the next float after the stored depth.  Without a square root:
- * zc - m > z  <=>  zc - z > 0 and (zc - z)^2 > m2.  An empty word (EMPTY_KEY) never occludes. */
-inline int8 splat_occluded8(real8 zc, real8 m2, ulong8 word)
+/* Early depth rejection on eight rays e + t d (a lane mask), |d| = len: can no fragment of
+ * depth >= zc - m (zc = (s - e).d / len, m = sqrt(m2): the ball's chord starts there) beat the
+ * pixel's word?  float rounding is monotone, so such a fragment's key is at least
+ * as_uint((float)(zc - m)) << 32, above the word if zc - m exceeds the next float z after the
+ * stored depth.  Scaled by len, without a square root or a division: zc - m > z  <=>
+ * u = zl - z len > 0 and u^2 > M, with zl = zc len and M = m2 len^2.  An empty word
+ * (EMPTY_KEY) never occludes. */
+inline int8 splat_occluded8(real8 zl, real8 len, real8 M, ulong8 word)
 {
     uint8 hi = convert_uint8(word >> 32);
-    real8 u = zc - convert_real8(as_float8(hi + 1));
-    return (hi < 0x7f800000u) & convert_int8(u > 0) & convert_int8(u * u > m2);
+    real8 u = zl - convert_real8(as_float8(hi + 1)) * len;
+    return (hi < 0x7f800000u) & convert_int8(u > 0) & convert_int8(u * u > M);
 }
 
 /* The 64-bit keys (float depth bits << 32 | idx) of eight depths. */
@@ -265,51 +270,97 @@ inline int splat_lane_bits(int8 m)
     return k.x | k.y;
 }
 
-/* The clip program at the points e + t d of the lanes in `wins` (those still in the running):
+/* The roots of Q on eight rays e + t d of a row (d not normalized) and what the tests need of
+ * them.  Root k: depth[k] = t |d|, the point b + u[k] d on the ray, rad[k] <= 0 iff
+ * |p - s| <= r, slope[k] = grad Q(p).d / 2 (the outward normal's component along the ray is
+ * sign slope).  With fp64 the roots are solved from the eye: Q(e + t d) = qa t^2 + 2 qh t + qe
+ * has coefficients that are polynomials in the column x (qa = a0 + 2 a1 x + a2 x^2,
+ * qh = b0 + b1 x), and double keeps the roots far below the float depth's rounding; the radius
+ * test is t^2 |d|^2 - 2 t (a.d) + |a|^2 - r^2 <= 0 (a = s - e, k = |a|^2 - r^2).  In float
+ * they are solved near the sample (the paper's local solve, eqs. 5, 6): from o = e + tc d,
+ * the ray's point nearest s (tc = a.d / |d|^2), Q(o + u d) = qa u^2 + 2 h u + Q(o), and the radius
+ * test is u^2 |d|^2 <= r^2 - |o - s|^2. */
+typedef struct {
+    real8 depth[2], u[2], rad[2], slope[2];
+    real8 bX, bY, bZ;
+} splat_roots;
+
+inline int8 splat_roots8(quadric q, real3 e, real3 a, real r, real k, real qe, real8 xs, real8 dX, real8 dY,
+                         real8 dZ, real8 dd, real8 ad, real8 len, real a0, real a1, real a2, real b0, real b1,
+                         splat_roots *R)
+{
+    real8 qa = a0 + xs * (2 * a1 + xs * a2), t[2];
+#ifdef CLCSG_DOUBLE
+    real8 qh = b0 + xs * b1;
+    int8 nr = quadratic_roots8(qa, qh, (real8)(qe), &t[0], &t[1]);
+    R->bX = (real8)(e.x); R->bY = (real8)(e.y); R->bZ = (real8)(e.z);
+    for (int j = 0; j < 2; ++j) {
+        R->u[j] = t[j];
+        R->rad[j] = t[j] * (t[j] * dd - 2 * ad) + k;
+        R->slope[j] = qa * t[j] + qh;
+    }
+#else
+    real8 tc = ad / dd;
+    real8 oX = e.x + tc * dX, oY = e.y + tc * dY, oZ = e.z + tc * dZ;
+    real8 wX = tc * dX - a.x, wY = tc * dY - a.y, wZ = tc * dZ - a.z; /* o - s */
+    real8 m2 = r * r - (wX * wX + wY * wY + wZ * wZ);
+    real8 gX = q.xx * oX + q.xy * oY + q.xz * oZ + q.xw, gY = q.xy * oX + q.yy * oY + q.yz * oZ + q.yw,
+          gZ = q.xz * oX + q.yz * oY + q.zz * oZ + q.zw; /* A o - b */
+    real8 qh = dX * gX + dY * gY + dZ * gZ;
+    real8 qc = oX * (gX + q.xw) + oY * (gY + q.yw) + oZ * (gZ + q.zw) + q.ww;
+    int8 nr = quadratic_roots8(qa, qh, qc, &t[0], &t[1]);
+    R->bX = oX; R->bY = oY; R->bZ = oZ;
+    for (int j = 0; j < 2; ++j) {
+        R->u[j] = t[j];
+        R->rad[j] = t[j] * t[j] * dd - m2;
+        R->slope[j] = qa * t[j] + qh;
+        t[j] += tc;
+    }
+#endif
+    R->depth[0] = t[0] * len;
+    R->depth[1] = t[1] * len;
+    return nr;
+}
+
+/* The clip program at the points b + u d of the lanes in `wins` (those still in the running):
  * clears the lanes whose point is not on the CSG surface (membership equal on both sides of Q)
  * and returns the side the solid is on at each point (+1: the negative side). */
 inline real8 splat_clip8(int qid, __global const tape_op *clip, int nc, __global const quadric_rec *quadrics,
-                         real3 e, real8 dX, real8 dY, real8 dZ, real8 t, int8 *wins, ulong *cnt)
+                         const splat_roots *R, real8 dX, real8 dY, real8 dZ, real8 u, int8 *wins, ulong *cnt)
 {
     cnt[PC_CLIP_EVALUATIONS] += popcount((uint)splat_lane_bits(*wins));
-    uchar8 bits = tape_member8(clip, nc, quadrics, e.x + t * dX, e.y + t * dY, e.z + t * dZ, qid);
+    uchar8 bits = tape_member8(clip, nc, quadrics, R->bX + u * dX, R->bY + u * dY, R->bZ + u * dZ, qid);
     *wins &= convert_int8((bits != (uchar8)(0)) & (bits != (uchar8)(3)));
     return select((real8)(-1), (real8)(1), convert_realmask8((bits & (uchar8)(1)) != (uchar8)(0)));
 }
 
-/* Step 2 on eight rays e + t d of a splat (lanes `live`), d not normalized, given the nr roots
- * t0 <= t1 of Q(e + t d) = a t^2 + 2 h t + c = 0: per lane the depth t |d| (len = |d|,
- * dd = |d|^2) of the splat's fragment, 0 if none.  The ray's point nearest s is o = e + tc d;
- * o - s is orthogonal to d, so |p - s|^2 = |o - s|^2 + (t - tc)^2 |d|^2 and the radius test is
- * (t - tc)^2 dd <= m2 = r^2 - |o - s|^2; the outward normal's component along the ray is
- * sign grad Q(p).d = 2 sign (a t + h).  Root k (t0 the nearer) is a candidate if it passes the
- * radius and depth tests; a candidate whose key (with sample index idx) is not below the
- * pixel's word as read loses, and the nearer one losing ends the lane (the farther root cannot
- * win either); a candidate wins if it is on the CSG surface (the clip program at the point,
- * splat_clip8; without one it is, on side sign) and faces the eye.  The farther root is tried
- * where the nearer is no candidate or does not win for the clip or the facing. */
+/* Step 2 on eight rays of a splat (lanes `live`) with nr roots R (splat_roots8): per lane the
+ * depth of the splat's fragment, 0 if none.  Root k (the nearer first) is a candidate if it
+ * passes the radius and depth tests; a candidate whose key (with sample index idx) is not below
+ * the pixel's word as read loses, and the nearer one losing ends the lane (the farther root
+ * cannot win either); a candidate wins if it is on the CSG surface (the clip program at the
+ * point, splat_clip8; without one it is, on side sign) and faces the eye.  The farther root is
+ * tried where the nearer is no candidate or does not win for the clip or the facing. */
 __attribute__((always_inline)) inline real8 splat_fragment8(int sign, int qid, __global const tape_op *clip, int nc,
-                                                            __global const quadric_rec *quadrics, real3 e, real8 dX,
-                                                            real8 dY, real8 dZ, real8 dd, real8 len, real8 tc,
-                                                            real8 m2, real8 a, real8 h, int8 nr, real8 t0, real8 t1,
-                                                            ulong8 word, int idx, int8 live, ulong *cnt)
+                                                            __global const quadric_rec *quadrics, const splat_roots *R,
+                                                            real8 dX, real8 dY, real8 dZ, int8 nr, ulong8 word,
+                                                            int idx, int8 live, ulong *cnt)
 {
-    real8 depth0 = t0 * len, depth1 = t1 * len, u0 = t0 - tc, u1 = t1 - tc;
-    int8 ok0 = live & convert_int8(u0 * u0 * dd <= m2) & convert_int8(depth0 > 0);
-    int8 ok1 = live & (nr > 1) & convert_int8(u1 * u1 * dd <= m2) & convert_int8(depth1 > 0);
-    int8 loses0 = convert_int8(splat_keys8(depth0, idx) >= word);
-    int8 wins0 = ok0 & ~loses0, wins1 = ok1 & convert_int8(splat_keys8(depth1, idx) < word);
+    int8 ok0 = live & convert_int8(R->rad[0] <= 0) & convert_int8(R->depth[0] > 0);
+    int8 ok1 = live & (nr > 1) & convert_int8(R->rad[1] <= 0) & convert_int8(R->depth[1] > 0);
+    int8 loses0 = convert_int8(splat_keys8(R->depth[0], idx) >= word);
+    int8 wins0 = ok0 & ~loses0, wins1 = ok1 & convert_int8(splat_keys8(R->depth[1], idx) < word);
     real8 side0 = (real8)(sign), side1 = side0;
-    if (nc > 0 && any(wins0)) side0 = splat_clip8(qid, clip, nc, quadrics, e, dX, dY, dZ, t0, &wins0, cnt);
+    if (nc > 0 && any(wins0)) side0 = splat_clip8(qid, clip, nc, quadrics, R, dX, dY, dZ, R->u[0], &wins0, cnt);
 #if BACKFACE_CULLING
-    wins0 &= convert_int8(side0 * (a * t0 + h) <= 0);
+    wins0 &= convert_int8(side0 * R->slope[0] <= 0);
 #endif
     wins1 &= ~ok0 | (~loses0 & ~wins0);
-    if (nc > 0 && any(wins1)) side1 = splat_clip8(qid, clip, nc, quadrics, e, dX, dY, dZ, t1, &wins1, cnt);
+    if (nc > 0 && any(wins1)) side1 = splat_clip8(qid, clip, nc, quadrics, R, dX, dY, dZ, R->u[1], &wins1, cnt);
 #if BACKFACE_CULLING
-    wins1 &= convert_int8(side1 * (a * t1 + h) <= 0);
+    wins1 &= convert_int8(side1 * R->slope[1] <= 0);
 #endif
-    return select(select((real8)(0), depth1, convert_realmask8(wins1)), depth0, convert_realmask8(wins0));
+    return select(select((real8)(0), R->depth[1], convert_realmask8(wins1)), R->depth[0], convert_realmask8(wins0));
 }
 
 /* Step 3: the 64-bit depth test of a fragment whose key was below the slot's word as read. */
@@ -354,11 +405,11 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     real3 n = has_slab ? slab.n : (real3)(0, 0, 1);
     real mid = has_slab ? 0.5 * (slab.h_lo + slab.h_hi) : 0, width = has_slab ? 0.5 * (slab.h_hi - slab.h_lo) + pad : 0;
     real3 cx = cross(a, ddx), ndx = cross(n, ddx);
-    /* Q along the rays from the eye, Q(e + t d) = (d^T A d) t^2 + 2 (g.d) t + Q(e) with
-     * g = A e - b: d^T A d = a0 + 2 a1 x + a2 x^2 and g.d = b0 + b1 x along a row (double
-     * precision keeps the roots far below the float depth's rounding) */
+    /* Q along the rays from the eye (splat_roots8): Q(e + t d) = (d^T A d) t^2 + 2 (g.d) t + Q(e)
+     * with g = A e - b; d^T A d = a0 + 2 a1 x + a2 x^2 and g.d = b0 + b1 x along a row */
     real3 ge = quadric_Ap(q, e) + quadric_minus_b(q), Addx = quadric_Ap(q, ddx);
     real qe = quadric_value(q, e), a2 = dot(ddx, Addx), b1 = dot(ge, ddx);
+    real k = dot(a, a) - r * r;
     for (int y = bound.y0; y <= bound.y1; ++y) {
         /* the rays through the ball and slab (convex) are a span of the row: found without
          * branches, square roots or divisions, then walked with the tests below */
@@ -384,21 +435,21 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
         }
         cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
         /* the span eight pixels per step: the rays, the ball test, the quadric's roots
-         * (quadric_intersect8, eqs. 5, 6 from o = e + tc d), the depth tests, the clip and the
-         * facing (splat_fragment8) as vectors, then the atomics per pixel */
+         * (quadratic_roots8, eqs. 5, 6 from e), the depth tests, the clip and the facing
+         * (splat_fragment8) as vectors, then the atomics per pixel */
         for (int x = first; x <= last; x += 8) {
             real8 xs = (real)x + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
             real8 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
-            /* the ray e + t d, d not normalized: t = tc at the point o nearest s, depth = t |d| */
+            /* the ray e + t d, d not normalized, depth = t |d|: it meets the ball iff
+             * M = |d|^2 (r^2 - |o - s|^2) = (a.d)^2 - |d|^2 k >= 0 (o: its point nearest s) */
             real8 dd = dX * dX + dY * dY + dZ * dZ;
-            real8 tc = (a.x * dX + a.y * dY + a.z * dZ) / dd;
+            real8 ad = a.x * dX + a.y * dY + a.z * dZ;
             real8 len = sqrt(dd);
-            real8 wX = tc * dX - a.x, wY = tc * dY - a.y, wZ = tc * dZ - a.z; /* o - s */
-            real8 m2 = r * r - (wX * wX + wY * wY + wZ * wZ);
-            int8 meet = convert_int8(m2 >= 0) & (x + (int8)(0, 1, 2, 3, 4, 5, 6, 7) <= last);
+            real8 M = ad * ad - dd * k;
+            int8 meet = convert_int8(M >= 0) & (x + (int8)(0, 1, 2, 3, 4, 5, 6, 7) <= last);
             if (!any(meet)) continue; /* the rays miss the ball */
-            real8 qa = a0 + xs * (2 * a1 + xs * a2), qh = b0 + xs * b1, t1, t2;
-            int8 nr = quadratic_roots8(qa, qh, (real8)(qe), &t1, &t2);
+            splat_roots R;
+            int8 nr = splat_roots8(q, e, a, r, k, qe, xs, dX, dY, dZ, dd, ad, len, a0, a1, a2, b0, b1, &R);
             __global ulong *row = &framebuffer[y * W + x];
             /* the pixels' words (a slot only decreases: a stale word costs an extra solve) */
             ulong8 word = (ulong8)(EMPTY_KEY);
@@ -410,15 +461,14 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
                 SPLAT_PEEK(4, s4) SPLAT_PEEK(5, s5) SPLAT_PEEK(6, s6) SPLAT_PEEK(7, s7)
             }
 #undef SPLAT_PEEK
-            int8 occluded = meet & splat_occluded8(tc * len - 16 * SLACK * (fabs(tc * len) + r), m2, word);
+            int8 occluded = meet & splat_occluded8(ad - 16 * SLACK * (fabs(ad) + r * len), len, M, word);
             int8 live = meet & ~occluded & (nr > 0);
 #if CLCSG_STATS
             cnt[PC_FRAGMENTS] += popcount((uint)splat_lane_bits(meet));
             cnt[PC_FRAGMENTS_OCCLUDED] += popcount((uint)splat_lane_bits(occluded));
 #endif
             if (!any(live)) continue;
-            real8 depth = splat_fragment8(sign, qid, cp, nc, quadrics, e, dX, dY, dZ, dd, len, tc, m2, qa, qh, nr, t1,
-                                          t2, word, idx, live, cnt);
+            real8 depth = splat_fragment8(sign, qid, cp, nc, quadrics, &R, dX, dY, dZ, nr, word, idx, live, cnt);
             int8 pass = live & convert_int8(depth > 0);
 #if CLCSG_STATS
             cnt[PC_FRAGMENTS_PASSED] += popcount((uint)splat_lane_bits(pass));
