@@ -203,10 +203,17 @@ OCLGRIND_UNOPTIMIZED = {"rendering/splat.cl": ["-cl-opt-disable"]}
 
 def _device_options(context, path: str) -> list[str]:
     """Build options of program ``path`` on ``context``'s device beyond the shared ones
-    (:data:`OCLGRIND_UNOPTIMIZED`)."""
+    (:data:`OCLGRIND_UNOPTIMIZED`; ``CLCSG_PREFETCH=1`` on PoCL's CPU devices, where the
+    kernels ask for memory ahead with clang's ``__builtin_prefetch``: OpenCL's ``prefetch()``
+    does nothing there)."""
+    import pyopencl as cl
+
     devices = context.ctx.devices
     if any("oclgrind" in d.platform.name.lower() for d in devices):
         return list(OCLGRIND_UNOPTIMIZED.get(path, []))
+    if all("portable computing language" in d.platform.name.lower() and d.type & cl.device_type.CPU
+           for d in devices):
+        return ["-DCLCSG_PREFETCH=1"]
     return []
 
 
