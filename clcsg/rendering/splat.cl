@@ -289,14 +289,20 @@ typedef struct {
     real8 bX, bY, bZ;
 } splat_roots;
 
-inline int8 splat_roots8(quadric q, real3 e, real3 a, real r, real k, real qe, real8 xs, real8 dX, real8 dY,
-                         real8 dZ, real8 dd, real8 ad, real8 len, real a0, real a1, real a2, real b0, real b1,
-                         splat_roots *R)
+inline int8 splat_roots8(quadric q, bool plane, real3 e, real3 a, real r, real k, real qe, real8 xs, real8 dX,
+                         real8 dY, real8 dZ, real8 dd, real8 ad, real8 len, real a0, real a1, real a2, real b0,
+                         real b1, splat_roots *R)
 {
     real8 qa = a0 + xs * (2 * a1 + xs * a2), t[2];
 #ifdef CLCSG_DOUBLE
     real8 qh = b0 + xs * b1;
-    int8 nr = quadratic_roots8(qa, qh, (real8)(qe), &t[0], &t[1]);
+    int8 nr;
+    if (plane) { /* 2 qh t + qe = 0: quadratic_roots8's single root c / q, q = -2 h */
+        t[0] = t[1] = qe / (-2 * qh);
+        nr = convert_int8(isfinite(t[0])) & 1;
+    } else {
+        nr = quadratic_roots8(qa, qh, (real8)(qe), &t[0], &t[1]);
+    }
     R->bX = (real8)(e.x); R->bY = (real8)(e.y); R->bZ = (real8)(e.z);
     for (int j = 0; j < 2; ++j) {
         R->u[j] = t[j];
@@ -430,6 +436,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     real3 ge = quadric_Ap(q, e) + quadric_minus_b(q), Addx = quadric_Ap(q, ddx);
     real qe = quadric_value(q, e), a2 = dot(ddx, Addx), b1 = dot(ge, ddx);
     real k = dot(a, a) - r * r;
+    bool plane = q.xx == 0 && q.xy == 0 && q.xz == 0 && q.yy == 0 && q.yz == 0 && q.zz == 0;
     for (int y = bound.y0; y < min(bound.y0 + SPLAT_PREFETCH_ROWS, bound.y1 + 1); ++y)
         splat_prefetch_row(framebuffer, W, y, bound.x0, bound.x1);
     for (int y = bound.y0; y <= bound.y1; ++y) {
@@ -472,8 +479,6 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             real8 M = ad * ad - dd * k;
             int8 meet = convert_int8(M >= 0) & (x + (int8)(0, 1, 2, 3, 4, 5, 6, 7) <= last);
             if (!any(meet)) continue; /* the rays miss the ball */
-            splat_roots R;
-            int8 nr = splat_roots8(q, e, a, r, k, qe, xs, dX, dY, dZ, dd, ad, len, a0, a1, a2, b0, b1, &R);
             __global ulong *row = &framebuffer[y * W + x];
             /* the pixels' words (a slot only decreases: a stale word costs an extra solve) */
             ulong8 word = (ulong8)(EMPTY_KEY);
@@ -486,11 +491,15 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             }
 #undef SPLAT_PEEK
             int8 occluded = meet & splat_occluded8(ad - 16 * SLACK * (fabs(ad) + r * len), len, M, word);
-            int8 live = meet & ~occluded & (nr > 0);
+            int8 live = meet & ~occluded;
 #if CLCSG_STATS
             cnt[PC_FRAGMENTS] += popcount((uint)splat_lane_bits(meet));
             cnt[PC_FRAGMENTS_OCCLUDED] += popcount((uint)splat_lane_bits(occluded));
 #endif
+            if (!any(live)) continue;
+            splat_roots R;
+            int8 nr = splat_roots8(q, plane, e, a, r, k, qe, xs, dX, dY, dZ, dd, ad, len, a0, a1, a2, b0, b1, &R);
+            live &= nr > 0;
             if (!any(live)) continue;
             real8 depth = splat_fragment8(sign, qid, cp, nc, quadrics, &R, dX, dY, dZ, nr, word, idx, live, cnt);
             int8 pass = live & convert_int8(depth > 0);
