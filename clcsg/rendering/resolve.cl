@@ -64,8 +64,7 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
  * components keeps the vectors in registers (OpenCL has no dynamic component index). */
 #define RESOLVE_GATHER(l, c)                                                                        \
     if ((l) < lanes) {                                                                              \
-        int pix = i * W + j0 + (l);                                                                 \
-        ulong key = framebuffer[pix];                                                               \
+        ulong key = K.c;                                                                            \
         if (key != EMPTY_KEY) {                                                                     \
             __global const sample_rec *sp = &samples[(uint)(key & 0xffffffffUL)];                  \
             int qid = sp->quadric, prim = sp->splat_primitive;                                      \
@@ -108,6 +107,20 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     float8 DEPTH = INFINITY; /* the outputs, as pixel_miss where no fragment reached */
     int8 QID = -1, PRIM = -1;
     int hits = 0, exact = 0;
+    int pix = i * W + j0;
+    ulong8 K = (ulong8)(EMPTY_KEY); /* the words */
+    if (lanes == RESOLVE_LANES) {
+        K = vload8(0, framebuffer + pix);
+    } else {
+        for (int l = 0; l < lanes; ++l) ((ulong *)&K)[l] = framebuffer[pix + l];
+    }
+    if (all(K == (ulong8)(EMPTY_KEY)) && lanes == RESOLVE_LANES) { /* the background only */
+        vstore8((float8)(INFINITY), 0, out.depth + pix);
+        vstore8((int8)(-1), 0, out.quadric + pix);
+        vstore8((int8)(-1), 0, out.primitive + pix);
+        vstore8((uint8)(as_uint(shade_background(view))), 0, (__global uint *)(out.rgba + pix));
+        return;
+    }
     RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
     RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
     uchar4 bg = shade_background(view);
@@ -139,7 +152,6 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         ra = select(ra, convert_uchar8_sat(AW * 255.0f + 0.5f), hit);
     }
     /* the row's eight pixels at once, or the lanes one by one at the row's end */
-    int pix = i * W + j0;
     if (lanes == RESOLVE_LANES) {
         vstore8(DEPTH, 0, out.depth + pix);
         vstore8(QID, 0, out.quadric + pix);
