@@ -216,9 +216,9 @@ inline rect splat_bound(__global const view_rec *view, quadric q, real lam_min, 
     *has_slab = false;
     rect bound = screen_ball(view, a, r);
 #if BACKFACE_CULLING
-    /* the whole-splat test needs one orientation over the ball */
-    bool fixed = nc == 0 || tape_self_polarity(clip, nc, qid) != 0;
-    if (fixed && !rect_empty(bound) && splat_backfacing(q, lam_min, lam_max, sign, s, a, r)) {
+    /* the whole-splat test needs one orientation over the ball (asked last: a loop over C) */
+    if (!rect_empty(bound) && splat_backfacing(q, lam_min, lam_max, sign, s, a, r)
+        && (nc == 0 || tape_self_polarity(clip, nc, qid) != 0)) {
         cnt[PC_SPLATS_CULLED] = 1;
         return (rect){0, 0, -1, -1};
     }
