@@ -430,3 +430,5 @@ def test_log_parser_keeps_real_errors():
     assert classify(parse_log(write_only)[0]) == "error"
     other_race = SAMPLE_LOG.split("\n\n")[1].replace("atom_min(slot, key);", "framebuffer[i] = key;")
     assert classify(parse_log(other_race)[0]) == "error"
+    vector_read = SAMPLE_LOG.split("\n\n")[1].replace("return *slot;", "return vload8(0, row);")
+    assert classify(parse_log(vector_read)[0]) == "splat-pre-read"
