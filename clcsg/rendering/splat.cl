@@ -373,6 +373,34 @@ __attribute__((always_inline)) inline real8 splat_fragment8(int sign, int qid, _
     return select(select((real8)(0), R->depth[1], convert_realmask8(wins1)), R->depth[0], convert_realmask8(wins0));
 }
 
+/* The span [*first, *last] of row y's pixels in the bound whose rays meet the ball grown to R
+ * and, with a slab, whose chord through it meets the slab (see the kernel), eight pixels per step
+ * as vectors; empty (first > last) if none.  dy: the row's ray at column 0, d = dy + x ddx;
+ * cy, cx: a x dy, a x ddx; ndy, ndx: n x dy, n x ddx. */
+inline void splat_row_span(rect bound, real3 dy, real3 cy, real3 ndy, real3 ddx, real3 cx, real3 ndx, real3 n,
+                           real R, real mid, real width, bool has_slab, int *first_out, int *last_out)
+{
+    int first = bound.x1 + 1, last = bound.x0 - 1;
+    for (int x = bound.x0; x <= bound.x1; x += 8) { /* eight pixels per step, as vectors */
+        int8 xi = x + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+        real8 xs = (real)x + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+        real8 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
+        real8 cX = cy.x + xs * cx.x, cY = cy.y + xs * cx.y, cZ = cy.z + xs * cx.z; /* a x d */
+        real8 nX = ndy.x + xs * ndx.x, nY = ndy.y + xs * ndx.y, nZ = ndy.z + xs * ndx.z; /* n x d */
+        real8 dd = dX * dX + dY * dY + dZ * dZ, nd = n.x * dX + n.y * dY + n.z * dZ;
+        real8 E = R * R * dd - (cX * cX + cY * cY + cZ * cZ); /* |d|^2 m^2, the grown ball */
+        real8 Y = fabs(-(cX * nX + cY * nY + cZ * nZ) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
+        int8 hit = convert_int8(E >= 0) & (xi <= bound.x1);
+        if (has_slab) hit &= convert_int8((Y <= 0) | (Y * Y <= E * nd * nd));
+        int8 lo = select((int8)(INT_MAX), xi, hit), hi = select((int8)(INT_MIN), xi, hit);
+        int4 l4 = min(lo.lo, lo.hi), h4 = max(hi.lo, hi.hi);
+        first = min(first, min(min(l4.x, l4.y), min(l4.z, l4.w)));
+        last = max(last, max(max(h4.x, h4.y), max(h4.z, h4.w)));
+    }
+    *first_out = first;
+    *last_out = last;
+}
+
 /* Step 3: the 64-bit depth test of a fragment whose key was below the slot's word as read. */
 inline void splat_depth_test(__global ulong *slot, ulong key, ulong *cnt)
 {
@@ -440,30 +468,15 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     for (int y = bound.y0; y < min(bound.y0 + SPLAT_PREFETCH_ROWS, bound.y1 + 1); ++y)
         splat_prefetch_row(framebuffer, W, y, bound.x0, bound.x1);
     for (int y = bound.y0; y <= bound.y1; ++y) {
-        /* the rays through the ball and slab (convex) are a span of the row: found without
-         * branches, square roots or divisions, then walked with the tests below */
-        int first = bound.x1 + 1, last = bound.x0 - 1;
+        /* the rays through the ball and slab (convex) are a span of the row (splat_row_span),
+         * found without branches, square roots or divisions, then walked with the tests below */
+        int first, last;
         real3 dy = d00 + (real)y * ddy;
         real3 cy = cross(a, dy), ndy = cross(n, dy);
         real a0 = dot(dy, quadric_Ap(q, dy)), a1 = dot(dy, Addx), b0 = dot(ge, dy);
         if (y + SPLAT_PREFETCH_ROWS <= bound.y1)
             splat_prefetch_row(framebuffer, W, y + SPLAT_PREFETCH_ROWS, bound.x0, bound.x1);
-        for (int x = bound.x0; x <= bound.x1; x += 8) { /* eight pixels per step, as vectors */
-            int8 xi = x + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-            real8 xs = (real)x + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
-            real8 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
-            real8 cX = cy.x + xs * cx.x, cY = cy.y + xs * cx.y, cZ = cy.z + xs * cx.z; /* a x d */
-            real8 nX = ndy.x + xs * ndx.x, nY = ndy.y + xs * ndx.y, nZ = ndy.z + xs * ndx.z; /* n x d */
-            real8 dd = dX * dX + dY * dY + dZ * dZ, nd = n.x * dX + n.y * dY + n.z * dZ;
-            real8 E = R * R * dd - (cX * cX + cY * cY + cZ * cZ); /* |d|^2 m^2, the grown ball */
-            real8 Y = fabs(-(cX * nX + cY * nY + cZ * nZ) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
-            int8 hit = convert_int8(E >= 0) & (xi <= bound.x1);
-            if (has_slab) hit &= convert_int8((Y <= 0) | (Y * Y <= E * nd * nd));
-            int8 lo = select((int8)(INT_MAX), xi, hit), hi = select((int8)(INT_MIN), xi, hit);
-            int4 l4 = min(lo.lo, lo.hi), h4 = max(hi.lo, hi.hi);
-            first = min(first, min(min(l4.x, l4.y), min(l4.z, l4.w)));
-            last = max(last, max(max(h4.x, h4.y), max(h4.z, h4.w)));
-        }
+        splat_row_span(bound, dy, cy, ndy, ddx, cx, ndx, n, R, mid, width, has_slab, &first, &last);
         cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
         /* the span eight pixels per step: the rays, the ball test, the quadric's roots
          * (quadratic_roots8, eqs. 5, 6 from e), the depth tests, the clip and the facing
