@@ -465,6 +465,21 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     real qe = quadric_value(q, e), a2 = dot(ddx, Addx), b1 = dot(ge, ddx);
     real k = dot(a, a) - r * r;
     bool plane = q.xx == 0 && q.xy == 0 && q.xz == 0 && q.yy == 0 && q.yz == 0 && q.zz == 0;
+    /* a plane's splat (its slab is the disc of radius R on the plane): the rays through the disc
+     * are, per row, a quadratic's span.  With a' = a + mid n (the disc's center from the eye),
+     * the ray meets the plane at t = (n.a') / (n.d), |t d - a'|^2 <= R^2 reads
+     * |(n.a') d - (n.d) a'|^2 <= R^2 (n.d)^2, and u = (n.a') d - (n.d) a' = u0 + x u1 is linear
+     * in x: pa x^2 + 2 pb x + pc <= 0.  Where pa <= 0 (the disc seen edge-on, or reaching the
+     * eye's plane) the rows are scanned as for other splats. */
+    real3 ap = a + mid * n;
+    real alpha = dot(n, ap), nu1 = dot(n, ddx);
+    real3 u1 = alpha * ddx - nu1 * ap;
+    real pa = dot(u1, u1) - R * R * nu1 * nu1;
+#ifdef CLCSG_DOUBLE
+    bool disc_span = plane && has_slab && pa > 0;
+#else
+    bool disc_span = false; /* float's rounding of the roots can reach a pixel: the scan */
+#endif
     for (int y = bound.y0; y < min(bound.y0 + SPLAT_PREFETCH_ROWS, bound.y1 + 1); ++y)
         splat_prefetch_row(framebuffer, W, y, bound.x0, bound.x1);
     for (int y = bound.y0; y <= bound.y1; ++y) {
@@ -476,7 +491,20 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
         real a0 = dot(dy, quadric_Ap(q, dy)), a1 = dot(dy, Addx), b0 = dot(ge, dy);
         if (y + SPLAT_PREFETCH_ROWS <= bound.y1)
             splat_prefetch_row(framebuffer, W, y + SPLAT_PREFETCH_ROWS, bound.x0, bound.x1);
-        splat_row_span(bound, dy, cy, ndy, ddx, cx, ndx, n, R, mid, width, has_slab, &first, &last);
+        if (disc_span) {
+            real nu0 = dot(n, dy);
+            real3 u0 = alpha * dy - nu0 * ap;
+            real pb = dot(u0, u1) - R * R * nu0 * nu1, pc = dot(u0, u0) - R * R * nu0 * nu0;
+            real disc = pb * pb - pa * pc;
+            first = bound.x1 + 1; last = bound.x0 - 1;
+            if (disc >= 0) { /* the pixels within the roots, and 1e-3 of one: the rounding */
+                real sq = sqrt(disc), lim = 2 + (real)W;
+                first = max(bound.x0, (int)ceil(clamp((-pb - sq) / pa, -lim, lim) - 1e-3));
+                last = min(bound.x1, (int)floor(clamp((-pb + sq) / pa, -lim, lim) + 1e-3));
+            }
+        } else {
+            splat_row_span(bound, dy, cy, ndy, ddx, cx, ndx, n, R, mid, width, has_slab, &first, &last);
+        }
         cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
         /* the span eight pixels per step: the rays, the ball test, the quadric's roots
          * (quadratic_roots8, eqs. 5, 6 from e), the depth tests, the clip and the facing
