@@ -304,7 +304,7 @@ inline int8 splat_roots8(quadric q, bool plane, real3 e, real3 a, real r, real k
         nr = quadratic_roots8(qa, qh, (real8)(qe), &t[0], &t[1]);
     }
     R->bX = (real8)(e.x); R->bY = (real8)(e.y); R->bZ = (real8)(e.z);
-    for (int j = 0; j < 2; ++j) {
+    for (int j = 0; j < (plane ? 1 : 2); ++j) {
         R->u[j] = t[j];
         R->rad[j] = t[j] * (t[j] * dd - 2 * ad) + k;
         R->slope[j] = qa * t[j] + qh;
@@ -353,18 +353,20 @@ inline real8 splat_clip8(int qid, __global const tape_op *clip, int nc, __global
  * tried where the nearer is no candidate or does not win for the clip or the facing. */
 __attribute__((always_inline)) inline real8 splat_fragment8(int sign, int qid, __global const tape_op *clip, int nc,
                                                             __global const quadric_rec *quadrics, const splat_roots *R,
-                                                            real8 dX, real8 dY, real8 dZ, int8 nr, ulong8 word,
-                                                            int idx, int8 live, ulong *cnt)
+                                                            real8 dX, real8 dY, real8 dZ, int8 nr, bool one_root,
+                                                            ulong8 word, int idx, int8 live, ulong *cnt)
 {
     int8 ok0 = live & convert_int8(R->rad[0] <= 0) & convert_int8(R->depth[0] > 0);
-    int8 ok1 = live & (nr > 1) & convert_int8(R->rad[1] <= 0) & convert_int8(R->depth[1] > 0);
     int8 loses0 = convert_int8(splat_keys8(R->depth[0], idx) >= word);
-    int8 wins0 = ok0 & ~loses0, wins1 = ok1 & convert_int8(splat_keys8(R->depth[1], idx) < word);
+    int8 wins0 = ok0 & ~loses0;
     real8 side0 = (real8)(sign), side1 = side0;
     if (nc > 0 && any(wins0)) side0 = splat_clip8(qid, clip, nc, quadrics, R, dX, dY, dZ, R->u[0], &wins0, cnt);
 #if BACKFACE_CULLING
     wins0 &= convert_int8(side0 * R->slope[0] <= 0);
 #endif
+    if (one_root) return select((real8)(0), R->depth[0], convert_realmask8(wins0)); /* a plane */
+    int8 ok1 = live & (nr > 1) & convert_int8(R->rad[1] <= 0) & convert_int8(R->depth[1] > 0);
+    int8 wins1 = ok1 & convert_int8(splat_keys8(R->depth[1], idx) < word);
     wins1 &= ~ok0 | (~loses0 & ~wins0);
     if (nc > 0 && any(wins1)) side1 = splat_clip8(qid, clip, nc, quadrics, R, dX, dY, dZ, R->u[1], &wins1, cnt);
 #if BACKFACE_CULLING
@@ -516,10 +518,10 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
              * M = |d|^2 (r^2 - |o - s|^2) = (a.d)^2 - |d|^2 k >= 0 (o: its point nearest s) */
             real8 dd = dX * dX + dY * dY + dZ * dZ;
             real8 ad = a.x * dX + a.y * dY + a.z * dZ;
-            real8 len = sqrt(dd);
             real8 M = ad * ad - dd * k;
             int8 meet = convert_int8(M >= 0) & (x + (int8)(0, 1, 2, 3, 4, 5, 6, 7) <= last);
             if (!any(meet)) continue; /* the rays miss the ball */
+            real8 len = sqrt(dd);
             __global ulong *row = &framebuffer[y * W + x];
             /* the pixels' words (a slot only decreases: a stale word costs an extra solve) */
             ulong8 word = (ulong8)(EMPTY_KEY);
@@ -542,7 +544,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
             int8 nr = splat_roots8(q, plane, e, a, r, k, qe, xs, dX, dY, dZ, dd, ad, len, a0, a1, a2, b0, b1, &R);
             live &= nr > 0;
             if (!any(live)) continue;
-            real8 depth = splat_fragment8(sign, qid, cp, nc, quadrics, &R, dX, dY, dZ, nr, word, idx, live, cnt);
+            real8 depth = splat_fragment8(sign, qid, cp, nc, quadrics, &R, dX, dY, dZ, nr, plane, word, idx, live, cnt);
             int8 pass = live & convert_int8(depth > 0);
 #if CLCSG_STATS
             cnt[PC_FRAGMENTS_PASSED] += popcount((uint)splat_lane_bits(pass));
