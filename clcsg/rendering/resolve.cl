@@ -121,8 +121,36 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         vstore8((uint8)(as_uint(shade_background(view))), 0, (__global uint *)(out.rgba + pix));
         return;
     }
-    RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
-    RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
+    /* eight hits of samples on one quadric with one fixed primitive (most of a surface's
+     * inside): the coefficients and the albedo are read once; else lane by lane */
+    bool uniform = lanes == RESOLVE_LANES && all(K != (ulong8)(EMPTY_KEY));
+    int q0 = -1, p0 = -1;
+    if (uniform) {
+        uint8 sidx = convert_uint8(K & (ulong8)(0xffffffffUL));
+        q0 = samples[sidx.s0].quadric;
+        p0 = samples[sidx.s0].splat_primitive;
+#define RESOLVE_SAME(c) uniform &= samples[sidx.c].quadric == q0 && samples[sidx.c].splat_primitive == p0;
+        RESOLVE_SAME(s1) RESOLVE_SAME(s2) RESOLVE_SAME(s3) RESOLVE_SAME(s4) RESOLVE_SAME(s5) RESOLVE_SAME(s6)
+        RESOLVE_SAME(s7)
+#undef RESOLVE_SAME
+        uniform &= p0 >= 0;
+    }
+    if (uniform) {
+        Z = convert_float8(as_float8(convert_uint8(K >> 32)));
+        DEPTH = Z;
+        QID = (int8)(q0);
+        PRIM = (int8)(p0);
+        __global const real *q = quadrics[q0].coef;
+        XX = (float8)((float)q[0]); XY = (float8)((float)q[1]); XZ = (float8)((float)q[2]); BX = (float8)((float)q[3]);
+        YY = (float8)((float)q[4]); YZ = (float8)((float)q[5]); BY = (float8)((float)q[6]); ZZ = (float8)((float)q[7]);
+        BZ = (float8)((float)q[8]);
+        float4 alb = albedo[p0];
+        AX = (float8)(alb.x); AY = (float8)(alb.y); AZ = (float8)(alb.z); AW = (float8)(alb.w);
+        hits = 0xff;
+    } else {
+        RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
+        RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
+    }
     uchar4 bg = shade_background(view);
     uchar8 rx = bg.x, ry = bg.y, rz = bg.z, ra = bg.w;
     if (hits) {
