@@ -403,6 +403,29 @@ inline void splat_row_span(rect bound, real3 dy, real3 cy, real3 ndy, real3 ddx,
     *last_out = last;
 }
 
+/* The span [*first, *last] of a row's pixels in the bound for a plane's splat, whose slab is
+ * the disc of radius R on the plane (dy: the row's ray at column 0): the rays through the disc
+ * are, per row, a quadratic's span.  With a' = a + mid n (the disc's center from the eye),
+ * the ray meets the plane at t = (n.a') / (n.d), |t d - a'|^2 <= R^2 reads
+ * |(n.a') d - (n.d) a'|^2 <= R^2 (n.d)^2, and u = (n.a') d - (n.d) a' = u0 + x u1 is linear
+ * in x: pa x^2 + 2 pb x + pc <= 0.  Where pa <= 0 (the disc seen edge-on, or reaching the
+ * eye's plane) the rows are scanned as for other splats. */
+inline void splat_disc_span(rect bound, real3 dy, real3 n, real3 ap, real alpha, real3 u1, real nu1, real pa, real R,
+                            int W, int *first, int *last)
+{
+    real nu0 = dot(n, dy);
+    real3 u0 = alpha * dy - nu0 * ap;
+    real pb = dot(u0, u1) - R * R * nu0 * nu1, pc = dot(u0, u0) - R * R * nu0 * nu0;
+    real disc = pb * pb - pa * pc;
+    *first = bound.x1 + 1;
+    *last = bound.x0 - 1;
+    if (disc >= 0) { /* the pixels within the roots, and 1e-3 of one: the rounding */
+        real sq = sqrt(disc), lim = 2 + (real)W;
+        *first = max(bound.x0, (int)ceil(clamp((-pb - sq) / pa, -lim, lim) - 1e-3));
+        *last = min(bound.x1, (int)floor(clamp((-pb + sq) / pa, -lim, lim) + 1e-3));
+    }
+}
+
 /* Step 3: the 64-bit depth test of a fragment whose key was below the slot's word as read. */
 inline void splat_depth_test(__global ulong *slot, ulong key, ulong *cnt)
 {
@@ -467,12 +490,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     real qe = quadric_value(q, e), a2 = dot(ddx, Addx), b1 = dot(ge, ddx);
     real k = dot(a, a) - r * r;
     bool plane = q.xx == 0 && q.xy == 0 && q.xz == 0 && q.yy == 0 && q.yz == 0 && q.zz == 0;
-    /* a plane's splat (its slab is the disc of radius R on the plane): the rays through the disc
-     * are, per row, a quadratic's span.  With a' = a + mid n (the disc's center from the eye),
-     * the ray meets the plane at t = (n.a') / (n.d), |t d - a'|^2 <= R^2 reads
-     * |(n.a') d - (n.d) a'|^2 <= R^2 (n.d)^2, and u = (n.a') d - (n.d) a' = u0 + x u1 is linear
-     * in x: pa x^2 + 2 pb x + pc <= 0.  Where pa <= 0 (the disc seen edge-on, or reaching the
-     * eye's plane) the rows are scanned as for other splats. */
+    /* a plane's splat: its row spans in closed form (splat_disc_span) */
     real3 ap = a + mid * n;
     real alpha = dot(n, ap), nu1 = dot(n, ddx);
     real3 u1 = alpha * ddx - nu1 * ap;
@@ -494,16 +512,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
         if (y + SPLAT_PREFETCH_ROWS <= bound.y1)
             splat_prefetch_row(framebuffer, W, y + SPLAT_PREFETCH_ROWS, bound.x0, bound.x1);
         if (disc_span) {
-            real nu0 = dot(n, dy);
-            real3 u0 = alpha * dy - nu0 * ap;
-            real pb = dot(u0, u1) - R * R * nu0 * nu1, pc = dot(u0, u0) - R * R * nu0 * nu0;
-            real disc = pb * pb - pa * pc;
-            first = bound.x1 + 1; last = bound.x0 - 1;
-            if (disc >= 0) { /* the pixels within the roots, and 1e-3 of one: the rounding */
-                real sq = sqrt(disc), lim = 2 + (real)W;
-                first = max(bound.x0, (int)ceil(clamp((-pb - sq) / pa, -lim, lim) - 1e-3));
-                last = min(bound.x1, (int)floor(clamp((-pb + sq) / pa, -lim, lim) + 1e-3));
-            }
+            splat_disc_span(bound, dy, n, ap, alpha, u1, nu1, pa, R, W, &first, &last);
         } else {
             splat_row_span(bound, dy, cy, ndy, ddx, cx, ndx, n, R, mid, width, has_slab, &first, &last);
         }
