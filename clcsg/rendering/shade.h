@@ -49,38 +49,18 @@ inline real3 view_ray(__global const view_rec *vw, int i, int j)
     return normalize(d);
 }
 
-/* x^y = 2^(y log2 x) for x >= 0, y >= 0 (x below FLT_MIN gives 0, or 1 for y = 0), on float
- * types T (int type I): about 1e-7 relative, plenty for 8-bit output and the same arithmetic
- * for one pixel and for eight, at a fraction of pow()'s (and exp2(), log2()'s) cost on CPUs.
- * log2 x = e + log2 m with x = m 2^e, m in [sqrt(1/2), sqrt(2)): with t = (m - 1) / (m + 1),
- * log2 m = (2 / ln 2) (t + t^3 / 3 + ... + t^9 / 9) (|t| <= 0.172: truncation under 1e-9);
- * 2^z = 2^n 2^f with n = rint(z), |f| <= 1/2: sum_k (f ln 2)^k / k! to k = 7 (under 1e-9). */
-#define SHADE_POW_BODY(T, I)                                                                         \
-    {                                                                                                \
-        I xi = as_##I(x);                                                                            \
-        I e = ((xi >> 23) & 0xff) - 127;                                                             \
-        T m = as_##T((xi & 0x007fffff) | 0x3f800000);                                                \
-        I big = m > 1.41421356f;                                                                     \
-        m = select(m, 0.5f * m, big);                                                                \
-        e = select(e, e + 1, big);                                                                   \
-        T t = (m - 1.0f) / (m + 1.0f), t2 = t * t;                                                   \
-        T lg = t * (2.88539008f + t2 * (0.961796694f + t2 * (0.577078016f + t2 * (0.412198583f      \
-                                                                                + t2 * 0.320598898f)))); \
-        T z = clamp(y * (convert_##T(e) + lg), -127.0f, 127.0f);                                    \
-        T n = rint(z), f = z - n;                                                                    \
-        T p = 1.0f + f * (0.693147181f + f * (0.240226507f + f * (0.0555041087f + f * (0.00961812911f  \
-                      + f * (0.00133335581f + f * (0.000154035304f + f * 1.52527338e-05f))))));      \
-        T r = p * as_##T((convert_##I(n) + 127) << 23);                                             \
-        r = select(r, (T)(0.0f), convert_##I(n) < -126);                                             \
-        return select(r, (T)(y > 0.0f ? 0.0f : 1.0f), x < FLT_MIN);                                 \
-    }
-inline float shade_pow(float x, float y) SHADE_POW_BODY(float, int)
-inline float3 shade_pow3(float3 x, float y) SHADE_POW_BODY(float3, int3)
-inline float8 shade_pow8(float8 x, float y) SHADE_POW_BODY(float8, int8)
+/* x^y for x >= 0 as exp2(y log2 x), for the colours of the primitives (once per view) and a
+ * highlight exponent that is not a whole number (shade_powi): x = 0 gives 0 for y > 0. */
+inline float shade_pow(float x, float y) { return exp2(y * log2(x)); }
+inline float3 shade_pow3(float3 x, float y) { return exp2(y * log2(x)); }
+inline float8 shade_pow8(float8 x, float y) { return exp2(y * log2(x)); }
 
 /* x^y for x in [0, 1], y > 0, within 2e-5 relative: enough for the 8-bit encoding (5e-3 of a
- * level), without shade_pow's division.  log2 m (m in [1, 2)) and 2^f (f in [0, 1)) are degree
- * 5 and 4 polynomials fitted on Chebyshev nodes (errors 1.5e-5 absolute, 3.6e-6 relative). */
+ * level), at a fraction of exp2() and log2()'s cost on CPUs.  With x = (1 + m) 2^e, log2 x =
+ * e + log2(1 + m) and 2^z = 2^n 2^f (n = floor(z)): log2(1 + m) (m in [0, 1)) and 2^f (f in
+ * [0, 1)) are degree 5 and 4 polynomials fitted on Chebyshev nodes (errors 1.5e-5 absolute,
+ * 3.6e-6 relative), on float types T (int type I): the same arithmetic for one pixel and for
+ * eight. */
 #define SHADE_POW_ENCODE_BODY(T, I)                                                                  \
     {                                                                                                \
         I xi = as_##I(x);                                                                            \
