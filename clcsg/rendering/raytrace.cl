@@ -448,6 +448,15 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
                 vstore8(select(r2, (real8)INFINITY, missed), 0, lr.r2[m]);
                 vstore8(convert_uchar8(select(k, (int8)(lo.w < 0 ? 4 | 8 : 8), gone)), 0, lr.kind[m]);
             }
+        if (shared) { /* lanes without a root of a listed quadric in their stretch of the slab have no hit in it */
+            realmask8 has = 0;
+            for (int m = 0; m < sl.w; ++m) {
+                real8 r1 = vload8(0, lr.r1[m]), r2 = vload8(0, lr.r2[m]);
+                has |= (r1 >= ta8 & r1 <= tb8) | (r2 >= ta8 & r2 <= tb8);
+            }
+            in &= lane_bits(has);
+            if (!in) continue;
+        }
         real ta[8], tb[8];
         vstore8(ta8, 0, ta);
         vstore8(tb8, 0, tb);

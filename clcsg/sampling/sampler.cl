@@ -147,19 +147,21 @@ inline bool cell_geometry(const task_rec *t, __global const frame_rec *frames, c
 
 /* d_q at the four corners (x0,y0), (x1,y0), (x0,y1), (x1,y1); NaN where the heightfield is
  * undefined.  Values inherited from the parent were evaluated with the parent's tape over a
- * larger cell: still conservative. */
+ * larger cell: still conservative.  An inherited value was taken at the same point of the
+ * same heightfield, so the height is defined there and is not computed again (try_single
+ * computes the one point it emits). */
 inline void corner_distances(const cell_geom *g, cell_rec c, __global const tape_op *tape, int n,
-                             __global const quadric_rec *qs, int q, real d[4], real3 p[4], cell_work *w)
+                             __global const quadric_rec *qs, int q, real d[4], cell_work *w)
 {
     real cx[4] = {c.x0, c.x1, c.x0, c.x1};
     real cy[4] = {c.y0, c.y0, c.y1, c.y1};
     for (int m = 0; m < 4; ++m) {
         real h;
-        d[m] = NAN;
-        if (plane_height(&g->pf, cx[m], cy[m], &h)) {
-            p[m] = plane_point(&g->pf, cx[m], cy[m], h);
-            d[m] = (c.level > 0 && !isnan(c.d[m])) ? c.d[m] : query(tape, n, qs, q, p[m], w);
-        }
+        if (c.level > 0 && !isnan(c.d[m]))
+            d[m] = c.d[m];
+        else
+            d[m] = plane_height(&g->pf, cx[m], cy[m], &h) ? query(tape, n, qs, q, plane_point(&g->pf, cx[m], cy[m], h), w)
+                                                          : NAN;
     }
 }
 
@@ -189,7 +191,7 @@ inline int corner_cover(const cell_geom *g, const real d[4])
 /* Single sample (paper 4.2 special case): a point on the CSG surface whose splat covers the
  * patch's whole 3-D box; a corner with d < 0 first, then the cell's center (which reaches a
  * box twice as large, at the cost of one query).  The splat radius shrinks to what is needed. */
-inline bool try_single(const cell_geom *g, cell_rec c, const real d[4], const real3 p[4],
+inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
                        __global const tape_op *tape, int n, __global const quadric_rec *qs, int q, real radius,
                        sample_src src, __global volatile uint *counters, __global raw_sample_rec *samples,
                        uint cap_samples, cell_work *w)
@@ -197,7 +199,7 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4], const re
     real cx[4] = {c.x0, c.x1, c.x0, c.x1};
     real cy[4] = {c.y0, c.y0, c.y1, c.y1};
     int best = -1;
-    real best_r = INFINITY;
+    real best_r = INFINITY, best_h = 0;
     for (int m = 0; m < 4; ++m) {
         if (!(d[m] < 0)) continue;
         real h = plane_height_clamped(&g->pf, cx[m], cy[m]);
@@ -208,10 +210,12 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4], const re
         if (r < best_r) {
             best_r = r;
             best = m;
+            best_h = h;
         }
     }
     if (best >= 0 && best_r <= radius) {
-        emit_sample(samples, atomic_inc(&counters[SC_SAMPLES]), cap_samples, p[best],
+        emit_sample(samples, atomic_inc(&counters[SC_SAMPLES]), cap_samples,
+                    plane_point(&g->pf, cx[best], cy[best], best_h),
                     fmax(best_r, radius * (real)1e-3), src);
         return true;
     }
@@ -350,11 +354,10 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
         return OUT_DECIDED_FILL;
     }
     real d[4];
-    real3 p[4];
-    corner_distances(&g, c, tape, n, qs, t.quadric, d, p, w);
+    corner_distances(&g, c, tape, n, qs, t.quadric, d, w);
     int cover = corner_cover(&g, d);
     if (cover > 0) return OUT_DISCARDED;
-    if (try_single(&g, c, d, p, tape, n, qs, t.quadric, radius, src, counters, samples, cap_samples, w))
+    if (try_single(&g, c, d, tape, n, qs, t.quadric, radius, src, counters, samples, cap_samples, w))
         return OUT_SINGLE;
     /* fill: the corner discs of negative distance cover the cell and the heightfield is
      * defined everywhere: a grid with spacing s <= sqrt 2 r / delta puts every point of the
