@@ -135,10 +135,8 @@ inline bool sub_rect_owned(const plane_frame *pf, real x0, real x1, real y0, rea
 /* device coordinates of local (x, y, t) */
 inline real3 plane_point(const plane_frame *pf, real x, real y, real t)
 {
-    real z[3];
-    z[pf->i] = x;
-    z[pf->j] = y;
-    z[pf->k] = t;
+    /* z[i] = x, z[j] = y, z[k] = t with (i, j) = (1, 2), (0, 2), (0, 1) for k = 0, 1, 2 */
+    real z[3] = {pf->k == 0 ? t : x, pf->k == 0 ? x : pf->k == 1 ? t : y, pf->k == 2 ? t : y};
     return pf->center + (real3)(pf->U[0] * z[0] + pf->U[1] * z[1] + pf->U[2] * z[2],
                                 pf->U[3] * z[0] + pf->U[4] * z[1] + pf->U[5] * z[2],
                                 pf->U[6] * z[0] + pf->U[7] * z[1] + pf->U[8] * z[2]);
