@@ -111,8 +111,10 @@ inline real quadric_distance(quadric q, real lam_min, real lam_max, real3 p)
     bool inside = f < 0;
     real lam = inside ? lam_max : -lam_min;
     real af = fabs(f);
+    /* lam = 0 (a plane; a cylinder or cone from outside): disc = g^2, sqrt(g^2) = g, so
+     * 2 |f| / (g + g) = |f| / g, the same number without the square root */
     real disc = g * g + 4 * lam * af;
-    real t = disc >= 0 ? 2 * af / (g + sqrt(disc)) : INFINITY;
+    real t = lam == 0 ? af / g : disc >= 0 ? 2 * af / (g + sqrt(disc)) : INFINITY;
     return inside ? -t : t;
 }
 
