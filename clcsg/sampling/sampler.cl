@@ -346,7 +346,9 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     prune_region patch = patch_region(&g.pf, c, g.t_lo, g.t_hi, 0);
     patch_on_surface(&g, c, &patch);
     uchar state;
-    tape_prune_rows(tape, n, qs, &patch, t.quadric, &state, &w->evals);
+    prune_memo leaves; /* the leaves' states over the patch, for no_surface_by_cases */
+    leaves.mode = 1;
+    tape_prune_rows_memo(tape, n, qs, &patch, t.quadric, &state, &w->evals, &leaves);
     int decided = prune_decision(state);
     if (decided > 0 || !(state & ST_SELF)) return OUT_DECIDED_DISCARD;
     if (decided < 0 && g.fill_fits) {
@@ -357,6 +359,9 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     corner_distances(&g, c, tape, n, qs, t.quadric, d, w);
     int cover = corner_cover(&g, d);
     if (cover > 0) return OUT_DISCARDED;
+    /* no corner on the surface: the live leaves may only be the faces where solids meet */
+    if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0) && no_surface_by_cases(tape, n, t.quadric, &leaves))
+        return OUT_DECIDED_DISCARD;
     if (try_single(&g, c, d, tape, n, qs, t.quadric, radius, src, counters, samples, cap_samples, w))
         return OUT_SINGLE;
     /* fill: the corner discs of negative distance cover the cell and the heightfield is

@@ -366,6 +366,59 @@ inline int prune_constant(uchar s) { return ST_TAPE(s) == ST_LIVE ? -1 : ST_TAPE
  * side) of a decided root state: they hold at every point of the region. */
 inline uint prune_member_bits(uchar s) { return (ST_MINUS(s) == ST_T ? 1u : 0u) | (ST_PLUS(s) == ST_T ? 2u : 0u); }
 
+/* Case analysis over the leaves pruning left live (the states `memo` recorded in mode 1 over
+ * a region): is there no surface of self_q anywhere in the region?  Three-valued pruning
+ * cannot see that OR(L, NOT L) is TRUE: where two solids of a union meet in a face on quadric
+ * q (a fillet strip glued into a corner, the removed corner of a plate), the tape over a cell
+ * across that face keeps q live, though every point has the same membership on both sides of
+ * self_q.  So with k <= CASE_QUADRICS live quadrics, the 2^k cases (each live quadric negative
+ * or positive; its leaf (q, s) holds iff s Q < 0) are evaluated with the constant leaves from
+ * the memo and self_q substituted (tape_member's bits): if no case gives two different sides,
+ * no open piece of the region is surface.  What is left are points where a live quadric is
+ * exactly 0 (both its leaves hold there): curves on self_q's patch (quadrics are unique, so
+ * q is not self_q), and a surface point on such a curve with no surface on either side of it
+ * bounds no area, so the surface (the closure of its 2-D pieces, which the coverage guarantee
+ * is about) has none there.  Cases that no point has make the test conservative, never wrong. */
+#define CASE_QUADRICS 4
+inline bool no_surface_by_cases(__global const tape_op *t, int n, int self_q, const prune_memo *memo)
+{
+    if (n > PRUNE_MEMO_ROWS) return false;
+    int live[CASE_QUADRICS];
+    int k = 0;
+    for (int r = 0; r < n; ++r) {
+        tape_op o = t[r];
+        if (o.op != OP_LEAF || o.a == self_q || ((memo->bits[r >> 4] >> (2 * (r & 15))) & 3) != ST_LIVE) continue;
+        bool seen = false;
+        for (int m = 0; m < k; ++m) seen = seen || live[m] == o.a;
+        if (seen) continue;
+        if (k == CASE_QUADRICS) return false;
+        live[k++] = o.a;
+    }
+    for (int c = 0; c < (1 << k); ++c) {
+        uchar reg[TAPE_REGS];
+        for (int r = 0; r < n; ++r) {
+            tape_op o = t[r];
+            if (o.op == OP_LEAF) {
+                if (o.a == self_q) {
+                    reg[o.out] = o.b > 0 ? 1 : 2;
+                    continue;
+                }
+                int s = (memo->bits[r >> 4] >> (2 * (r & 15))) & 3;
+                if (s == ST_LIVE) {
+                    int m = 0; /* bit m of c: live quadric m positive */
+                    while (live[m] != o.a) ++m;
+                    s = ((c >> m) & 1) == (o.b < 0) ? ST_T : ST_F;
+                }
+                reg[o.out] = s == ST_T ? 3 : 0;
+            } else
+                TAPE_BOOLEAN_ROW(reg, o, BITS_AND, BITS_OR, 3, 0);
+        }
+        uint bits = reg[t[n - 1].out];
+        if (bits == 1 || bits == 2) return false;
+    }
+    return true;
+}
+
 /* Rows that tape_prune_write writes for (t, g, self_q): the forward pass's rows plus a root
  * COPY if the last one does not define the root; 1 for a constant tape.  Reserving exactly
  * this many rows stores a pruned tape as what pruning keeps, never the parent's length.
