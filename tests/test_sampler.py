@@ -53,6 +53,17 @@ def _glued_corner():
     return clcsg.union(base - corner, upright, strip)
 
 
+def _counterbore_chamfer():
+    """A plate with a counterbored hole whose chamfer cone starts at the counterbore's radius: on
+    the plane of the cone's lower cap the cone and the counterbore cylinder meet it in one circle
+    (the OpenSCAD idiom of plate_12_holes.scad)."""
+    plate = clcsg.box((2, 2, 0.3), center=(0, 0, 0.15))
+    bore = clcsg.cylinder(0.5, 0.15, center=(0, 0, 0.15))
+    cbore = clcsg.cylinder(0.2, 0.3, center=(0, 0, 0.3))
+    chamfer = clcsg.cone(0.04, 0.3, 0.34, center=(0, 0, 0.28))
+    return plate - clcsg.union(bore, cbore, chamfer)
+
+
 SCENES = {
     # every quadric type alone, bounded by a box (some rotated off the axes)
     "sphere": (clcsg.sphere(1.0), 0.1),
@@ -92,6 +103,7 @@ SCENES = {
     "flush_tops": (clcsg.box(1) | clcsg.box(1).translate((0.5, 0.5, 0)), 0.06),
     "shared_surface": (clcsg.sphere(1) & (clcsg.box(1.2).translate((0.3, 0, 0)) | clcsg.box(1.2).translate((-0.3, 0, 0))), 0.06),
     "glued_corner": (_glued_corner(), 0.04),
+    "counterbore_chamfer": (_counterbore_chamfer(), 0.03),
 }
 
 MM_SCENES = ["drilled_block", "rounded_cube", "flush_tops", "hyperboloid_paraboloid", "sharp_tips"]
@@ -196,12 +208,15 @@ def test_coincident_geometry_terminates_with_bounded_work(cl_context):
 
 
 @pytest.mark.parametrize("normal_form", ["tree", "dnf"])
-def test_faces_where_solids_meet_are_decided_not_split_to_the_floor(normal_form, cl_context):
+@pytest.mark.parametrize("name", ["glued_corner", "counterbore_chamfer"])
+def test_faces_where_solids_meet_are_decided_not_split_to_the_floor(name, normal_form, cl_context):
     """A cell across a face where two solids of a union meet keeps that face's quadric live in
     its pruned tape, though no point of it is surface: the case analysis over the live quadrics
-    (tape.h, no_surface_by_cases) discards it.  Without it about 8x as many cells, a third of
-    them at the floor."""
-    shape, r = SCENES["glued_corner"]
+    (tape.h, no_surface_by_cases) discards it (glued_corner: without it about 8x as many cells,
+    a third of them at the floor).  On a plane where two live quadrics meet it in one circle,
+    the cases where their signs differ have no point, and plane_cases.h drops them
+    (counterbore_chamfer: without it 1,552 cells at the floor)."""
+    shape, r = SCENES[name]
     s = sample(shape, r, device=cl_context, normal_form=normal_form)
     assert s.stats["unresolved"] == 0
     assert sum(s.stats["cells_per_level"]) < 1.5 * len(s), (sum(s.stats["cells_per_level"]), len(s))

@@ -18,6 +18,7 @@
  */
 #include "tape.h"
 #include "fill.h"
+#include "plane_cases.h"
 
 #ifndef MAX_FILL
 #define MAX_FILL 65536
@@ -322,6 +323,22 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     cells_out[slot + 1] = b;
 }
 
+/* A cell with no corner on the surface: its live leaves may only be faces where solids meet,
+ * or quadrics that touch a plane task without crossing it (no_surface_by_cases, with the sign
+ * relations of plane_cases.h where the plain cases do not decide).  Tried where the cases take
+ * at most CASE_ROWS tape rows to evaluate. */
+#define CASE_ROWS 256
+inline bool no_surface_in_cases(const cell_geom *g, __global const tape_op *tape, int n,
+                                __global const quadric_rec *qs, int self_q, const prune_memo *leaves)
+{
+    int live[CASE_QUADRICS];
+    uchar rel[CASE_QUADRICS];
+    int k = live_quadrics(tape, n, self_q, leaves, live);
+    if (k < 0 || (n << k) > CASE_ROWS) return false;
+    if (no_surface_by_cases(tape, n, self_q, leaves, live, k, 0)) return true;
+    return plane_relations(&g->pf, qs, live, k, rel) && no_surface_by_cases(tape, n, self_q, leaves, live, k, rel);
+}
+
 /* One cell: geometry, the pruned tape's decision, the corner discs, single sample, fill,
  * floor, split (in that order; see the module docstring of sampler.py for the guarantee). */
 int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const frame_rec *frames,
@@ -359,8 +376,7 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     corner_distances(&g, c, tape, n, qs, t.quadric, d, w);
     int cover = corner_cover(&g, d);
     if (cover > 0) return OUT_DISCARDED;
-    /* no corner on the surface: the live leaves may only be the faces where solids meet */
-    if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0) && no_surface_by_cases(tape, n, t.quadric, &leaves))
+    if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0) && no_surface_in_cases(&g, tape, n, qs, t.quadric, &leaves))
         return OUT_DECIDED_DISCARD;
     if (try_single(&g, c, d, tape, n, qs, t.quadric, radius, src, counters, samples, cap_samples, w))
         return OUT_SINGLE;

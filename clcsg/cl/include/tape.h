@@ -371,19 +371,29 @@ inline uint prune_member_bits(uchar s) { return (ST_MINUS(s) == ST_T ? 1u : 0u) 
  * cannot see that OR(L, NOT L) is TRUE: where two solids of a union meet in a face on quadric
  * q (a fillet strip glued into a corner, the removed corner of a plate), the tape over a cell
  * across that face keeps q live, though every point has the same membership on both sides of
- * self_q.  So with k <= CASE_QUADRICS live quadrics, the 2^k cases (each live quadric negative
- * or positive; its leaf (q, s) holds iff s Q < 0) are evaluated with the constant leaves from
- * the memo and self_q substituted (tape_member's bits): if no case gives two different sides,
- * no open piece of the region is surface.  What is left are points where a live quadric is
- * exactly 0 (both its leaves hold there): curves on self_q's patch (quadrics are unique, so
- * q is not self_q), and a surface point on such a curve with no surface on either side of it
- * bounds no area, so the surface (the closure of its 2-D pieces, which the coverage guarantee
- * is about) has none there.  Cases that no point has make the test conservative, never wrong. */
+ * self_q.  So with k <= CASE_QUADRICS live quadrics (live_quadrics), the 2^k cases (each live
+ * quadric negative or positive; its leaf (q, s) holds iff s Q < 0) are evaluated with the
+ * constant leaves from the memo and self_q substituted (tape_member's bits): if no case gives
+ * two different sides, no open piece of the region is surface.  What is left are points where
+ * a live quadric is exactly 0 (both its leaves hold there): curves on self_q's patch (quadrics
+ * are unique, so q is not self_q), and a surface point on such a curve with no surface on
+ * either side of it bounds no area, so the surface (the closure of its 2-D pieces, which the
+ * coverage guarantee is about) has none there.  Cases that no point has make the test
+ * conservative, never wrong; `rel` (or null) drops some that the caller knows no point has:
+ * rel[m] = CASE_POSITIVE or CASE_NEGATIVE (live quadric m has that sign wherever it is not 0),
+ * CASE_SAME + 2 j or CASE_SAME + 2 j + 1 (its sign is live quadric j's, or the opposite; j < m). */
 #define CASE_QUADRICS 4
-inline bool no_surface_by_cases(__global const tape_op *t, int n, int self_q, const prune_memo *memo)
+#define CASE_FREE 0
+#define CASE_POSITIVE 1
+#define CASE_NEGATIVE 2
+#define CASE_SAME 4
+
+/* The distinct quadrics other than self_q of the leaves the memo has live, into live[];
+ * returns how many, or -1 if more than CASE_QUADRICS (or the memo does not cover the tape). */
+inline int live_quadrics(__global const tape_op *t, int n, int self_q, const prune_memo *memo,
+                         int live[CASE_QUADRICS])
 {
-    if (n > PRUNE_MEMO_ROWS) return false;
-    int live[CASE_QUADRICS];
+    if (n > PRUNE_MEMO_ROWS) return -1;
     int k = 0;
     for (int r = 0; r < n; ++r) {
         tape_op o = t[r];
@@ -391,10 +401,24 @@ inline bool no_surface_by_cases(__global const tape_op *t, int n, int self_q, co
         bool seen = false;
         for (int m = 0; m < k; ++m) seen = seen || live[m] == o.a;
         if (seen) continue;
-        if (k == CASE_QUADRICS) return false;
+        if (k == CASE_QUADRICS) return -1;
         live[k++] = o.a;
     }
+    return k;
+}
+
+inline bool no_surface_by_cases(__global const tape_op *t, int n, int self_q, const prune_memo *memo,
+                                const int live[CASE_QUADRICS], int k, const uchar *rel)
+{
     for (int c = 0; c < (1 << k); ++c) {
+        bool possible = true; /* bit m of c: live quadric m positive */
+        for (int m = 0; rel && m < k; ++m) {
+            int bit = (c >> m) & 1, r = rel[m];
+            if (r == CASE_POSITIVE) possible = possible && bit == 1;
+            else if (r == CASE_NEGATIVE) possible = possible && bit == 0;
+            else if (r >= CASE_SAME) possible = possible && (bit ^ ((c >> ((r - CASE_SAME) >> 1)) & 1)) == (r & 1);
+        }
+        if (!possible) continue;
         uchar reg[TAPE_REGS];
         for (int r = 0; r < n; ++r) {
             tape_op o = t[r];
@@ -405,7 +429,7 @@ inline bool no_surface_by_cases(__global const tape_op *t, int n, int self_q, co
                 }
                 int s = (memo->bits[r >> 4] >> (2 * (r & 15))) & 3;
                 if (s == ST_LIVE) {
-                    int m = 0; /* bit m of c: live quadric m positive */
+                    int m = 0;
                     while (live[m] != o.a) ++m;
                     s = ((c >> m) & 1) == (o.b < 0) ? ST_T : ST_F;
                 }
