@@ -212,7 +212,7 @@ def test_coincident_geometry_terminates_with_bounded_work(cl_context):
 def test_faces_where_solids_meet_are_decided_not_split_to_the_floor(name, normal_form, cl_context):
     """A cell across a face where two solids of a union meet keeps that face's quadric live in
     its pruned tape, though no point of it is surface: the case analysis over the live quadrics
-    (tape.h, no_surface_by_cases) discards it (glued_corner: without it about 8x as many cells,
+    (tape.h, surface_cases) discards it (glued_corner: without it about 8x as many cells,
     a third of them at the floor).  On a plane where two live quadrics meet it in one circle,
     the cases where their signs differ have no point, and plane_cases.h drops them
     (counterbore_chamfer: without it 1,552 cells at the floor)."""

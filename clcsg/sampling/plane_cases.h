@@ -1,5 +1,5 @@
 /* Sign relations of quadrics on a plane, for the sampler's case analysis (tape.h,
- * no_surface_by_cases; used by sampler.cl on tasks whose quadric is a plane).
+ * surface_cases; used by sampler.cl on tasks whose quadric is a plane).
  *
  * On a plane task the heightfield is linear, t = -(2 beta_i x + 2 beta_j y + gamma) / (2 beta_k),
  * so its points are p(x, y) = P0 + x Px + y Py, and a quadric Q(p) = p.A p + 2 w.p + w0 there is
@@ -13,7 +13,7 @@
  * - M a multiple of another live quadric's M: the two have one sign (or opposite signs)
  *   everywhere on the plane (a chamfer cone and a counterbore cylinder that meet the plane in
  *   one circle), so the cases where they differ are dropped.
- * Only points where a quadric is exactly 0 are left out (see no_surface_by_cases).
+ * Only points where a quadric is exactly 0 are left out (see tape.h, surface_cases).
  *
  * M is normalized by its largest entry and compared with CASE_TOLERANCE: the relations hold
  * up to the rounding of the quadrics' coefficients (an intended tangency, written as one).
@@ -75,37 +75,43 @@ inline bool plane_conic_semidefinite(const plane_conic *c, real s)
     return true;
 }
 
-/* rel[m] for the live quadrics of a plane task (pf: its frame); false: none is known. */
-inline bool plane_relations(const plane_frame *pf, __global const quadric_rec *qs, const int *live, int k,
-                            uchar *rel)
+/* The cases (tape.h, surface_cases: bit c, live quadric m positive in case c iff bit m of c)
+ * that some point of a plane task (pf: its frame) may have, given its k live quadrics. */
+inline uint plane_possible_cases(const plane_frame *pf, __global const quadric_rec *qs, const int *live, int k)
 {
 #ifndef CLCSG_DOUBLE
-    return false;
+    return ~0u;
 #else
-    if (!(pf->li == 0 && pf->lj == 0 && pf->lk == 0) || pf->bk == 0 || k == 0) return false;
+    if (!(pf->li == 0 && pf->lj == 0 && pf->lk == 0) || pf->bk == 0) return ~0u;
     real3 P0 = plane_point(pf, 0, 0, -pf->gamma / (2 * pf->bk));
     real3 Px = plane_axis(pf, pf->i) - (pf->bi / pf->bk) * plane_axis(pf, pf->k);
     real3 Py = plane_axis(pf, pf->j) - (pf->bj / pf->bk) * plane_axis(pf, pf->k);
     plane_conic c[CASE_QUADRICS];
-    bool any = false;
+    uint possible = ~0u;
     for (int m = 0; m < k; ++m) {
         c[m] = plane_conic_of(quadric_load(qs, live[m]), P0, Px, Py);
-        rel[m] = CASE_FREE;
-        if (plane_conic_semidefinite(&c[m], 1))
-            rel[m] = CASE_POSITIVE;
-        else if (plane_conic_semidefinite(&c[m], -1))
-            rel[m] = CASE_NEGATIVE;
-        for (int j = 0; j < m && rel[m] == CASE_FREE; ++j) {
+        uint pos = CASE_TABLE(m);
+        if (plane_conic_semidefinite(&c[m], 1)) {
+            possible &= pos;
+            continue;
+        }
+        if (plane_conic_semidefinite(&c[m], -1)) {
+            possible &= ~pos;
+            continue;
+        }
+        for (int j = 0; j < m; ++j) {
             bool same = true, opposite = true;
             for (int e = 0; e < 6; ++e) {
                 same = same && fabs(c[m].m[e] - c[j].m[e]) <= CASE_TOLERANCE;
                 opposite = opposite && fabs(c[m].m[e] + c[j].m[e]) <= CASE_TOLERANCE;
             }
-            if (same || opposite) rel[m] = CASE_SAME + 2 * j + (opposite ? 1 : 0);
+            if (same || opposite) {
+                possible &= same ? ~(pos ^ CASE_TABLE(j)) : pos ^ CASE_TABLE(j);
+                break;
+            }
         }
-        any = any || rel[m] != CASE_FREE;
     }
-    return any;
+    return possible;
 #endif
 }
 

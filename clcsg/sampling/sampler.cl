@@ -324,19 +324,14 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
 }
 
 /* A cell with no corner on the surface: its live leaves may only be faces where solids meet,
- * or quadrics that touch a plane task without crossing it (no_surface_by_cases, with the sign
- * relations of plane_cases.h where the plain cases do not decide).  Tried where the cases take
- * at most CASE_ROWS tape rows to evaluate. */
-#define CASE_ROWS 256
+ * or quadrics that touch a plane task without crossing it (tape.h surface_cases, and on a plane
+ * task plane_cases.h for the cases no point has). */
 inline bool no_surface_in_cases(const cell_geom *g, __global const tape_op *tape, int n,
                                 __global const quadric_rec *qs, int self_q, const prune_memo *leaves)
 {
-    int live[CASE_QUADRICS];
-    uchar rel[CASE_QUADRICS];
-    int k = live_quadrics(tape, n, self_q, leaves, live);
-    if (k < 0 || (n << k) > CASE_ROWS) return false;
-    if (no_surface_by_cases(tape, n, self_q, leaves, live, k, 0)) return true;
-    return plane_relations(&g->pf, qs, live, k, rel) && no_surface_by_cases(tape, n, self_q, leaves, live, k, rel);
+    int live[CASE_QUADRICS], k = 0;
+    uint cases = surface_cases(tape, n, self_q, leaves, live, &k);
+    return cases == 0 || (cases != ~0u && (cases & plane_possible_cases(&g->pf, qs, live, k)) == 0);
 }
 
 /* One cell: geometry, the pruned tape's decision, the corner discs, single sample, fill,
@@ -363,7 +358,7 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     prune_region patch = patch_region(&g.pf, c, g.t_lo, g.t_hi, 0);
     patch_on_surface(&g, c, &patch);
     uchar state;
-    prune_memo leaves; /* the leaves' states over the patch, for no_surface_by_cases */
+    prune_memo leaves; /* the leaves' states over the patch, for surface_cases */
     leaves.mode = 1;
     tape_prune_rows_memo(tape, n, qs, &patch, t.quadric, &state, &w->evals, &leaves);
     int decided = prune_decision(state);

@@ -367,80 +367,57 @@ inline int prune_constant(uchar s) { return ST_TAPE(s) == ST_LIVE ? -1 : ST_TAPE
 inline uint prune_member_bits(uchar s) { return (ST_MINUS(s) == ST_T ? 1u : 0u) | (ST_PLUS(s) == ST_T ? 2u : 0u); }
 
 /* Case analysis over the leaves pruning left live (the states `memo` recorded in mode 1 over
- * a region): is there no surface of self_q anywhere in the region?  Three-valued pruning
- * cannot see that OR(L, NOT L) is TRUE: where two solids of a union meet in a face on quadric
- * q (a fillet strip glued into a corner, the removed corner of a plate), the tape over a cell
- * across that face keeps q live, though every point has the same membership on both sides of
- * self_q.  So with k <= CASE_QUADRICS live quadrics (live_quadrics), the 2^k cases (each live
- * quadric negative or positive; its leaf (q, s) holds iff s Q < 0) are evaluated with the
- * constant leaves from the memo and self_q substituted (tape_member's bits): if no case gives
- * two different sides, no open piece of the region is surface.  What is left are points where
- * a live quadric is exactly 0 (both its leaves hold there): curves on self_q's patch (quadrics
- * are unique, so q is not self_q), and a surface point on such a curve with no surface on
- * either side of it bounds no area, so the surface (the closure of its 2-D pieces, which the
- * coverage guarantee is about) has none there.  Cases that no point has make the test
- * conservative, never wrong; `rel` (or null) drops some that the caller knows no point has:
- * rel[m] = CASE_POSITIVE or CASE_NEGATIVE (live quadric m has that sign wherever it is not 0),
- * CASE_SAME + 2 j or CASE_SAME + 2 j + 1 (its sign is live quadric j's, or the opposite; j < m). */
-#define CASE_QUADRICS 4
-#define CASE_FREE 0
-#define CASE_POSITIVE 1
-#define CASE_NEGATIVE 2
-#define CASE_SAME 4
-
-/* The distinct quadrics other than self_q of the leaves the memo has live, into live[];
- * returns how many, or -1 if more than CASE_QUADRICS (or the memo does not cover the tape). */
-inline int live_quadrics(__global const tape_op *t, int n, int self_q, const prune_memo *memo,
-                         int live[CASE_QUADRICS])
+ * a region): where is there no surface of self_q in the region?  Three-valued pruning cannot
+ * see that OR(L, NOT L) is TRUE: where two solids of a union meet in a face on quadric q (a
+ * fillet strip glued into a corner, the removed corner of a plate), the tape over a cell across
+ * that face keeps q live, though every point has the same membership on both sides of self_q.
+ * So with k <= CASE_QUADRICS distinct live quadrics (listed in live[] as met), each point of the
+ * region is in one of 2^k cases c (bit m of c: live quadric m positive there; its leaf (q, s)
+ * holds iff s Q < 0), and one pass evaluates all cases at once: a register is a truth table,
+ * one bit per case, per side of self_q (CASE_TABLE(m): the cases where live quadric m is
+ * positive), the constant leaves come from the memo, self_q is substituted.  Returns the cases
+ * whose two sides differ (0: no open piece of the region is surface), or ~0u if there are more
+ * live quadrics or the memo does not cover the tape.
+ * Left out are points where a live quadric is exactly 0 (both its leaves hold there): curves on
+ * self_q's patch (quadrics are unique, so q is not self_q), and a surface point on such a curve
+ * with no surface on either side of it bounds no area, so the surface (the closure of its 2-D
+ * pieces, which the coverage guarantee is about) has none there.  Cases that no point has make
+ * the answer conservative, never wrong; the caller may drop some it knows no point has. */
+#define CASE_QUADRICS 5
+/* the cases with bit m set: 0xAAAAAAAA, 0xCCCCCCCC, 0xF0F0F0F0, 0xFF00FF00, 0xFFFF0000 */
+#define CASE_TABLE(m) (~(~0u / ((1u << (1u << (m))) + 1u)))
+inline uint surface_cases(__global const tape_op *t, int n, int self_q, const prune_memo *memo, int live[CASE_QUADRICS],
+                          int *k_out)
 {
-    if (n > PRUNE_MEMO_ROWS) return -1;
+    if (n > PRUNE_MEMO_ROWS) return ~0u;
+    uint2 reg[TAPE_REGS]; /* (negative side, positive side) of self_q, a bit per case */
     int k = 0;
     for (int r = 0; r < n; ++r) {
         tape_op o = t[r];
-        if (o.op != OP_LEAF || o.a == self_q || ((memo->bits[r >> 4] >> (2 * (r & 15))) & 3) != ST_LIVE) continue;
-        bool seen = false;
-        for (int m = 0; m < k; ++m) seen = seen || live[m] == o.a;
-        if (seen) continue;
-        if (k == CASE_QUADRICS) return -1;
-        live[k++] = o.a;
+        if (o.op == OP_LEAF) {
+            if (o.a == self_q) {
+                reg[o.out] = o.b > 0 ? (uint2)(~0u, 0u) : (uint2)(0u, ~0u);
+                continue;
+            }
+            int s = (memo->bits[r >> 4] >> (2 * (r & 15))) & 3;
+            if (s != ST_LIVE) {
+                reg[o.out] = (uint2)(s == ST_T ? ~0u : 0u);
+                continue;
+            }
+            int m = 0;
+            while (m < k && live[m] != o.a) ++m;
+            if (m == k) {
+                if (k == CASE_QUADRICS) return ~0u;
+                live[k++] = o.a;
+            }
+            uint pos = CASE_TABLE(m);
+            reg[o.out] = (uint2)(o.b < 0 ? pos : ~pos);
+        } else
+            TAPE_BOOLEAN_ROW(reg, o, BITS_AND, BITS_OR, (uint2)(~0u), (uint2)(0u));
     }
-    return k;
-}
-
-inline bool no_surface_by_cases(__global const tape_op *t, int n, int self_q, const prune_memo *memo,
-                                const int live[CASE_QUADRICS], int k, const uchar *rel)
-{
-    for (int c = 0; c < (1 << k); ++c) {
-        bool possible = true; /* bit m of c: live quadric m positive */
-        for (int m = 0; rel && m < k; ++m) {
-            int bit = (c >> m) & 1, r = rel[m];
-            if (r == CASE_POSITIVE) possible = possible && bit == 1;
-            else if (r == CASE_NEGATIVE) possible = possible && bit == 0;
-            else if (r >= CASE_SAME) possible = possible && (bit ^ ((c >> ((r - CASE_SAME) >> 1)) & 1)) == (r & 1);
-        }
-        if (!possible) continue;
-        uchar reg[TAPE_REGS];
-        for (int r = 0; r < n; ++r) {
-            tape_op o = t[r];
-            if (o.op == OP_LEAF) {
-                if (o.a == self_q) {
-                    reg[o.out] = o.b > 0 ? 1 : 2;
-                    continue;
-                }
-                int s = (memo->bits[r >> 4] >> (2 * (r & 15))) & 3;
-                if (s == ST_LIVE) {
-                    int m = 0;
-                    while (live[m] != o.a) ++m;
-                    s = ((c >> m) & 1) == (o.b < 0) ? ST_T : ST_F;
-                }
-                reg[o.out] = s == ST_T ? 3 : 0;
-            } else
-                TAPE_BOOLEAN_ROW(reg, o, BITS_AND, BITS_OR, 3, 0);
-        }
-        uint bits = reg[t[n - 1].out];
-        if (bits == 1 || bits == 2) return false;
-    }
-    return true;
+    *k_out = k;
+    uint2 root = reg[t[n - 1].out];
+    return root.x ^ root.y;
 }
 
 /* Rows that tape_prune_write writes for (t, g, self_q): the forward pass's rows plus a root
