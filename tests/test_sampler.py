@@ -53,6 +53,19 @@ def _glued_corner():
     return clcsg.union(base - corner, upright, strip)
 
 
+def _fillet_corner():
+    """The glued corner's strip rounded by a cylinder tangent to the plate's top and to the
+    upright's inner face (the zoo bracket's fillet): on the strip's own faces the cylinder meets
+    the plane in two lines, one of them the other face's line."""
+    t, fr = 0.2, 0.3
+    base = clcsg.box((2, 1.6, t), center=(0, 0, t / 2))
+    upright = clcsg.box((2, t, 1.2), center=(0, 0.8 - t / 2, 0.6))
+    y_in = 0.8 - t
+    strip = clcsg.box((2, fr, fr), center=(0, y_in - fr / 2, t + fr / 2))
+    rounding = clcsg.cylinder(2.2, fr, center=(0, y_in - fr, t + fr), axis=(1, 0, 0))
+    return clcsg.union(base, upright, strip - rounding)
+
+
 def _counterbore_chamfer():
     """A plate with a counterbored hole whose chamfer cone starts at the counterbore's radius: on
     the plane of the cone's lower cap the cone and the counterbore cylinder meet it in one circle
@@ -104,6 +117,7 @@ SCENES = {
     "shared_surface": (clcsg.sphere(1) & (clcsg.box(1.2).translate((0.3, 0, 0)) | clcsg.box(1.2).translate((-0.3, 0, 0))), 0.06),
     "glued_corner": (_glued_corner(), 0.04),
     "counterbore_chamfer": (_counterbore_chamfer(), 0.03),
+    "fillet_corner": (_fillet_corner(), 0.04),
 }
 
 MM_SCENES = ["drilled_block", "rounded_cube", "flush_tops", "hyperboloid_paraboloid", "sharp_tips"]
@@ -208,14 +222,15 @@ def test_coincident_geometry_terminates_with_bounded_work(cl_context):
 
 
 @pytest.mark.parametrize("normal_form", ["tree", "dnf"])
-@pytest.mark.parametrize("name", ["glued_corner", "counterbore_chamfer"])
+@pytest.mark.parametrize("name", ["glued_corner", "counterbore_chamfer", "fillet_corner"])
 def test_faces_where_solids_meet_are_decided_not_split_to_the_floor(name, normal_form, cl_context):
     """A cell across a face where two solids of a union meet keeps that face's quadric live in
     its pruned tape, though no point of it is surface: the case analysis over the live quadrics
     (tape.h, surface_cases) discards it (glued_corner: without it about 8x as many cells,
     a third of them at the floor).  On a plane where two live quadrics meet it in one circle,
     the cases where their signs differ have no point, and plane_cases.h drops them
-    (counterbore_chamfer: without it 1,552 cells at the floor)."""
+    (counterbore_chamfer: without it 1,552 cells at the floor); likewise where a conic is a live
+    plane's line times a factor of one sign over the cell (fillet_corner: without it 2,050)."""
     shape, r = SCENES[name]
     s = sample(shape, r, device=cl_context, normal_form=normal_form)
     assert s.stats["unresolved"] == 0

@@ -13,6 +13,10 @@
  * - M a multiple of another live quadric's M: the two have one sign (or opposite signs)
  *   everywhere on the plane (a chamfer cone and a counterbore cylinder that meet the plane in
  *   one circle), so the cases where they differ are dropped.
+ * - M the product of another live quadric's line (a plane's conic is linear) and a linear
+ *   factor of one sign over the cell: a cylinder that a face plane cuts in two lines, one of
+ *   them where the box face it rounds ends (the fillet strip's faces): over the cell the two
+ *   have one sign, or opposite signs (plane_line_factor).
  * Only points where a quadric is exactly 0 are left out (see tape.h, surface_cases).
  *
  * M is normalized by its largest entry and compared with CASE_TOLERANCE: the relations hold
@@ -75,9 +79,47 @@ inline bool plane_conic_semidefinite(const plane_conic *c, real s)
     return true;
 }
 
+/* Is c the product of the line l (a linear conic: l(x, y) = 2 l.x1 x + 2 l.y1 y + l.11) and a
+ * linear factor f with one sign over the rectangle [x0, x1] x [y0, y1]?  Returns that sign
+ * (+1, -1), or 0.  c vanishes on l's line (its restriction there, a s^2 + 2 b s + c0 along
+ * p + s d, is 0 up to CASE_TOLERANCE), and f's coefficients follow from c's quadratic terms
+ * (f's x and y coefficients) and its linear ones (f's constant). */
+inline int plane_line_factor(const plane_conic *c, const plane_conic *l, real x0, real x1, real y0, real y1)
+{
+    real nx = 2 * l->m[3], ny = 2 * l->m[4], n0 = l->m[5]; /* l = nx x + ny y + n0 */
+    real nn = nx * nx + ny * ny;
+    if (!(nn > 0)) return 0;
+    real px = -n0 * nx / nn, py = -n0 * ny / nn; /* the line's point nearest the origin */
+    real dn = sqrt(nn), dx = -ny / dn, dy = nx / dn;
+    real axx = c->m[0], axy = c->m[1], ayy = c->m[2], gx = c->m[3], gy = c->m[4];
+    real a = dx * (axx * dx + axy * dy) + dy * (axy * dx + ayy * dy);
+    real b = dx * (axx * px + axy * py + gx) + dy * (axy * px + ayy * py + gy);
+    real c0 = px * (axx * px + axy * py + 2 * gx) + py * (axy * px + ayy * py + 2 * gy) + c->m[5];
+    real reach = 1 + fabs(px) + fabs(py);
+    if (!(fabs(a) <= CASE_TOLERANCE && fabs(b) <= CASE_TOLERANCE * reach && fabs(c0) <= CASE_TOLERANCE * reach * reach))
+        return 0;
+    /* c's quadratic part (fx x + fy y)(nx x + ny y), its linear part fx n0 x + fy n0 y + f0 (nx x + ny y) */
+    real fx, fy, f0;
+    if (fabs(nx) >= fabs(ny)) {
+        fx = axx / nx;
+        fy = (2 * axy - fx * ny) / nx;
+        f0 = (2 * gx - fx * n0) / nx;
+    } else {
+        fy = ayy / ny;
+        fx = (2 * axy - fy * nx) / ny;
+        f0 = (2 * gy - fy * n0) / ny;
+    }
+    real lo = f0 + fmin(fx * x0, fx * x1) + fmin(fy * y0, fy * y1);
+    real hi = f0 + fmax(fx * x0, fx * x1) + fmax(fy * y0, fy * y1);
+    real margin = CASE_TOLERANCE * (fabs(f0) + fabs(fx) * fmax(fabs(x0), fabs(x1)) + fabs(fy) * fmax(fabs(y0), fabs(y1)));
+    return lo > margin ? 1 : hi < -margin ? -1 : 0;
+}
+
 /* The cases (tape.h, surface_cases: bit c, live quadric m positive in case c iff bit m of c)
- * that some point of a plane task (pf: its frame) may have, given its k live quadrics. */
-inline uint plane_possible_cases(const plane_frame *pf, __global const quadric_rec *qs, const int *live, int k)
+ * that some point of a plane task (pf: its frame) in the cell [x0, x1] x [y0, y1] may have,
+ * given its k live quadrics. */
+inline uint plane_possible_cases(const plane_frame *pf, __global const quadric_rec *qs, const int *live, int k,
+                                 real x0, real x1, real y0, real y1)
 {
 #ifndef CLCSG_DOUBLE
     return ~0u;
@@ -109,6 +151,14 @@ inline uint plane_possible_cases(const plane_frame *pf, __global const quadric_r
                 possible &= same ? ~(pos ^ CASE_TABLE(j)) : pos ^ CASE_TABLE(j);
                 break;
             }
+        }
+    }
+    for (int m = 0; m < k; ++m) { /* conics with a live plane's line as a factor */
+        if (!(c[m].m[0] == 0 && c[m].m[1] == 0 && c[m].m[2] == 0)) continue;
+        for (int j = 0; j < k; ++j) {
+            if (j == m || (c[j].m[0] == 0 && c[j].m[1] == 0 && c[j].m[2] == 0)) continue;
+            int f = plane_line_factor(&c[j], &c[m], x0, x1, y0, y1);
+            if (f) possible &= f > 0 ? ~(CASE_TABLE(m) ^ CASE_TABLE(j)) : CASE_TABLE(m) ^ CASE_TABLE(j);
         }
     }
     return possible;
