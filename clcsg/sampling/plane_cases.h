@@ -29,19 +29,21 @@
 
 #define CASE_TOLERANCE (256 * REAL_EPS)
 
-/* M's entries xx, xy, yy, x1, y1, 11, divided by the largest in absolute value */
+/* M's entries xx, xy, yy, x1, y1, 11, divided by the largest in absolute value (scale) */
 typedef struct {
     real m[6];
+    real scale;
 } plane_conic;
 
 inline plane_conic plane_conic_of(quadric Q, real3 P0, real3 Px, real3 Py)
 {
     real3 APx = quadric_Ap(Q, Px), APy = quadric_Ap(Q, Py);
     real3 g = quadric_Ap(Q, P0) + quadric_minus_b(Q);
-    plane_conic c = {{dot(Px, APx), dot(Px, APy), dot(Py, APy), dot(Px, g), dot(Py, g), quadric_value(Q, P0)}};
+    plane_conic c = {{dot(Px, APx), dot(Px, APy), dot(Py, APy), dot(Px, g), dot(Py, g), quadric_value(Q, P0)}, 0};
     real s = 0;
     for (int m = 0; m < 6; ++m) s = fmax(s, fabs(c.m[m]));
     for (int m = 0; m < 6; ++m) c.m[m] = s > 0 ? c.m[m] / s : 0;
+    c.scale = s;
     return c;
 }
 
@@ -115,6 +117,125 @@ inline int plane_line_factor(const plane_conic *c, const plane_conic *l, real x0
     return lo > margin ? 1 : hi < -margin ? -1 : 0;
 }
 
+/* +1 (-1) if conics a and b are positive (negative) multiples of each other, up to
+ * CASE_TOLERANCE, else 0 */
+inline int plane_conics_proportional(const plane_conic *a, const plane_conic *b)
+{
+    bool same = a->scale > 0 && b->scale > 0, opposite = same;
+    for (int e = 0; e < 6; ++e) {
+        same = same && fabs(a->m[e] - b->m[e]) <= CASE_TOLERANCE;
+        opposite = opposite && fabs(a->m[e] + b->m[e]) <= CASE_TOLERANCE;
+    }
+    return same ? 1 : opposite ? -1 : 0;
+}
+
+/* Quadric Q as its symmetric 4x4 matrix (x, 1)^T H (x, 1): rows of A and w = -b, then (w, w0) */
+inline void quadric_matrix4(quadric Q, real h[4][4])
+{
+    real v[4][4] = {{Q.xx, Q.xy, Q.xz, Q.xw}, {Q.xy, Q.yy, Q.yz, Q.yw}, {Q.xz, Q.yz, Q.zz, Q.zw}, {Q.xw, Q.yw, Q.zw, Q.ww}};
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) h[i][j] = v[i][j];
+}
+
+/* Over the surface of the task's quadric S, in the cell's box g: is quadric Qj the live plane
+ * P's value times a linear factor of one sign there?  If Qj and S meet P in one conic (Qj = mu S
+ * on P: a flare cone and the turret cylinder it widens to meet the plane of their common
+ * circle), Qj - mu S vanishes on P, so it is P L for a linear L (from its matrix D = (p l^T +
+ * l p^T) / 2: l = 2 D u - (u^T D u) p with p.u = 1), and on S, Qj = P L.  Returns L's sign over
+ * the box (+1, -1), or 0. */
+inline int task_plane_factor(quadric S, quadric P, quadric Qj, const prune_region *g)
+{
+    real4 p = (real4)(2 * P.xw, 2 * P.yw, 2 * P.zw, P.ww); /* P(x) = p.(x, 1) */
+    real3 n = p.xyz;
+    real nn = dot(n, n);
+    if (!(nn > 0)) return 0;
+    real3 nh = n / sqrt(nn);
+    real3 Px = normalize(cross(nh, fabs(nh.x) < 0.6 ? (real3)(1, 0, 0) : (real3)(0, 1, 0)));
+    real3 Py = cross(nh, Px);
+    real3 P0 = -(p.w / nn) * n;
+    plane_conic cj = plane_conic_of(Qj, P0, Px, Py), cs = plane_conic_of(S, P0, Px, Py);
+    int k = plane_conics_proportional(&cj, &cs);
+    if (!k) return 0;
+    real mu = k * cj.scale / cs.scale;
+    real hj[4][4], hs[4][4], d[4][4];
+    quadric_matrix4(Qj, hj);
+    quadric_matrix4(S, hs);
+    real big = 0;
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) {
+            d[i][j] = hj[i][j] - mu * hs[i][j];
+            big = fmax(big, fabs(hj[i][j]) + fabs(mu * hs[i][j]));
+        }
+    real pv[4] = {p.x, p.y, p.z, p.w}, pp = dot(p, p), u[4], du[4], udu = 0;
+    for (int i = 0; i < 4; ++i) u[i] = pv[i] / pp;
+    for (int i = 0; i < 4; ++i) {
+        du[i] = 0;
+        for (int j = 0; j < 4; ++j) du[i] += d[i][j] * u[j];
+        udu += u[i] * du[i];
+    }
+    real l[4];
+    for (int i = 0; i < 4; ++i) l[i] = 2 * du[i] - udu * pv[i];
+    for (int i = 0; i < 4; ++i) /* D must be that product */
+        for (int j = 0; j < 4; ++j)
+            if (fabs(d[i][j] - 0.5 * (pv[i] * l[j] + l[i] * pv[j])) > CASE_TOLERANCE * big) return 0;
+    real3 l3 = (real3)(l[0], l[1], l[2]);
+    real mid = dot(l3, g->c) + l[3];
+    real spread = fabs(dot(l3, g->a0)) + fabs(dot(l3, g->a1)) + fabs(dot(l3, g->a2));
+    real margin = CASE_TOLERANCE * (fabs(l[3]) + length(l3) * (length(g->c) + spread + 1));
+    return mid - spread > margin ? 1 : mid + spread < -margin ? -1 : 0;
+}
+
+/* The cases two parallel planes cannot have together anywhere (CASE_TABLE bits), 0 if the
+ * planes are not parallel: offset planes n.x = d1 and n.x = d2 (OpenSCAD's eps overlaps: a
+ * cap 0.01 below the face it joins) split space in three slabs, not four, so one of the four
+ * sign pairs has no point.  Parallel up to CASE_TOLERANCE and offset by much more, so that
+ * where they would cross is far outside any scene. */
+inline uint parallel_planes_impossible(quadric A, quadric B, int ma, int mb)
+{
+    real3 na = (real3)(A.xw, A.yw, A.zw), nb = (real3)(B.xw, B.yw, B.zw);
+    real la = length(na), lb = length(nb);
+    if (!(la > 0 && lb > 0)) return 0;
+    real3 ua = na / la, ub = nb / lb;
+    if (length(cross(ua, ub)) > CASE_TOLERANCE) return 0;
+    /* A = 2 la (ua.x + A.ww / (2 la)), B likewise: the planes are ua.x = da, ub.x = db */
+    real da = -A.ww / (2 * la), db = -B.ww / (2 * lb);
+    bool same = dot(ua, ub) > 0;
+    if (!same) db = -db; /* B's plane as ua.x = db, B positive where ua.x < db */
+    if (!(fabs(da - db) > 1e6 * CASE_TOLERANCE * (1 + fabs(da) + fabs(db)))) return 0;
+    uint pa = CASE_TABLE(ma), pb = CASE_TABLE(mb); /* A positive where ua.x > da */
+    if (same) return da < db ? pb & ~pa : pa & ~pb; /* ua.x > db implies ua.x > da, or the reverse */
+    return da < db ? ~pa & ~pb : pa & pb;
+}
+
+/* The cases that points of any task in box g may have, given its k live quadrics: not two
+ * parallel planes' impossible pair (parallel_planes_impossible); where one is a plane and
+ * another meets it in the task quadric's conic, signs tied (task_plane_factor). */
+inline uint task_possible_cases(__global const quadric_rec *qs, int self_q, const int *live, int k,
+                                const prune_region *g)
+{
+#ifndef CLCSG_DOUBLE
+    return ~0u;
+#else
+    uint possible = ~0u;
+    quadric S = quadric_load(qs, self_q);
+    for (int m = 0; m < k; ++m) {
+        quadric P = quadric_load(qs, live[m]);
+        if (!(P.xx == 0 && P.xy == 0 && P.xz == 0 && P.yy == 0 && P.yz == 0 && P.zz == 0)) continue;
+        for (int j = 0; j < k; ++j) {
+            if (j == m) continue;
+            quadric Qj = quadric_load(qs, live[j]);
+            if (Qj.xx == 0 && Qj.xy == 0 && Qj.xz == 0 && Qj.yy == 0 && Qj.yz == 0 && Qj.zz == 0) {
+                if (j > m) possible &= ~parallel_planes_impossible(P, Qj, m, j);
+                continue;
+            }
+            int f = task_plane_factor(S, P, Qj, g);
+            if (f) possible &= f > 0 ? ~(CASE_TABLE(m) ^ CASE_TABLE(j)) : CASE_TABLE(m) ^ CASE_TABLE(j);
+        }
+    }
+    return possible;
+#endif
+}
+
 /* The cases (tape.h, surface_cases: bit c, live quadric m positive in case c iff bit m of c)
  * that some point of a plane task (pf: its frame) in the cell [x0, x1] x [y0, y1] may have,
  * given its k live quadrics. */
@@ -142,13 +263,9 @@ inline uint plane_possible_cases(const plane_frame *pf, __global const quadric_r
             continue;
         }
         for (int j = 0; j < m; ++j) {
-            bool same = true, opposite = true;
-            for (int e = 0; e < 6; ++e) {
-                same = same && fabs(c[m].m[e] - c[j].m[e]) <= CASE_TOLERANCE;
-                opposite = opposite && fabs(c[m].m[e] + c[j].m[e]) <= CASE_TOLERANCE;
-            }
-            if (same || opposite) {
-                possible &= same ? ~(pos ^ CASE_TABLE(j)) : pos ^ CASE_TABLE(j);
+            int r = plane_conics_proportional(&c[m], &c[j]);
+            if (r) {
+                possible &= r > 0 ? ~(pos ^ CASE_TABLE(j)) : pos ^ CASE_TABLE(j);
                 break;
             }
         }

@@ -326,13 +326,16 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
 /* A cell with no corner on the surface: its live leaves may only be faces where solids meet,
  * or quadrics that touch a plane task without crossing it (tape.h surface_cases, and on a plane
  * task plane_cases.h for the cases no point has). */
-inline bool no_surface_in_cases(const cell_geom *g, cell_rec c, __global const tape_op *tape, int n,
-                                __global const quadric_rec *qs, int self_q, const prune_memo *leaves)
+inline bool no_surface_in_cases(const cell_geom *g, cell_rec c, const prune_region *patch,
+                                __global const tape_op *tape, int n, __global const quadric_rec *qs, int self_q,
+                                const prune_memo *leaves)
 {
     int live[CASE_QUADRICS], k = 0;
     uint cases = surface_cases(tape, n, self_q, leaves, live, &k);
-    return cases == 0 ||
-           (cases != ~0u && (cases & plane_possible_cases(&g->pf, qs, live, k, c.x0, c.x1, c.y0, c.y1)) == 0);
+    if (cases == 0) return true;
+    if (cases == ~0u) return false;
+    cases &= plane_possible_cases(&g->pf, qs, live, k, c.x0, c.x1, c.y0, c.y1);
+    return cases == 0 || (cases & task_possible_cases(qs, self_q, live, k, patch)) == 0;
 }
 
 /* One cell: geometry, the pruned tape's decision, the corner discs, single sample, fill,
@@ -372,7 +375,7 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     corner_distances(&g, c, tape, n, qs, t.quadric, d, w);
     int cover = corner_cover(&g, d);
     if (cover > 0) return OUT_DISCARDED;
-    if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0) && no_surface_in_cases(&g, c, tape, n, qs, t.quadric, &leaves))
+    if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0) && no_surface_in_cases(&g, c, &patch, tape, n, qs, t.quadric, &leaves))
         return OUT_DECIDED_DISCARD;
     if (try_single(&g, c, d, tape, n, qs, t.quadric, radius, src, counters, samples, cap_samples, w))
         return OUT_SINGLE;
