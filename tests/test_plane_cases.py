@@ -3,8 +3,8 @@ quadric that touches a plane task without crossing it), against numpy's eigenval
 semidefinite conics of rank 1 to 3 (a tangent cylinder's conic has rank 1) and on conics with
 an eigenvalue of each sign; which conics plane_line_factor takes as a live plane's line times
 a linear factor of one sign over a cell, against the factors they were made of; the sign pair
-two parallel planes cannot have, against random points; and task_plane_factor against
-quadrics made as mu S + P L."""
+two parallel planes, or two nested conics, cannot have, against random points; and
+task_plane_factor against quadrics made as mu S + P L."""
 
 from __future__ import annotations
 
@@ -191,3 +191,40 @@ def test_task_plane_factor_finds_the_factor_and_its_sign(seed, cl_context):
         want.append(int(np.sign(l[:3] @ c + l[3])) if kind == 0 else 0)
     got = _run(cl_context, "plane_factor", (S_, P_, Q_, boxes), n, np.int32)
     assert np.array_equal(got, np.array(want)), (got, want)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_nested_conics_lose_the_sign_pair_no_point_has(seed, cl_context):
+    """a = mu b + delta (a constant of either sign): the pair (b positive, a negative) or the
+    reverse has no point of the plane; a = mu b + a linear term is not nested."""
+    if real_dtype(cl_context) != np.float64:
+        return
+    rng = np.random.default_rng(seed)
+    n = 32
+    pts = rng.uniform(-4, 4, size=(20000, 2))
+    hom = np.c_[pts, np.ones(len(pts))]
+    a_, b_, seen, kinds = [], [], [], []
+    for i in range(n):
+        M = rng.normal(size=(3, 3))
+        B = (M + M.T) / 2
+        A = rng.uniform(0.3, 3) * B
+        nested = i % 2 == 0
+        if nested:
+            A[2, 2] += rng.choice([-1, 1]) * rng.uniform(0.05, 1.0)
+        else:
+            A[0, 2] += 0.3
+            A[2, 0] += 0.3
+        a_.append(_entries(A[:2, :2], 2 * A[:2, 2], A[2, 2]))
+        b_.append(_entries(B[:2, :2], 2 * B[:2, 2], B[2, 2]))
+        sa = np.einsum("ij,jk,ik->i", hom, A, hom) > 0
+        sb = np.einsum("ij,jk,ik->i", hom, B, hom) > 0
+        seen.append({int(x) | 2 * int(y) for x, y in zip(sa, sb)})  # case bits: 0 a positive, 1 b positive
+        kinds.append(nested)
+    got = _run(cl_context, "nested", (a_, b_), n, np.uint32)
+    for mask, pairs, nested in zip(got, seen, kinds):
+        dropped = [c for c in range(4) if mask >> c & 1]
+        if nested:
+            assert len(dropped) == 1 and dropped[0] not in pairs, (mask, pairs)
+        else:
+            assert mask == 0

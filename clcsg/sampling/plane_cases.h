@@ -13,6 +13,9 @@
  * - M a multiple of another live quadric's M: the two have one sign (or opposite signs)
  *   everywhere on the plane (a chamfer cone and a counterbore cylinder that meet the plane in
  *   one circle), so the cases where they differ are dropped.
+ * - M another live quadric's M times mu > 0 plus a semidefinite term (concentric circles: a
+ *   cone's cap moved by an eps overlap against the cylinder it continues): one sign implies the
+ *   other's (plane_conics_nested).
  * - M the product of another live quadric's line (a plane's conic is linear) and a linear
  *   factor of one sign over the cell: a cylinder that a face plane cuts in two lines, one of
  *   them where the box face it rounds ends (the fillet strip's faces): over the cell the two
@@ -236,6 +239,35 @@ inline uint task_possible_cases(__global const quadric_rec *qs, int self_q, cons
 #endif
 }
 
+/* The cases two nested conics cannot have together (CASE_TABLE bits of live quadrics ma, mb),
+ * 0 if they are not nested: where a - mu b (mu > 0, from their quadratic parts) is semidefinite,
+ * one conic is the other plus a term of one sign, so b > 0 implies a > 0 (or a > 0 implies
+ * b > 0). Concentric circles 0.01 apart: a cone's cap and the cylinder it continues, where
+ * OpenSCAD's eps overlap moves the cap. */
+inline uint plane_conics_nested(const plane_conic *a, const plane_conic *b, int ma, int mb)
+{
+    real qa = fmax(fabs(a->m[0]), fmax(fabs(a->m[1]), fabs(a->m[2])));
+    real qb = fmax(fabs(b->m[0]), fmax(fabs(b->m[1]), fabs(b->m[2])));
+    if (!(qa > CASE_TOLERANCE && qb > CASE_TOLERANCE)) return 0;
+    int p = fabs(b->m[0]) == qb ? 0 : fabs(b->m[1]) == qb ? 1 : 2;
+    real mu = a->m[p] / b->m[p];
+    if (!(mu > 0)) return 0;
+    plane_conic d;
+    real big = 0;
+    for (int e = 0; e < 6; ++e) {
+        d.m[e] = a->m[e] - mu * b->m[e];
+        big = fmax(big, fabs(d.m[e]));
+    }
+    d.scale = 1;
+    if (!(fabs(d.m[0]) <= CASE_TOLERANCE && fabs(d.m[1]) <= CASE_TOLERANCE && fabs(d.m[2]) <= CASE_TOLERANCE) ||
+        !(big > 1e6 * CASE_TOLERANCE))
+        return 0; /* quadratic parts not proportional, or the same conic (plane_conics_proportional) */
+    uint pa = CASE_TABLE(ma), pb = CASE_TABLE(mb);
+    if (plane_conic_semidefinite(&d, 1)) return pb & ~pa; /* a >= mu b: b positive implies a positive */
+    if (plane_conic_semidefinite(&d, -1)) return pa & ~pb;
+    return 0;
+}
+
 /* The cases (tape.h, surface_cases: bit c, live quadric m positive in case c iff bit m of c)
  * that some point of a plane task (pf: its frame) in the cell [x0, x1] x [y0, y1] may have,
  * given its k live quadrics. */
@@ -270,6 +302,8 @@ inline uint plane_possible_cases(const plane_frame *pf, __global const quadric_r
             }
         }
     }
+    for (int m = 0; m < k; ++m) /* nested conics */
+        for (int j = 0; j < m; ++j) possible &= ~plane_conics_nested(&c[m], &c[j], m, j);
     for (int m = 0; m < k; ++m) { /* conics with a live plane's line as a factor */
         if (!(c[m].m[0] == 0 && c[m].m[1] == 0 && c[m].m[2] == 0)) continue;
         for (int j = 0; j < k; ++j) {

@@ -1,7 +1,7 @@
 /* Checks of plane_cases.h against the host (tests/test_plane_cases.py): which conics, given by
  * their six entries, plane_conic_semidefinite takes as positive (bit 0) and as negative (bit 1)
  * semidefinite; which plane_line_factor finds to be a line times a factor of one sign; the
- * impossible sign pairs of parallel planes; task_plane_factor's factors. */
+ * impossible sign pairs of parallel planes and of nested conics; task_plane_factor's factors. */
 #include "plane_cases.h"
 
 __kernel void semidefinite(__global const real *entries, int n, __global int *out)
@@ -58,4 +58,18 @@ __kernel void plane_factor(__global const real *s, __global const real *p, __glo
     g.rho = 0;
     g.on_patch = 0;
     out[i] = task_plane_factor(check_quadric(s + 10 * i), check_quadric(p + 10 * i), check_quadric(q + 10 * i), &g);
+}
+
+/* plane_conics_nested of conics a[i], b[i] (six entries each, normalized) as live quadrics 0, 1 */
+__kernel void nested(__global const real *a, __global const real *b, int n, __global uint *out)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    plane_conic ca, cb;
+    for (int e = 0; e < 6; ++e) {
+        ca.m[e] = a[6 * i + e];
+        cb.m[e] = b[6 * i + e];
+    }
+    ca.scale = cb.scale = 1;
+    out[i] = plane_conics_nested(&ca, &cb, 0, 1);
 }
