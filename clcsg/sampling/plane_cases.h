@@ -1,5 +1,8 @@
-/* Sign relations of quadrics on a plane, for the sampler's case analysis (tape.h,
- * surface_cases; used by sampler.cl on tasks whose quadric is a plane).
+/* Sign relations between live quadrics that drop the cases of the sampler's case analysis
+ * (tape.h, surface_cases; used by sampler.cl) that no point of a cell has: on plane tasks
+ * through the quadrics' conics on the plane (plane_possible_cases), on any task through a live
+ * plane (task_possible_cases: parallel planes, and a quadric meeting a plane in the task
+ * quadric's conic).
  *
  * On a plane task the heightfield is linear, t = -(2 beta_i x + 2 beta_j y + gamma) / (2 beta_k),
  * so its points are p(x, y) = P0 + x Px + y Py, and a quadric Q(p) = p.A p + 2 w.p + w0 there is
@@ -22,9 +25,10 @@
  *   have one sign, or opposite signs (plane_line_factor).
  * Only points where a quadric is exactly 0 are left out (see tape.h, surface_cases).
  *
- * M is normalized by its largest entry and compared with CASE_TOLERANCE: the relations hold
- * up to the rounding of the quadrics' coefficients (an intended tangency, written as one).
- * Without double precision the rounding is too coarse to tell: no relations. */
+ * Entries are compared relative to the largest, with CASE_TOLERANCE (256 ulps; the offsets of
+ * parallel planes and of nested conics must be far above it): the relations hold up to the
+ * rounding of the quadrics' coefficients (an intended tangency, written as one).  Without
+ * double precision the rounding is too coarse to tell: no relations. */
 #ifndef CLCSG_PLANE_CASES_H
 #define CLCSG_PLANE_CASES_H
 #include "heightfield.h"
