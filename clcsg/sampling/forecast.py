@@ -6,15 +6,16 @@ seconds it took, and answers the seconds left.  The sampler's progress (``_Progr
 :mod:`clcsg.sampling.sampler`) turns that into the bar's fraction; tests and ``python -m bench
 progress`` replay recorded histories through it.
 
-**Levels.**  A root cell of diagonal d_0 is split into four (both edges cut at SPLIT_AT, the
-larger part s = SPLIT_LARGER of the edge) while its diagonal exceeds QUAD_SPLIT_DIAG radii,
-then in two along its longest edge, which shrinks the diagonal by s every two levels.  With
-n_q = ceil(log(d_0 / (QUAD_SPLIT_DIAG r)) / log(1 / s)) four-way levels for the largest root
-cell and d_q = d_0 s^n_q, its cells reach a diagonal D after n_q + 2 log(d_q / D) / log(1 / s)
-levels: the *peak level* at D = PEAK_DIAG r (2 radii: the surface cells are resolved about
-there, and the cells per level stop growing) and the *last level* at D = the floor, rounded
-(cells smaller than it are dropped; the floor is measured on the cell's 3-D diagonal, so the
-level is right within one on the runs of ``python -m bench progress``).
+**Levels.**  A root cell of diagonal d_0 is split into four (the edges cut at SPLIT_AT and
+SPLIT_AT_Y, the larger part at most s = SPLIT_LARGER of the edge) while its diagonal exceeds
+QUAD_SPLIT_DIAG radii, then in two along its longest edge, which shrinks the diagonal by s every
+two levels.  With n_q = ceil(log(d_0 / (QUAD_SPLIT_DIAG r)) / log(1 / s)) four-way levels for
+the largest root cell and d_q = d_0 s^n_q, its cells reach a diagonal D after
+n_q + 2 log(d_q / D) / log(1 / s) levels: the *peak level* at D = PEAK_DIAG r (2 radii: the
+surface cells are resolved about there, and the cells per level stop growing) and the *last
+level* at D = the floor, rounded (cells smaller than it are dropped; the floor is measured on
+the cell's 3-D diagonal, so the level is right within one on the runs of ``python -m bench
+progress``).
 
 **Cells ahead.**  After a level of n cells with c children queued, the cells of the levels
 ahead are c, c g_1, c g_1 g_2, ... up to the last level, with g = sqrt(c / n_prev) the growth

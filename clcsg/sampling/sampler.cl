@@ -12,7 +12,7 @@
  * samples and tapes are appended with atomics and written only below the capacity; the
  * counters keep counting, so the host sees an overflow, grows the buffer and re-runs the level.
  *
- * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, SPLIT_AT, MAX_FILL (largest
+ * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, SPLIT_AT(_Y), MAX_FILL (largest
  * grid a cell may emit at once; larger cells are split instead).  Counter slots SC_* come from
  * clcsg/cl/constants.py.
  */
@@ -24,12 +24,16 @@
 #define MAX_FILL 65536
 #endif
 
-/* Where a split cuts the longest edge, as a fraction of it.  Not one half: models are full of
- * features at the middle (or a quarter...) of their boxes, and a cell edge lying exactly on a
- * trimming curve can never be decided (its corners there have d_q = 0, and no bound separates
- * it from the curve), so it would split down to the floor.  Any fraction keeps the guarantee. */
-#ifndef SPLIT_AT
-#error "SPLIT_AT: the split fraction comes from the driver (sampler.py)"
+/* Where a split cuts the longest edge, as a fraction of it (SPLIT_AT across x, SPLIT_AT_Y
+ * across y).  Not one half: models are full of features at the middle (or a quarter...) of
+ * their boxes, and a cell edge lying exactly on a trimming curve can never be decided (its
+ * corners there have d_q = 0, and no bound separates it from the curve), so it would split
+ * down to the floor.  Not one fraction for both axes: a cell's corners would then lie on the
+ * diagonal x = y of its root cell, where curves of symmetric models run (the tricylinder's
+ * edges), and each such corner starts a chain of cells down to the floor (Steinmetz: a third
+ * of its cells).  Any fractions keep the guarantee. */
+#if !defined(SPLIT_AT) || !defined(SPLIT_AT_Y)
+#error "SPLIT_AT, SPLIT_AT_Y: the split fractions come from the driver (sampler.py)"
 #endif
 #ifndef QUAD_SPLIT_DIAG
 #error "QUAD_SPLIT_DIAG: from the driver (sampler.py)"
@@ -278,7 +282,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
         for (int m = 0; m < count; ++m) arena_out[base + rows + first + m] = arena_out[base + first + m];
         /* corners (x0|xm|x1) x (y0|ym|y1), row-major: e[3 * j + i] */
         real xs[3] = {c.x0, c.x0 + (real)SPLIT_AT * g->wx, c.x1};
-        real ys[3] = {c.y0, c.y0 + (real)SPLIT_AT * g->wy, c.y1};
+        real ys[3] = {c.y0, c.y0 + (real)SPLIT_AT_Y * g->wy, c.y1};
         real e[9];
         e[0] = d[0]; e[2] = d[1]; e[6] = d[2]; e[8] = d[3];
         e[1] = query_at(g, xs[1], ys[0], tape, n, qs, q, w);
@@ -310,7 +314,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
         a.d[0] = d[0]; a.d[2] = d[2];
         b.d[1] = d[1]; b.d[3] = d[3];
     } else {
-        real mid = c.y0 + (real)SPLIT_AT * g->wy;
+        real mid = c.y0 + (real)SPLIT_AT_Y * g->wy;
         a.y1 = b.y0 = mid;
         e0 = query_at(g, c.x0, mid, tape, n, qs, q, w);
         e1 = query_at(g, c.x1, mid, tape, n, qs, q, w);

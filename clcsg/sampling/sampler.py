@@ -42,8 +42,10 @@ instead of splitting them to the floor: a cell that crosses a trimming curve has
 each side of it (a curve flat on the cell's scale separates its corners), so once the cell is
 about r a corner with d_q < 0 gives the single sample below; a cell on the discarded side,
 not crossing, is decided by the patch test.  Splits cut the longest edge at ``SPLIT_AT`` of
-it, not the middle: a cell edge lying exactly on a trimming curve (features in the middle of a
-box are common) has corners with d_q = 0 that no bound can separate from the curve.  A
+it (``SPLIT_AT_Y`` across y), not the middle: a cell edge lying exactly on a trimming curve
+(features in the middle of a box are common) has corners with d_q = 0 that no bound can
+separate from the curve, and so does a corner on a curve along the grid's diagonal (the
+tricylinder's edges, in the planes y = +-z), which one fraction for both axes would put there.  A
 roughly square cell larger than ``QUAD_SPLIT_DIAG`` radii is cut across both edges at once
 (four children: a level saved, the children cover the cell just the same).  So the
 chain ends in (i) a fill, which puts every cell point within r of a sample (the anisotropic
@@ -273,11 +275,13 @@ def _task_regions(t, frames, origin, grow) -> tuple[dict, dict]:
     return world, local
 
 
-#: where a split cuts a cell's longest edge, as a fraction of it (the build option SPLIT_AT of
-#: sampler.cl, which says why it is not one half)
+#: where a split cuts a cell's longest edge, as a fraction of it: SPLIT_AT across x, SPLIT_AT_Y
+#: across y (the build options of sampler.cl, which says why they are not one half, and not
+#: one fraction for both)
 SPLIT_AT = 0.4871
-#: the larger child's share of a split
-SPLIT_LARGER = 1 - SPLIT_AT
+SPLIT_AT_Y = 0.4913
+#: the larger child's share of a split (at most)
+SPLIT_LARGER = 1 - min(SPLIT_AT, SPLIT_AT_Y)
 #: a roughly square cell whose diagonal exceeds this many radii is split into four, not two
 #: (the build option QUAD_SPLIT_DIAG of sampler.cl)
 QUAD_SPLIT_DIAG = 8.0
@@ -457,6 +461,7 @@ def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, 
                progress, max_levels, root_rows=None):
     """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT,
+               "SPLIT_AT_Y": SPLIT_AT_Y,
                "QUAD_SPLIT_DIAG": QUAD_SPLIT_DIAG, "WORK_GROUP": WORK_GROUP}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
