@@ -4,12 +4,20 @@
  * impossible sign pairs of parallel planes and of nested conics; task_plane_factor's factors. */
 #include "plane_cases.h"
 
+/* a conic from its six (normalized) entries */
+inline plane_conic check_conic(__global const real *entries)
+{
+    plane_conic c;
+    for (int e = 0; e < 6; ++e) c.m[e] = entries[e];
+    c.scale = 1;
+    return c;
+}
+
 __kernel void semidefinite(__global const real *entries, int n, __global int *out)
 {
     int i = get_global_id(0);
     if (i >= n) return;
-    plane_conic c;
-    for (int e = 0; e < 6; ++e) c.m[e] = entries[6 * i + e];
+    plane_conic c = check_conic(entries + 6 * i);
     out[i] = (plane_conic_semidefinite(&c, 1) ? 1 : 0) | (plane_conic_semidefinite(&c, -1) ? 2 : 0);
 }
 
@@ -20,11 +28,7 @@ __kernel void line_factor(__global const real *conics, __global const real *line
 {
     int i = get_global_id(0);
     if (i >= n) return;
-    plane_conic c, l;
-    for (int e = 0; e < 6; ++e) {
-        c.m[e] = conics[6 * i + e];
-        l.m[e] = lines[6 * i + e];
-    }
+    plane_conic c = check_conic(conics + 6 * i), l = check_conic(lines + 6 * i);
     out[i] = plane_line_factor(&c, &l, rects[4 * i], rects[4 * i + 1], rects[4 * i + 2], rects[4 * i + 3]);
 }
 
@@ -65,11 +69,6 @@ __kernel void nested(__global const real *a, __global const real *b, int n, __gl
 {
     int i = get_global_id(0);
     if (i >= n) return;
-    plane_conic ca, cb;
-    for (int e = 0; e < 6; ++e) {
-        ca.m[e] = a[6 * i + e];
-        cb.m[e] = b[6 * i + e];
-    }
-    ca.scale = cb.scale = 1;
+    plane_conic ca = check_conic(a + 6 * i), cb = check_conic(b + 6 * i);
     out[i] = plane_conics_nested(&ca, &cb, 0, 1);
 }
