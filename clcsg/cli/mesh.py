@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..meshing.mesher import DEFAULT_CELLS, DEFAULT_TOLERANCE, mesh
+from ..meshing.mesher import DEFAULT_CELLS, DEFAULT_TOLERANCE, METHODS, mesh
 from ..meshing.writers import FORMATS, check_output, write
 from ..sampling.radius import Radius
 from .app import add_subcommand, parse_bound, positive_int
@@ -16,13 +16,16 @@ def add_parser(subparsers):
         help="write a watertight triangle mesh (STL, 3MF, OBJ, PLY, OFF)",
         description=f"""
             Mesh a scene (.json, OpenSCAD .csg or .scad) into a closed, consistently oriented,
-            2-manifold triangle mesh: marching tetrahedra on the grid cells the pruned tape
-            keeps (their tetrahedra bisected where a wall, rod or step is thinner than a
-            cell), every vertex solved onto the exact quadric surface in double precision,
-            edges split onto the exact intersection curves of the quadrics (sharp edges and
-            corners) and on curved patches until the chord error is under the tolerance, then
-            edges collapsed wherever the chord error bound and the sharp edges allow (curved
-            patches coarsened to the tolerance, flat faces to their boundary).  Formats: {', '.join(FORMATS)}
+            2-manifold triangle mesh whose vertices lie on the exact quadric surfaces in double
+            precision, on their exact intersection curves at sharp edges and at the exact
+            corners.  Method "facets" (the default wherever every primitive is a box, cylinder,
+            cone, sphere, ellipsoid, half-space, slab or infinite cylinder): each primitive
+            faceted within the tolerance (circles get the fewest segments whose chord error
+            is under it), manifold3d's exact Booleans, then every vertex solved onto its
+            quadrics; primitives faceted again finer where the result strays.  Method
+            "contour" (any quadric): marching tetrahedra on the grid cells the pruned tape
+            keeps, edges split onto the intersection curves and collapsed within the chord
+            error (flat faces to their boundary).  Formats: {', '.join(FORMATS)}
             (from the extension, checked before any work; STL is binary; 3MF, PLY and OBJ get
             each triangle's primitive colour).  An empty solid is an error (exit code 3) and
             writes no file.  Runs on the host (numpy); --device is not used.
@@ -39,9 +42,12 @@ def add_parser(subparsers):
     p.add_argument("-t", "--tolerance", metavar="T", default=DEFAULT_TOLERANCE,
                    help="largest chord error: scene units, or a percentage of the bound's diagonal "
                         f"(default {DEFAULT_TOLERANCE.replace('%', '%%')})")
+    p.add_argument("--method", choices=METHODS, default="auto",
+                   help="facets, contour, or auto: facets where every primitive has a closed-form faceting "
+                        "(default auto)")
     p.add_argument("--cells", metavar="N", type=positive_int, default=DEFAULT_CELLS,
-                   help=f"grid cells over the bound's longest side before refinement (default {DEFAULT_CELLS}); "
-                        "features thinner than an eighth of a cell may be lost, raise it for thinner walls")
+                   help=f"contour method: grid cells over the bound's longest side before refinement (default "
+                        f"{DEFAULT_CELLS}); features thinner than an eighth of a cell may be lost, raise it for thinner walls")
     p.add_argument("--bound", metavar="x0,y0,z0,x1,y1,z1", default=None,
                    help="box that clips unbounded terms (overrides the scene's own bound)")
 
@@ -52,8 +58,8 @@ def run(args) -> int:
     bound = None if args.bound is None else parse_bound(args.bound, "--bound")
     run_ = Run("mesh")
     scene = load_scene(run_, args.scene, bound)
-    with run_.step("mesh", "meshing: grid, vertices, sharp edges, refinement"):
-        m = mesh(scene, tolerance=args.tolerance, cells=max(int(args.cells), 4))
+    with run_.step("mesh", "meshing"):
+        m = mesh(scene, tolerance=args.tolerance, cells=max(int(args.cells), 4), method=args.method)
     with run_.step("write", f"writing {args.output}"):
         write(m, args.output)
         run_.wrote(args.output)

@@ -51,9 +51,11 @@ def _collapse_edges(m, cand) -> int:
         merged[b] = a
         own = [q for q in m.sets[a] if q >= 0]
         own += [q for q in m.sets[b] if q >= 0 and q not in own]
-        m.sets[a] = (own + [-1, -1, -1])[:3]
+        _store_set(m, a, own)
         done += 1
     m.triangles = np.array([t for t, ok in zip(tri, alive) if ok], dtype=np.int64).reshape(-1, 3)
+    if m.faces is not None:
+        m.faces = m.faces[np.array(alive, dtype=bool)]
     return done
 
 
@@ -73,18 +75,31 @@ def _merge_unjoined(m, scale) -> int:
         target = np.arange(len(m.vertices))
         target[rest] = keep
         tri = target[m.triangles]
-        tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 2] != tri[:, 0])]
-        _, inv, twins = np.unique(np.sort(tri, axis=1), axis=0, return_inverse=True, return_counts=True)
-        tri = tri[twins[inv.ravel()] == 1]
+        kept = np.flatnonzero((tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 2] != tri[:, 0]))
+        _, inv, twins = np.unique(np.sort(tri[kept], axis=1), axis=0, return_inverse=True, return_counts=True)
+        kept = kept[twins[inv.ravel()] == 1]
+        tri = tri[kept]
         if not len(tri) or not closed(tri):
             continue
+        if m.faces is not None:
+            m.faces = m.faces[kept]
         own = [q for q in m.sets[keep] if q >= 0]
         for v in rest:
             own += [q for q in m.sets[v] if q >= 0 and q not in own]
-        m.sets[keep] = (own + [-1, -1, -1])[:3]
+        _store_set(m, keep, own)
         m.triangles = tri
         merged += len(rest)
     return merged
+
+
+def _store_set(m, v, own) -> None:
+    """Vertex ``v``'s quadrics become ``own``: all of them, the sets widened to fit, if the
+    surface allows it (``m.wide``), else as many as fit (the refinement solves at most three)."""
+    w = m.sets.shape[1]
+    if m.wide and len(own) > w:
+        m.sets = np.pad(m.sets, ((0, 0), (0, len(own) - w)), constant_values=-1)
+        w = len(own)
+    m.sets[v] = (own + [-1] * w)[:w]
 
 
 def _root(merged, v):

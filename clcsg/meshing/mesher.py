@@ -1,6 +1,11 @@
 """``clcsg.mesh``: a closed triangle mesh of a scene, its vertices on the exact surface.
 
-The stages, one module each:
+Two methods.  *facets* (:mod:`.exact_facets`; the default wherever every primitive has a
+closed-form faceting): the primitives faceted within the tolerance, combined by manifold3d's
+exact Booleans, every vertex then solved onto its exact quadrics, curves and corners.
+*contour* (any quadric; the stages below): the pruned tape contoured on a grid.
+
+The contour stages, one module each:
 
 1. :mod:`.octree`: the grid cells the surface may cross (octree descent over the pruned tape);
 2. :mod:`.adapt`: their Kuhn tetrahedra, bisected (:mod:`.bisect`) where a feature is
@@ -34,12 +39,16 @@ from .collapse import collapse_coincident
 from .decimate import decimate
 from .owners import triangle_owners
 from .octree import surface_cells
+from .exact_facets import facetable, mesh_by_facets, timed
+from .facets import KINDS as FACETED_KINDS
 from .operand_booleans import mesh_by_booleans, needs_booleans
 
 #: default tolerance: 0.1% of the bound's diagonal
 DEFAULT_TOLERANCE = "0.1%"
 #: grid cells over the longest side of the bound (before refinement)
 DEFAULT_CELLS = 32
+#: the meshing methods of :func:`mesh`
+METHODS = ("auto", "facets", "contour")
 
 
 @dataclass
@@ -47,7 +56,7 @@ class Mesh:
     """A closed triangle mesh: ``vertices`` (V, 3) float64, ``triangles`` (T, 3) int64 with
     outward (counter-clockwise) orientation, per triangle its ``quadric`` (tape quadric index),
     ``primitive`` (instance index, -1 if none found) and ``colors`` (T, 4) RGBA in [0, 1]; per
-    vertex the quadrics it lies on (``vertex_quadrics`` (V, 3), -1 padded)."""
+    vertex the quadrics it lies on (``vertex_quadrics`` (V, k >= 3), -1 padded)."""
 
     vertices: np.ndarray
     triangles: np.ndarray
@@ -67,23 +76,22 @@ def resolve_tolerance(tolerance, diagonal: float) -> float:
     return Radius.parse(tolerance, "tolerance").of(diagonal)
 
 
-def _timed(stats, stage, fn, *args):
-    """``fn(*args)``, its process CPU time added to ``stats["stage_cpu_s"][stage]``."""
-    t0 = time.process_time()
-    out = fn(*args)
-    stats["stage_cpu_s"][stage] = stats["stage_cpu_s"].get(stage, 0.0) + time.process_time() - t0
-    return out
-
-
-def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=None) -> Mesh:
+def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=None, method: str = "auto") -> Mesh:
     """The mesh of ``scene`` (a Scene, Shape or scene file path) within ``tolerance`` of its
     surface (scene units, or ``"0.1%"`` of the bound's diagonal).  Raises SceneError for an
-    empty solid."""
+    empty solid.
+
+    ``method``: ``"facets"`` (faceted primitives, manifold3d's Booleans, vertices onto the
+    exact surface: :mod:`.exact_facets`), ``"contour"`` (the pruned tape contoured on a grid
+    of ``cells``: the stages in this module's docstring) or ``"auto"`` (facets where every
+    primitive has a closed-form faceting, else contour)."""
     t0 = time.process_time()
     sc = as_scene(scene, bound)
     spec = Radius.parse(tolerance, "tolerance")
     if not isinstance(cells, int) or cells < 4:
         raise UsageError(f"cells must be an integer >= 4, got {cells!r}")
+    if method not in METHODS:
+        raise UsageError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     tape = sc.compile()
     if tape.empty:
         raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
@@ -92,10 +100,19 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     stats = {"tolerance": tol, "stage_cpu_s": {}}
     if needs_booleans(sc.shape):
         return _by_booleans(sc, tol, cells, stats, t0)
-    grid = _timed(stats, "cells", surface_cells, tape, cells)
+    if method == "facets" and not facetable(tape):
+        kinds = sorted({i.node.kind for i in tape.instances} - set(FACETED_KINDS))
+        raise UsageError(f"{sc.source}: method 'facets' has no faceting for {', '.join(kinds)}; use 'contour' or 'auto'")
+    if method != "contour" and facetable(tape):
+        got = mesh_by_facets(tape, tol, stats)
+        if not len(got.triangles):
+            raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
+        stats.update(triangles=int(len(got.triangles)), vertices=int(len(got.vertices)), cpu_s=time.process_time() - t0)
+        return Mesh(got.vertices, got.triangles, got.quadric, got.primitive, got.colors, got.sets, tol, stats)
+    grid = timed(stats, "cells", surface_cells, tape, cells)
     stats.update(cells=int(len(grid.ijk)), boxes_tested=int(grid.visited), h=grid.h)
 
-    marched = _timed(stats, "adapt", adapt, tape, grid, tol, stats)
+    marched = timed(stats, "adapt", adapt, tape, grid, tol, stats)
     tri = marched.triangles
     if not len(tri):
         raise SceneError(f"{sc.source}: the solid is empty (or thinner than the grid, "
@@ -105,11 +122,11 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     vsets = np.full((len(verts), 3), -1, dtype=np.int64)
     vsets[:, 0] = vq
     m = refine.Surface(tape, verts, vsets, tri)
-    _timed(stats, "refine", refine.refine, m, tol, stats)
-    _timed(stats, "collapse", collapse_coincident, m, stats)
-    _timed(stats, "decimate", decimate, m, tol, stats)
-    _timed(stats, "planar", planar.coarsen, m, stats)
-    quad, prim, colors = _timed(stats, "owners", triangle_owners, tape, m, tol)
+    timed(stats, "refine", refine.refine, m, tol, stats)
+    timed(stats, "collapse", collapse_coincident, m, stats)
+    timed(stats, "decimate", decimate, m, tol, stats)
+    timed(stats, "planar", planar.coarsen, m, stats)
+    quad, prim, colors = timed(stats, "owners", triangle_owners, tape, m, tol)
     stats["spanning_triangles"] = int(refine.spanning(m.sets, m.triangles).sum())  # of the final mesh
     stats.update(triangles=int(len(m.triangles)), vertices=int(len(m.vertices)),
                  cpu_s=time.process_time() - t0)
@@ -118,7 +135,7 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
 
 def _by_booleans(sc, tol: float, cells: int, stats: dict, t0: float) -> Mesh:
     """The mesh of a scene with point or large mesh operands (:mod:`.operand_booleans`)."""
-    v, tri, colors = _timed(stats, "booleans", mesh_by_booleans, sc, tol, cells,
+    v, tri, colors = timed(stats, "booleans", mesh_by_booleans, sc, tol, cells,
                             lambda scene, t, c: mesh(scene, tolerance=t, cells=c))
     if not len(tri):
         raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")

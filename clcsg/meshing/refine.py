@@ -69,12 +69,16 @@ SNAP = 0.05
 
 @dataclass
 class Surface:
-    """The mesh being refined: vertices, per vertex its quadrics (V, 3) -1 padded, triangles."""
+    """The mesh being refined: vertices, per vertex its quadrics (V, 3) -1 padded, triangles,
+    and optionally per triangle a row of data that follows the triangles it belongs to when
+    some are removed (:mod:`.collapse`); ``wide``: the sets may grow past three columns."""
 
     tape: object
     vertices: np.ndarray
     sets: np.ndarray
     triangles: np.ndarray
+    faces: np.ndarray | None = None
+    wide: bool = False
 
 
 def edges_of(tri):

@@ -1,0 +1,239 @@
+"""Faceted meshes of primitive instances, each triangle tagged with the literal it lies on.
+
+An instance's solid is the intersection of its literals (:mod:`clcsg.model.solids`); its
+faceted mesh is closed, outward, in world coordinates (the instance's matrix applied), and
+every triangle carries a *tag*: the index of the literal whose surface it approximates, or -1
+for a face that only closes an unbounded kind inside the region of interest.
+
+Curved surfaces are inscribed: every vertex lies on its literal's quadric, and the segment
+count of a circle of world radius R is the least n with R (1 - cos(pi / n)) <= tol, the chord
+sag of the inscribed n-gon.  Under a linear map A (the instance's transform times the local
+radii) a circle's polygon of parameter step d deviates from the image ellipse by at most
+sigma_1 R d^2 / 8 (the largest |x''|), so R is taken as sigma_1 R.  A sphere is manifold3d's
+(octahedron-based) unit sphere with the fewest segments whose measured sag is at most
+tol sigma_3^2 / sigma_1^3 (the largest normal curvature of the image ellipsoid is
+sigma_1 / sigma_3^2 and its edges are at most sigma_1 times longer).
+
+Unbounded kinds (half-spaces, slabs, infinite and elliptic cylinders) are closed by faces
+tagged -1 outside the region of interest: a ball (center, radius) in world coordinates that
+holds everything the mesh is clipped to.  Kinds without a closed form here (double cones,
+paraboloids, hyperboloids, raw quadric matrices) return None: the caller meshes such a scene
+another way.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from ..model.quadric import frame_z_to
+
+#: tag of a face that only closes an unbounded kind (no literal of the instance)
+CLOSING = -1
+#: kinds meshed here
+KINDS = ("box", "cylinder", "cone", "sphere", "ellipsoid", "halfspace", "slab", "infinite_cylinder",
+         "elliptic_cylinder")
+#: the fewest segments of a circle
+MIN_SEGMENTS = 3
+#: the most segments of a circle or sphere (a tolerance far below the primitive's size)
+MAX_SEGMENTS = 4096
+#: the chord sag the facets are made for, as a share of the tolerance: the distance a mesh
+#: is checked by is the first-order |Q| / |grad Q|, a little more than the sag (for a circle
+#: of radius R and sag s, s (1 + s / 2R) / (1 - s / R))
+SAG_SHARE = 0.95
+
+
+@dataclass
+class Facets:
+    """A closed, outward triangle mesh in world coordinates, a tag per triangle."""
+
+    vertices: np.ndarray  # (V, 3) float64
+    triangles: np.ndarray  # (T, 3) int64
+    tags: np.ndarray  # (T,) int64
+
+
+def circle_segments(radius: float, tol: float) -> int:
+    """The least n >= MIN_SEGMENTS with radius (1 - cos(pi / n)) <= tol."""
+    sag = SAG_SHARE * tol
+    if not radius > sag:
+        return MIN_SEGMENTS
+    n = math.ceil(math.pi / math.acos(1.0 - sag / radius))
+    return int(min(max(n, MIN_SEGMENTS), MAX_SEGMENTS))
+
+
+@lru_cache(maxsize=None)
+def _unit_sphere(segments: int):
+    """(vertices, triangles, sag) of manifold3d's unit sphere of ``segments``: sag is the
+    largest distance of a triangle's plane below the sphere (its deviation bound)."""
+    import manifold3d
+
+    got = manifold3d.Manifold.sphere(1.0, segments).to_mesh64()
+    v = np.array(got.vert_properties, dtype=np.float64)[:, :3]
+    v /= np.linalg.norm(v, axis=1, keepdims=True)  # on the sphere to rounding
+    t = np.array(got.tri_verts, dtype=np.int64).reshape(-1, 3)
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    n = np.cross(b - a, c - a)
+    d = np.abs((n * a).sum(axis=1)) / np.linalg.norm(n, axis=1)
+    return v, t, float(1.0 - d.min())
+
+
+def sphere_segments(sag: float) -> int:
+    """The fewest segments (a multiple of 4) of manifold3d's unit sphere with sag <= ``sag``."""
+    # the sphere's sag is about 2.7 times that of a circle of as many segments: start below
+    n = 4 * max(1, math.ceil(math.pi / math.acos(1.0 - min(sag / 2.5, 1.0))) // 4)
+    while n < MAX_SEGMENTS and _unit_sphere(n)[2] > sag:
+        n += 4
+    return n
+
+
+def _world(points, m):
+    return points @ m[:3, :3].T + m[:3, 3]
+
+
+def _oriented(v, t, tags, m) -> Facets:
+    """Local mesh -> world Facets (triangles reversed under a reflection)."""
+    if np.linalg.det(m[:3, :3]) < 0:
+        t = t[:, ::-1]
+    return Facets(_world(v, m), np.ascontiguousarray(t, dtype=np.int64), np.asarray(tags, dtype=np.int64))
+
+
+def _prism(bottom, top, n, cap_tags, side_tag=0):
+    """A closed mesh between two rings of ``n`` points (counter-clockwise seen from +z; a ring
+    may be a single apex point): sides tagged ``side_tag``, caps (top, bottom) ``cap_tags``."""
+    nb, nt = len(bottom), len(top)
+    v = np.concatenate([bottom, top])
+    k = np.arange(n)
+    k1 = (k + 1) % n
+    tris, tags = [], []
+    if nb > 1 and nt > 1:
+        tris += [np.stack([k, k1, nb + k1], 1), np.stack([k, nb + k1, nb + k], 1)]
+    elif nb > 1:  # apex on top
+        tris.append(np.stack([k, k1, np.full(n, nb)], 1))
+    else:  # apex at the bottom
+        tris.append(np.stack([np.zeros(n, dtype=np.int64), 1 + k1, 1 + k], 1))
+    tags.append(np.full(sum(len(x) for x in tris), side_tag))
+    fan = np.arange(1, n - 1)
+    if nt > 1:
+        tris.append(np.stack([np.full(n - 2, nb), nb + fan, nb + fan + 1], 1))
+        tags.append(np.full(n - 2, cap_tags[0]))
+    if nb > 1:
+        tris.append(np.stack([np.zeros(n - 2, dtype=np.int64), fan + 1, fan], 1))
+        tags.append(np.full(n - 2, cap_tags[1]))
+    return v, np.concatenate(tris).astype(np.int64), np.concatenate(tags)
+
+
+def _ring(n, rx, ry, z):
+    a = 2.0 * np.pi * np.arange(n) / n
+    if rx == 0.0 and ry == 0.0:
+        return np.array([[0.0, 0.0, z]])
+    return np.stack([rx * np.cos(a), ry * np.sin(a), np.full(n, z)], 1)
+
+
+def _framed(m, axis, center):
+    """The instance matrix times the local frame (z along ``axis``, origin at ``center``)."""
+    f = np.eye(4)
+    f[:3, :3] = frame_z_to(np.asarray(axis, dtype=np.float64))
+    f[:3, 3] = np.asarray(center, dtype=np.float64)
+    return m @ f
+
+
+def _sigma(m):
+    return np.linalg.svd(m[:3, :3], compute_uv=False)
+
+
+def _box(p, m):
+    s = np.broadcast_to(np.asarray(p.get("size", 1.0), dtype=np.float64), (3,))
+    c = np.asarray(p.get("center", (0, 0, 0)), dtype=np.float64)
+    return cuboid(c - s / 2, c + s / 2, (0, 1, 2, 3, 4, 5), m)
+
+
+def cuboid(lo, hi, tags, m) -> Facets:
+    """An axis-aligned box [lo, hi] of the local frame; ``tags`` of its faces +x, -x, +y, -y,
+    +z, -z (the literal order of a box)."""
+    bits = np.array([[(i >> k) & 1 for k in range(3)] for i in range(8)], dtype=bool)
+    v = np.where(bits, hi, lo)
+    quads = [(1, 3, 7, 5), (0, 4, 6, 2), (2, 6, 7, 3), (0, 1, 5, 4), (4, 5, 7, 6), (0, 2, 3, 1)]
+    t = np.array([[a, b, c] for a, b, c, d in quads] + [[a, c, d] for a, b, c, d in quads], dtype=np.int64)
+    return _oriented(v, t, np.tile(np.asarray(tags), 2), m)
+
+
+def _round(p, m, tol, kind):
+    h = float(p.get("height", 1.0))
+    if kind == "cylinder":
+        r1 = r2 = float(p.get("radius", 1.0))
+    else:
+        r1, r2 = float(p.get("r1", 1.0)), float(p.get("r2", 0.0))
+    w = _framed(m, p.get("axis", (0, 0, 1)), p.get("center", (0, 0, 0)))
+    n = circle_segments(max(r1, r2) * _sigma(w)[0], tol)
+    v, t, tags = _prism(_ring(n, r1, r1, -h / 2), _ring(n, r2, r2, h / 2), n, (1, 2))
+    return _oriented(v, t, tags, w)
+
+
+def _ellipsoid(p, m, tol, kind):
+    r = np.broadcast_to(np.asarray(p.get("radii" if kind == "ellipsoid" else "radius", 1.0), dtype=np.float64), (3,))
+    w = m @ np.diag([*r, 1.0])
+    w[:3, 3] = _world(np.asarray(p.get("center", (0, 0, 0)), dtype=np.float64), m)
+    s = _sigma(w)
+    v, t, _ = _unit_sphere(sphere_segments(SAG_SHARE * tol / s[0]))
+    return _oriented(v, t, np.zeros(len(t), dtype=np.int64), w)
+
+
+def _reach_local(m, reach):
+    """The region of interest (world ball (center, radius)) in the local frame ``m``: a ball
+    (center, radius) holding its preimage."""
+    c, rad = reach
+    inv = np.linalg.inv(m)
+    cl = _world(np.asarray(c, dtype=np.float64), inv)
+    return cl, float(rad) * float(_sigma(inv)[0])
+
+
+def _planar(p, m, reach, kind):
+    n = np.asarray(p.get("normal", (0, 0, 1)), dtype=np.float64)
+    length = float(np.linalg.norm(n))
+    n = n / length
+    if kind == "halfspace":
+        lo, hi = None, float(p.get("offset", 0.0)) / length
+    else:
+        lo, hi = float(p.get("lo", -0.5)), float(p.get("hi", 0.5))
+    f = np.eye(4)
+    f[:3, :3] = frame_z_to(n)
+    w = m @ f
+    cl, rad = _reach_local(w, reach)
+    rad = 1.5 * rad + abs(cl[2] - hi) + (0.0 if lo is None else abs(hi - lo)) + 1.0
+    bottom = cl[2] - rad if lo is None else lo
+    return cuboid(np.array([cl[0] - rad, cl[1] - rad, bottom]), np.array([cl[0] + rad, cl[1] + rad, hi]),
+                   (CLOSING, CLOSING, CLOSING, CLOSING, 0, CLOSING if lo is None else 0), w)
+
+
+def _infinite(p, m, tol, reach, kind):
+    w = _framed(m, p.get("axis", (0, 0, 1)), p.get("center", (0, 0, 0)))
+    if kind == "infinite_cylinder":
+        rx = ry = float(p.get("radius", 1.0))
+    else:
+        rx, ry = (float(x) for x in p.get("radii", (1.0, 0.5)))
+    cl, rad = _reach_local(w, reach)
+    z0, z1 = cl[2] - 1.5 * rad - 1.0, cl[2] + 1.5 * rad + 1.0
+    n = circle_segments(max(rx, ry) * _sigma(w)[0], tol)
+    v, t, tags = _prism(_ring(n, rx, ry, z0), _ring(n, rx, ry, z1), n, (CLOSING, CLOSING))
+    return _oriented(v, t, tags, w)
+
+
+def instance_facets(inst, tol: float, reach) -> Facets | None:
+    """The faceted mesh of ``inst`` (a :class:`clcsg.compile.tape.Instance`) within ``tol``;
+    ``reach``: the world ball (center, radius) the unbounded kinds must cover.  None for a
+    kind without a closed form here."""
+    kind, p, m = inst.node.kind, inst.node.params, np.asarray(inst.matrix, dtype=np.float64)
+    if kind == "box":
+        return _box(p, m)
+    if kind in ("cylinder", "cone"):
+        return _round(p, m, tol, kind)
+    if kind in ("sphere", "ellipsoid"):
+        return _ellipsoid(p, m, tol, kind)
+    if kind in ("halfspace", "slab"):
+        return _planar(p, m, reach, kind)
+    if kind in ("infinite_cylinder", "elliptic_cylinder"):
+        return _infinite(p, m, tol, reach, kind)
+    return None

@@ -1,0 +1,219 @@
+"""Vertices of a faceted Boolean result moved onto the exact surface, curves and corners.
+
+Every triangle of :func:`clcsg.meshing.instance_booleans.boolean_mesh` lies on one quadric's
+facets; a vertex's *set* is the quadrics of the triangles around it.  A vertex with one
+quadric is projected onto it, with two onto their intersection curve, with three onto the
+corner (Newton's method in float64, :func:`clcsg.meshing.project.newton`: the minimum-norm
+step, quadratic near a transversal intersection).  Of more than three quadrics (four planes
+through a pyramid's apex, a corner where coincident faces meet) the three with the most
+independent normals are used.
+
+Newton may fail where surfaces meet at a grazing angle (a fillet tangent to a face): it does
+not converge, or converges to a point farther than :data:`MAX_MOVE` tolerances away (another
+branch of the curve).  Such a vertex is solved for each subset of one quadric fewer, the
+solution that moves least taken, down to single quadrics; one that no single quadric takes
+within the limit (a cone's apex, where the gradient vanishes) stays where the facets put it,
+on its first quadric to their accuracy.  The counts are kept in the stats.
+
+The topology is the Boolean result's, untouched: the mesh stays closed, oriented and
+2-manifold.  Faceted curved surfaces are inscribed and their vertices move outward onto the
+surface, so a triangle's deviation from its quadric stays the chord sag the facets were made
+for (:mod:`.facets`).
+"""
+
+from __future__ import annotations
+
+from itertools import combinations
+
+import numpy as np
+
+from .project import REL, first_order_distance, newton
+
+#: a solved vertex may move at most this many tolerances (else a grazing intersection's far
+#: branch: the vertex keeps fewer quadrics)
+MAX_MOVE = 8.0
+
+
+def vertex_sets(n_vertices: int, triangles, tri_quadric) -> np.ndarray:
+    """(V, k) the distinct quadrics of the triangles around each vertex, -1 padded, in
+    ascending order (``tri_quadric`` < 0: none)."""
+    v = triangles.reshape(-1)
+    q = np.repeat(tri_quadric, 3)
+    keep = q >= 0
+    pairs = np.unique(np.stack([v[keep], q[keep]], 1), axis=0)
+    counts = np.bincount(pairs[:, 0], minlength=n_vertices)
+    width = max(1, int(counts.max(initial=0)))
+    out = np.full((n_vertices, width), -1, dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    col = np.arange(len(pairs)) - starts[pairs[:, 0]]
+    out[pairs[:, 0], col] = pairs[:, 1]
+    return out
+
+
+def _independent_three(matrices, sets, x):
+    """Per row of ``sets`` (N, k > 3), the three quadrics whose unit normals at ``x`` span
+    the largest volume."""
+    xh = np.concatenate([x, np.ones((len(x), 1))], axis=1)
+    ok = sets >= 0
+    g = np.einsum("nkij,nj->nki", matrices[np.where(ok, sets, 0)], xh)[..., :3]
+    g /= np.maximum(np.linalg.norm(g, axis=2, keepdims=True), 1e-300)
+    best = np.full(len(x), -1.0)
+    pick = np.repeat(np.arange(3)[None], len(x), 0)
+    for c in combinations(range(sets.shape[1]), 3):
+        valid = ok[:, list(c)].all(axis=1)
+        vol = np.abs(np.linalg.det(g[:, list(c)]))
+        better = valid & (vol > best)
+        best[better] = vol[better]
+        pick[better] = c
+    return np.take_along_axis(sets, pick, axis=1)
+
+
+def _solve(matrices, subsets, x0, limit):
+    """Newton from ``x0`` (N, 3) onto each of the ``subsets`` (list of (N, j) index arrays, one
+    j per list); per point the converged solution within ``limit`` that moved least:
+    (x, chosen subset index (-1: none), ...)."""
+    best = np.full(len(x0), np.inf)
+    pick = np.full(len(x0), -1)
+    x = x0.copy()
+    for s, sub in enumerate(subsets):
+        got, ok = newton(matrices[sub], x0)
+        move = np.linalg.norm(got - x0, axis=1)
+        better = ok & (move <= limit) & (move < best)
+        x[better], best[better], pick[better] = got[better], move[better], s
+    return x, pick
+
+
+def snap(vertices, sets, matrices, tol: float):
+    """(vertices moved, the quadrics each lies on (V, max(3, width of ``sets``)) -1 padded,
+    fallbacks: the vertices solved for fewer of their (at most three) quadrics than they touch): see the module docstring.  ``matrices``: the
+    quadric matrices the set indices name."""
+    x = np.array(vertices, dtype=np.float64, copy=True)
+    n = len(x)
+    count = np.minimum((sets >= 0).sum(axis=1), 3)
+    three = np.full((n, 3), -1, dtype=np.int64)
+    w = min(3, sets.shape[1])
+    three[:, :w] = sets[:, :w]
+    wide = (sets >= 0).sum(axis=1) > 3
+    if wide.any():
+        three[wide] = _independent_three(matrices, sets[wide], x[wide])
+    kept = np.full((n, 3), -1, dtype=np.int64)
+    limit = MAX_MOVE * tol
+    for k in (1, 2, 3):
+        sel = np.flatnonzero(count == k)
+        todo = sel
+        for j in range(k, 0, -1):  # all k quadrics, then each subset of k - 1, ...
+            if not len(todo):
+                break
+            subsets = [list(c) for c in combinations(range(k), j)]
+            got, pick = _solve(matrices, [three[todo][:, c] for c in subsets], x[todo], limit)
+            done = pick >= 0
+            if j == 1:  # the last resort: where it is, on its first quadric to the facets' accuracy
+                pick[~done], done = 0, np.ones(len(todo), dtype=bool)
+            rows = todo[done]
+            x[rows] = got[done]
+            for s, c in enumerate(subsets):
+                r = rows[pick[done] == s]
+                kept[r, :j] = three[r][:, c]
+            todo = todo[~done]
+    fallbacks = int(((kept >= 0).sum(axis=1) < count).sum())
+    return x, with_satisfied(matrices, sets, kept, x), fallbacks
+
+
+def with_satisfied(matrices, sets, kept, x):
+    """Per vertex every quadric of its ``sets`` that the solved point satisfies to rounding
+    (V, max(3, width)) -1 padded, those solved for (``kept``) first: three quadrics through
+    one curve (a cone standing on a cylinder on the cap's plane), or a fourth plane through a
+    corner."""
+    scale = np.maximum(1.0, np.abs(x).max(axis=1))
+    width = max(3, sets.shape[1])
+    out = np.full((len(x), width), -1, dtype=np.int64)
+    out[:, :3] = kept
+    fill = (kept >= 0).sum(axis=1)
+    for c in range(sets.shape[1]):
+        cand = sets[:, c]
+        rows = np.flatnonzero((cand >= 0) & ~(kept == cand[:, None]).any(axis=1))
+        if not len(rows):
+            continue
+        d = first_order_distance(matrices[cand[rows]][:, None], x[rows])
+        rows = rows[d <= 1e3 * REL * scale[rows]]
+        out[rows, fill[rows]] = cand[rows]
+        fill[rows] += 1
+    return out
+
+
+#: directions of the straddle test (a Fibonacci sphere)
+_K = np.arange(32) + 0.5
+_Z = 1.0 - 2.0 * _K / 32
+_DIRS = np.stack([np.sqrt(1 - _Z * _Z) * np.cos(_K * np.pi * (3.0 - np.sqrt(5.0)) + 0.3),
+                  np.sqrt(1 - _Z * _Z) * np.sin(_K * np.pi * (3.0 - np.sqrt(5.0)) + 0.3), _Z], axis=1)
+#: the straddle test's radius, relative to max(1, largest |coordinate|)
+STRADDLE = 1e-7
+
+
+def straddles(x, contains, eps) -> np.ndarray:
+    """Per point of ``x`` whether points at distance ``eps`` around it are both inside and
+    outside the solid (``contains``: points (N, 3) -> bool): it is on the surface."""
+    if not len(x):
+        return np.zeros(0, dtype=bool)
+    ins = contains((x[:, None] + eps * _DIRS[None]).reshape(-1, 3)).reshape(len(x), -1)
+    return ins.any(axis=1) & ~ins.all(axis=1)
+
+
+def _neighbour_candidates(x, kept, triangles, matrices, tol):
+    """(vertex, quadric) pairs: a quadric of a neighbouring vertex's set, not the vertex's own,
+    within ``tol`` of it (first order), nearest first."""
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    e = np.concatenate([e, e[:, ::-1]])
+    v = np.repeat(e[:, 0], 3)
+    q = kept[e[:, 1]].reshape(-1)
+    keep = (q >= 0) & ~(kept[v] == q[:, None]).any(axis=1)
+    pairs = np.unique(np.stack([v[keep], q[keep]], 1), axis=0)
+    if not len(pairs):
+        return pairs, np.zeros(0)
+    d = first_order_distance(matrices[pairs[:, 1]][:, None], x[pairs[:, 0]])
+    near = d <= tol
+    pairs, d = pairs[near], d[near]
+    order = np.lexsort((d, pairs[:, 0]))
+    return pairs[order], d[order]
+
+
+def repair_off_surface(x, kept, triangles, matrices, tol, contains):
+    """Vertices solved onto a curve beyond the corner where a third quadric cuts it off (the
+    faceted cutter is inscribed, so its facets meet the curve short of the exact corner): such
+    a vertex, off the solid's surface by the straddle test, is solved again with a neighbour's
+    quadric added (the corner; of a vertex on three, with each pair of them), the nearest
+    candidate first, and takes the first solution within :data:`MAX_MOVE` tolerances that
+    straddles.  In place; returns (the vertices found off the surface, those moved onto it)."""
+    pairs, _ = _neighbour_candidates(x, kept, triangles, matrices, tol)
+    if not len(pairs):
+        return 0, 0
+    scale = max(1.0, float(np.abs(x).max()))
+    eps = STRADDLE * scale
+    rows = np.unique(pairs[:, 0])
+    off = rows[~straddles(x[rows], contains, eps)]
+    if not len(off):
+        return 0, 0
+    tries = []  # (vertex, rank, quadrics)
+    for rank, (v, c) in enumerate(pairs[np.isin(pairs[:, 0], off)].tolist()):
+        own = [int(q) for q in kept[v] if q >= 0]
+        combos = [own[:2]] if len(own) < 3 else [[own[0], own[1]], [own[0], own[2]], [own[1], own[2]]]
+        tries += [(v, 3 * rank + k, combo + [c]) for k, combo in enumerate(combos)]
+    best = {}
+    for size in (2, 3):
+        group = [t for t in tries if len(t[2]) == size]
+        if not group:
+            continue
+        v = np.array([t[0] for t in group])
+        qs = np.array([t[2] for t in group])
+        got, ok = newton(matrices[qs], x[v])
+        ok &= np.linalg.norm(got - x[v], axis=1) <= MAX_MOVE * tol
+        idx = np.flatnonzero(ok)
+        idx = idx[straddles(got[idx], contains, eps)]
+        for i in idx.tolist():
+            vi, rank = group[i][0], group[i][1]
+            if vi not in best or rank < best[vi][0]:
+                best[vi] = (rank, got[i], group[i][2])
+    for v, (_, p, qs) in best.items():
+        x[v] = p
+        kept[v] = (qs + [-1] * kept.shape[1])[:kept.shape[1]]
+    return len(off), len(best)

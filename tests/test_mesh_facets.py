@@ -1,0 +1,167 @@
+"""The facets method of ``clcsg.mesh`` (:mod:`clcsg.meshing.exact_facets`): faceted primitives,
+manifold3d's Booleans, vertices solved onto the exact surface.  The primitives' facets against
+their own quadrics (float64), the segment counts against the chord sag (hypothesis), the
+visible primitive of every triangle against the float64 oracle's colour rule, and the
+method's choice and errors."""
+
+from __future__ import annotations
+
+import math
+
+import manifold3d
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import clcsg
+import tree_oracle as oracle
+from clcsg.model.csg import Primitive
+from clcsg.errors import UsageError
+from clcsg.meshing.facets import CLOSING, KINDS, SAG_SHARE, circle_segments, instance_facets, sphere_segments, _unit_sphere
+from test_mesh import check_closed_manifold, check_vertices_on_surface, point_mesh_distance
+from test_raytrace import COLOUR_SCENES
+
+
+@settings(max_examples=200, deadline=None)
+@given(radius=st.floats(1e-3, 1e3), rel=st.floats(1e-5, 0.5))
+def test_circle_segments_are_the_fewest_within_the_sag(radius, rel):
+    """R (1 - cos(pi / n)) <= SAG_SHARE tol, and n - 1 segments would exceed it."""
+    tol = rel * radius
+    n = circle_segments(radius, tol)
+    sag = lambda k: radius * (1.0 - math.cos(math.pi / k))
+    assert sag(n) <= SAG_SHARE * tol * (1 + 1e-12)
+    assert n == 3 or sag(n - 1) > SAG_SHARE * tol
+
+
+@pytest.mark.parametrize("sag", [0.3, 0.05, 0.01, 0.002])
+def test_sphere_segments_meet_the_sag(sag):
+    """The unit sphere's triangles (their planes) stay within the sag of the sphere."""
+    n = sphere_segments(sag)
+    assert _unit_sphere(n)[2] <= sag
+    assert n == 4 or _unit_sphere(n - 4)[2] > sag
+
+
+def _affine(rng):
+    m = np.eye(4)
+    m[:3, :3] = rng.normal(size=(3, 3)) + 2 * np.eye(3)
+    m[:3, 3] = rng.normal(size=3)
+    return m
+
+
+PRIMITIVES = {
+    "box": clcsg.box((1.0, 2.0, 0.5), center=(0.1, 0.2, 0.3)),
+    "cylinder": clcsg.cylinder(height=2.0, radius=0.7, axis=(1, 1, 0)),
+    "cone": clcsg.cone(height=1.5, r1=0.8, r2=0.2),
+    "apex_cone": clcsg.cone(height=1.5, r1=0.0, r2=0.6, axis=(0, 1, 1)),
+    "sphere": clcsg.sphere(0.9, center=(0.3, 0, 0)),
+    "ellipsoid": clcsg.ellipsoid((1.0, 0.4, 0.7)),
+    "halfspace": clcsg.halfspace((0.3, 1.0, 0.2), 0.4),
+    "slab": clcsg.slab((1, 0, 1), -0.3, 0.5),
+    "infinite_cylinder": Primitive("infinite_cylinder", {"axis": (0, 1, 0), "radius": 0.5}),
+    "elliptic_cylinder": Primitive("elliptic_cylinder", {"axis": (1, 0, 1), "radii": (0.6, 0.3)}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PRIMITIVES))
+@pytest.mark.parametrize("seed", [0, 1])
+def test_facets_closed_on_their_literals_within_the_sag(name, seed):
+    """Each kind's facets under a random affine map: a closed 2-manifold of positive volume;
+    every vertex of a triangle tagged with literal k lies on that literal's quadric (float64
+    residual), and the triangle's centroid and edge midpoints stay within the tolerance."""
+    assert PRIMITIVES[name].kind in KINDS
+    shape = PRIMITIVES[name].transform(_affine(np.random.default_rng(seed)))
+    tape = clcsg.Scene(shape, bound=((-4, -4, -4), (4, 4, 4))).compile()
+    inst = tape.instances[0]
+    tol = 0.01
+    f = instance_facets(inst, tol, (np.zeros(3), 4.0 * math.sqrt(3)))
+    mesh = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=f.vertices, tri_verts=f.triangles.astype(np.uint64)))
+    assert mesh.status() == manifold3d.Error.NoError
+    assert mesh.volume() > 0
+    assert set(np.unique(f.tags)) <= set(range(len(inst.literals))) | {CLOSING}
+    for k, (q, _) in enumerate(inst.literals):
+        on = f.tags == k
+        if not on.any():
+            continue
+        Q = tape.quadrics[q]
+        v = f.vertices[f.triangles[on]]
+        pts = np.concatenate([v.reshape(-1, 3), v.mean(axis=1), 0.5 * (v + np.roll(v, 1, axis=1)).reshape(-1, 3)])
+        xh = np.c_[pts, np.ones(len(pts))]
+        val = np.einsum("ni,ij,nj->n", xh, Q, xh)
+        grad = np.linalg.norm(2 * (xh @ Q)[:, :3], axis=1)
+        at_vertex = np.abs(val[:v.size // 3])
+        assert at_vertex.max() <= 1e-12 * max(1.0, np.abs(Q).max()) * max(1.0, np.abs(pts).max()) ** 2
+        dist = np.abs(val[v.size // 3:]) / np.maximum(grad[v.size // 3:], 1e-300)
+        assert dist.max() <= tol
+
+
+@pytest.mark.parametrize("name", sorted(COLOUR_SCENES))
+def test_visible_primitive_per_triangle(name):
+    """Each triangle names the primitive the colour rule gives its centroid (the oracle's
+    ``primitive_at``): flush inlays show the inlay, coincident faces the first that bounds the
+    solid, a coloured cutter its own colour, two cubes side by side keep theirs; the colours
+    are those primitives'."""
+    shape = COLOUR_SCENES[name]
+    sc = clcsg.Scene(shape)
+    tape = sc.compile()
+    m = clcsg.mesh(sc, method="facets")
+    check_closed_manifold(m)
+    ref = oracle.primitive_at(shape, m.vertices[m.triangles].mean(axis=1), tape.quadrics[m.quadric], tol=m.tolerance)
+    assert np.array_equal(m.primitive, ref)
+    colors = np.array([inst.color for inst in tape.instances])
+    assert np.allclose(m.colors, colors[m.primitive])
+
+
+def test_unbounded_kinds_clipped_to_the_bound():
+    """A half-space, a slab and an infinite cylinder, clipped by the scene's bound: closed,
+    every vertex on the surface of the clipped solid, the bound's faces where it is cut."""
+    shape = clcsg.intersection(clcsg.halfspace((0, 0, 1), 0.3), clcsg.slab((1, 0, 0), -0.5, 0.5),
+                               ~Primitive("infinite_cylinder", {"axis": (0, 1, 0), "radius": 0.3}))
+    sc = clcsg.Scene(shape, bound=((-1, -1, -1), (1, 1, 1)))
+    m = clcsg.mesh(sc, method="facets")
+    check_closed_manifold(m)
+    lo, hi = m.vertices.min(axis=0), m.vertices.max(axis=0)
+    assert np.allclose(lo, (-0.5, -1, -1)) and np.allclose(hi, (0.5, 1, 0.3))
+    exact = 1.0 * 2.0 * 1.3 - math.pi * 0.09 * 2.0
+    import trimesh
+
+    vol = trimesh.Trimesh(m.vertices, m.triangles, process=False).volume
+    assert abs(vol - exact) <= 30 * m.tolerance
+    on_bound = (m.quadric < 0)
+    assert on_bound.any()  # the cut faces of the bound
+    real = m.vertex_quadrics[:, 0] >= 0
+    q = sc.compile().quadrics[m.vertex_quadrics[real, 0]]
+    on_q, _ = oracle.sample_residuals(shape, m.vertices[real], q)
+    assert on_q.max() <= 1e-12
+
+
+def test_grazing_cylinders_are_faceted_again():
+    """The tricylinder's cylinders touch tangentially at six points; the first facets meet the
+    wrong way round there, and the instances are faceted again until every triangle is within
+    the tolerance of its quadric and on it at its vertices."""
+    sc = clcsg.load(oracle_path("examples/zoo/steinmetz.json"))
+    m = clcsg.mesh(sc, method="facets")
+    assert m.stats["facet_rounds"] >= 2
+    assert m.stats["far_triangles"] == 0 and m.stats["spanning_triangles"] == 0
+    check_closed_manifold(m)
+    check_vertices_on_surface(sc, m)
+    sp = oracle.surface_points(sc.shape, sc.compile().bound, n_lines=200, seed=2)
+    assert point_mesh_distance(sp.points, m.vertices, m.triangles).max() <= m.tolerance
+
+
+def oracle_path(rel):
+    import os
+
+    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), rel)
+
+
+def test_methods_chosen_and_checked():
+    """auto: facets where every kind has a faceting, contour for a hyperboloid; facets asked
+    for a hyperboloid is a usage error naming the kind; an unknown method too."""
+    box = clcsg.Scene(clcsg.box(1.0) - clcsg.cylinder(2.0, 0.3))
+    assert clcsg.mesh(box).stats["method"] == "facets"
+    assert "method" not in clcsg.mesh(box, method="contour").stats or clcsg.mesh(box, method="contour").stats["method"] != "facets"
+    tower = clcsg.Scene(Primitive("hyperboloid_one_sheet", {"radii": (0.6, 0.6, 0.9)}) & clcsg.box(1.0))
+    with pytest.raises(UsageError, match="hyperboloid_one_sheet"):
+        clcsg.mesh(tower, method="facets")
+    with pytest.raises(UsageError, match="method"):
+        clcsg.mesh(box, method="marching")
