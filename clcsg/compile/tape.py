@@ -350,13 +350,10 @@ class _WorldLiterals:
             start += c
 
 
-def instances_of(shape: Shape, table: QuadricTable, source: str = "scene", world=None) -> list[Instance]:
-    """The primitive instances of ``shape`` in tree order (iterative depth-first walk; a shared
-    sub-graph under the same transform is walked once).  Their boxes are the primitives' exact
-    boxes (:func:`~clcsg.compile.bounds.exact_boxes.kind_boxes`, in one batch; the polytope box of
-    :func:`~clcsg.compile.bounds.term_boxes.term_box` for kinds without a closed form)."""
-    world = _WorldLiterals(table, source) if world is None else world
-    out: list[Instance] = []
+def instance_matrices(shape: Shape) -> list[tuple]:
+    """(primitive, accumulated transform) of ``shape``'s primitive instances in tree order
+    (iterative depth-first walk; a shared sub-graph under the same transform is walked once)."""
+    out: list = []
     seen = set()
     stack = [(shape, np.eye(4))]
     while stack:
@@ -366,11 +363,21 @@ def instances_of(shape: Shape, table: QuadricTable, source: str = "scene", world
             continue
         seen.add(key)
         if isinstance(node, Primitive):
-            out.append(Instance(len(out), node, m, None, node.color, None))
+            out.append((node, m))
             continue
         _, kids = _children(node, m, False)
         for child, cm, _ in reversed(kids):
             stack.append((child, cm))
+    return out
+
+
+def instances_of(shape: Shape, table: QuadricTable, source: str = "scene", world=None) -> list[Instance]:
+    """The primitive instances of ``shape`` in tree order (:func:`instance_matrices`).  Their
+    boxes are the primitives' exact boxes (:func:`~clcsg.compile.bounds.exact_boxes.kind_boxes`,
+    in one batch; the polytope box of :func:`~clcsg.compile.bounds.term_boxes.term_box` for
+    kinds without a closed form)."""
+    world = _WorldLiterals(table, source) if world is None else world
+    out = [Instance(k, node, m, None, node.color, None) for k, (node, m) in enumerate(instance_matrices(shape))]
     world.prepare([(i.node, i.matrix) for i in out])
     for inst in out:
         inst.literals = world(inst.node, inst.matrix)

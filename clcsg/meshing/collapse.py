@@ -24,14 +24,17 @@ COINCIDENT = 1e-12
 MAX_MERGE_GROUPS = 1000
 
 
-def collapse_coincident(m, stats: dict) -> None:
-    """Collapse the zero-length edges of ``m`` in place (those that keep the mesh manifold)."""
+def collapse_coincident(m, stats: dict, unjoined: bool = True) -> None:
+    """Collapse the zero-length edges of ``m`` in place (those that keep the mesh manifold),
+    and merge coincident vertices no edge joins if ``unjoined`` (not where the mesh comes
+    from manifold3d, which keeps such vertices apart on purpose: two cubes touching along an
+    edge)."""
     edges, _ = edges_of(m.triangles)
     scale = max(1.0, float(np.abs(m.vertices).max(initial=0.0)))
     length = np.linalg.norm(m.vertices[edges[:, 0]] - m.vertices[edges[:, 1]], axis=1)
     cand = edges[length <= COINCIDENT * scale]
     done = _collapse_edges(m, cand) if len(cand) else 0
-    stats.update(collapsed_edges=done, merged_vertices=_merge_unjoined(m, scale))
+    stats.update(collapsed_edges=done, merged_vertices=_merge_unjoined(m, scale) if unjoined else 0)
 
 
 def _collapse_edges(m, cand) -> int:

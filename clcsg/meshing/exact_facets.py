@@ -33,7 +33,7 @@ from ..model.csg import DEFAULT_COLOR
 from . import refine
 from .collapse import collapse_coincident
 from .facets import KINDS
-from .instance_booleans import boolean_mesh, facets_of
+from .instance_booleans import boolean_mesh, common_frame, facets_of
 from .owners import primitives_of, shared_nearest
 from .project import first_order_distance
 from .snap import repair_off_surface, snap, vertex_sets
@@ -90,8 +90,8 @@ def _deviation(tape, vertices, triangles, quad) -> np.ndarray:
     return out
 
 
-def _one_round(tape, facets, tol: float, stats: dict) -> Faceted:
-    got = timed(stats, "booleans", boolean_mesh, tape, facets)
+def _one_round(tape, facets, frame, tol: float, stats: dict) -> Faceted:
+    got = timed(stats, "booleans", boolean_mesh, tape, facets, frame)
     n_inst, n_q = len(tape.instances), tape.n_quadrics
     table = np.full((n_inst + 1, 8), -1, dtype=np.int64)
     for inst in tape.instances:
@@ -106,7 +106,7 @@ def _one_round(tape, facets, tol: float, stats: dict) -> Faceted:
                         lambda p: contains(ops, qs, p))
     kept[kept >= n_q] = -1
     m = refine.Surface(tape, verts, refine._compact(kept), got.triangles, np.where(tri_q < n_q, tri_q, -1), wide=True)
-    timed(stats, "collapse", collapse_coincident, m, stats)
+    timed(stats, "collapse", collapse_coincident, m, stats, False)
     used = np.zeros(len(m.vertices), dtype=bool)
     used[m.triangles] = True
     index = np.cumsum(used) - 1
@@ -122,14 +122,16 @@ def _one_round(tape, facets, tol: float, stats: dict) -> Faceted:
                    m.sets[used], spanning | far)
 
 
-def mesh_by_facets(tape, tol: float, stats: dict) -> Faceted:
-    """The mesh of ``tape``'s solid within ``tol`` (see the module docstring)."""
+def mesh_by_facets(shape, tape, tol: float, stats: dict) -> Faceted:
+    """The mesh of ``shape``'s solid (``tape``: its compiled tape) within ``tol`` (see the
+    module docstring)."""
     tols = np.full(len(tape.instances), float(tol))
     owners = tape.owners()
     rounds = 0
+    frame = common_frame(shape, tape.instances)
     while True:
-        facets = timed(stats, "facets", facets_of, tape, tols)
-        got = _one_round(tape, facets, tol, stats)
+        facets = timed(stats, "facets", facets_of, tape, tols, frame)
+        got = _one_round(tape, facets, frame[0], tol, stats)
         rounds += 1
         if not got.bad.any() or rounds >= MAX_ROUNDS:
             break

@@ -221,11 +221,13 @@ def _infinite(p, m, tol, reach, kind):
     return _oriented(v, t, tags, w)
 
 
-def instance_facets(inst, tol: float, reach) -> Facets | None:
+def instance_facets(inst, tol: float, reach, matrix=None) -> Facets | None:
     """The faceted mesh of ``inst`` (a :class:`clcsg.compile.tape.Instance`) within ``tol``;
-    ``reach``: the world ball (center, radius) the unbounded kinds must cover.  None for a
-    kind without a closed form here."""
-    kind, p, m = inst.node.kind, inst.node.params, np.asarray(inst.matrix, dtype=np.float64)
+    ``reach``: the ball (center, radius) the unbounded kinds must cover.  ``matrix``: the
+    instance's transform into the frame the mesh is built in (default: its world matrix; the
+    tolerance and the ball are in that frame).  None for a kind without a closed form here."""
+    kind, p = inst.node.kind, inst.node.params
+    m = np.asarray(inst.matrix if matrix is None else matrix, dtype=np.float64)
     if kind == "box":
         return _box(p, m)
     if kind in ("cylinder", "cone"):

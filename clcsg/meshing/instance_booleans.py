@@ -1,12 +1,13 @@
 """The solid as manifold3d Booleans of its instances' faceted meshes (:mod:`.facets`).
 
 The instance program (:mod:`clcsg.compile.instance_program`: AND / OR rows over instance
-leaves, complements at the leaves) is evaluated on manifolds.  A register holds a manifold M
-and a polarity: M itself, or its complement, kept symbolic so that no complement is built
+leaves, complements at the leaves) is read back into n-ary nodes (same-kind chains
+flattened) and evaluated on manifolds by batched Booleans.  A node's value is a manifold M and
+a polarity: M itself, or its complement, kept symbolic so that no complement is built
 against a box:
 
-    A & B = A n B      A & ~B = A - B     ~A & ~B = ~(A u B)
-    A | B = A u B      A | ~B = ~(B - A)  ~A | ~B = ~(A n B)
+    A n B n ~C n ~D = (A n B) - (C u D)       (no positive operand: ~(C u D))
+    A u B u ~C u ~D = ~((C n D) - (A u B))    (no complement: A u B)
 
 Only a complement left at the root is made real, as K - M with K the clip box (the scene's
 bound); a result reaching out of K is intersected with it.
@@ -25,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+from ..compile.tape import instance_matrices
+from ..model.csg import Transformed, Union
 from .facets import Facets, cuboid, instance_facets
 
 #: face IDs per instance: more than a primitive's literals (a box has six) plus the closing tag
@@ -54,67 +57,134 @@ def _clip_box(m3d, lo, hi, instance):
     return _manifold(m3d, cuboid(lo, hi, (0, 1, 2, 3, 4, 5), np.eye(4)), instance)
 
 
-def _and(a, b):
-    (ma, na), (mb, nb) = a, b
-    if not na and not nb:
-        return ma ^ mb, False
-    if not na:
-        return ma - mb, False
-    if not nb:
-        return mb - ma, False
-    return ma + mb, True
+def _expression(ops):
+    """The instance program as nested n-ary nodes: ("leaf", instance, negated), ("const", value),
+    ("and" | "or", [children]) with same-kind chains flattened (a union of 2,500 holes is one
+    node of 2,500 children, built by one batched Boolean)."""
+    regs: dict = {}
+    for op, out, a, b in np.asarray(ops).tolist():
+        if op == OP_LEAF:
+            regs[out] = ("leaf", a, b < 0)
+        elif op == OP_CONST:
+            regs[out] = ("const", bool(a))
+        elif op == OP_COPY:
+            regs[out] = regs[a]
+        else:
+            kind = "and" if op == OP_AND else "or"
+            kids = []
+            for c in (regs[a], regs[b]):
+                kids += c[1] if c[0] == kind else [c]
+            regs[out] = (kind, kids)
+    return regs[int(np.asarray(ops)[-1][1])] if len(ops) else ("const", False)
 
 
-def _or(a, b):
-    (ma, na), (mb, nb) = a, b
-    if not na and not nb:
-        return ma + mb, False
-    if not na:
-        return mb - ma, True
-    if not nb:
-        return ma - mb, True
-    return ma ^ mb, True
+class _Builder:
+    """Manifolds of expression nodes: (manifold, negated) per node, shared nodes once."""
+
+    def __init__(self, m3d, leaves):
+        self.m3d, self.leaves, self.memo = m3d, leaves, {}
+        self.empty = m3d.Manifold()
+
+    def batch(self, parts, op):
+        if len(parts) == 1:
+            return parts[0]
+        return self.m3d.Manifold.batch_boolean(parts, op)
+
+    def build(self, node):
+        key = id(node)
+        if key not in self.memo:
+            self.memo[key] = (node, self._build(node))  # the node kept alive: its id stays unique
+        return self.memo[key][1]
+
+    def _build(self, node):
+        kind = node[0]
+        if kind == "leaf":
+            return self.leaves(node[1]), node[2]
+        if kind == "const":
+            return self.empty, node[1]  # TRUE: the complement of nothing
+        absorbing = kind == "or"  # the constant that decides the node: TRUE for or, FALSE for and
+        pos, neg = [], []
+        for child in node[1]:
+            m, negated = self.build(child)
+            if child[0] == "const":
+                if child[1] == absorbing:
+                    return self.empty, absorbing
+                continue
+            (neg if negated else pos).append(m)
+        add, meet = self.m3d.OpType.Add, self.m3d.OpType.Intersect
+        if kind == "and":  # A n B n ~C n ~D = (A n B) - (C u D)
+            if not pos:
+                return (self.batch(neg, add), True) if neg else (self.empty, True)
+            whole = self.batch(pos, meet)
+            return (whole - self.batch(neg, add) if neg else whole), False
+        # A u B u ~C u ~D = ~((C n D) - (A u B))
+        if not neg:
+            return (self.batch(pos, add) if pos else self.empty), False
+        whole = self.batch(neg, meet)
+        return (whole - self.batch(pos, add) if pos else whole), True
 
 
-def facets_of(tape, tols):
+def common_frame(shape, instances):
+    """(G, per instance its matrix below G): G is the product of the transforms every
+    instance lies under (a scene rotated as a whole), the matrices those the walk below them
+    gives, so that the Booleans run in the frame where the scene was modelled (axis-aligned
+    boxes stay exactly axis-aligned: G^-1 times a world matrix would carry its rounding).
+    (identity, world matrices) where there is no such transform or the walks disagree."""
+    g = np.eye(4)
+    node = shape
+    while True:
+        if isinstance(node, Transformed):
+            g, node = g @ node.matrix, node.operand
+        elif isinstance(node, Union) and len(node.operands) == 1:
+            node = node.operands[0]
+        else:
+            break
+    world = [np.asarray(i.matrix, dtype=np.float64) for i in instances]
+    if np.array_equal(g, np.eye(4)):
+        return g, world
+    local = instance_matrices(node)
+    if len(local) != len(instances) or any(n is not i.node for (n, _), i in zip(local, instances)):
+        return np.eye(4), world
+    return g, [m for _, m in local]
+
+
+def facets_of(tape, tols, frame=None):
     """Per instance of ``tape`` its :class:`~clcsg.meshing.facets.Facets` within its
-    tolerance (``tols``, one per instance), or None if a kind has no closed form (the whole
-    list is then None)."""
+    tolerance (``tols``, one per instance) in the frame ``frame`` = (G, matrices below G)
+    (default: the world), or None if a kind has no closed form (the whole list is then
+    None)."""
+    g, mats = frame if frame is not None else (np.eye(4), [i.matrix for i in tape.instances])
     lo, hi = (np.asarray(b, dtype=np.float64) for b in tape.bound)
-    reach = (0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo)) * 1.01 + 1e-9)
+    inv = np.linalg.inv(g)
+    stretch = float(np.linalg.svd(g[:3, :3], compute_uv=False)[0])
+    center = inv[:3, :3] @ (0.5 * (lo + hi)) + inv[:3, 3]
+    radius = (0.5 * float(np.linalg.norm(hi - lo)) * 1.01 + 1e-9) * float(np.linalg.svd(inv[:3, :3], compute_uv=False)[0])
     out = []
-    for inst, tol in zip(tape.instances, tols):
-        f = instance_facets(inst, float(tol), reach)
+    for inst, tol, m in zip(tape.instances, tols, mats):
+        f = instance_facets(inst, float(tol) / stretch, (center, radius), m)
         if f is None:
             return None
         out.append(f)
     return out
 
 
-def boolean_mesh(tape, facets) -> Faceted:
-    """The solid of ``tape`` from its instances' ``facets`` (:func:`facets_of`)."""
+def boolean_mesh(tape, facets, frame=np.eye(4)) -> Faceted:
+    """The solid of ``tape`` from its instances' ``facets`` (:func:`facets_of`), built in the
+    frame ``frame`` (G of :func:`common_frame`) and returned in world coordinates."""
     import manifold3d as m3d
 
     n = len(tape.instances)
     lo, hi = (np.asarray(b, dtype=np.float64) for b in tape.bound)
-    ops, n_regs = tape.instance_program
-    regs: list = [None] * max(n_regs, 1)
     leaves: dict = {}
-    empty = m3d.Manifold()
-    for op, out, a, b in np.asarray(ops).tolist():
-        if op == OP_LEAF:
-            if a not in leaves:
-                leaves[a] = _manifold(m3d, facets[a], a)
-            regs[out] = (leaves[a], b < 0)
-        elif op == OP_CONST:
-            regs[out] = (empty, bool(a))  # TRUE: the complement of nothing
-        elif op == OP_COPY:
-            regs[out] = regs[a]
-        elif op == OP_AND:
-            regs[out] = _and(regs[a], regs[b])
-        elif op == OP_OR:
-            regs[out] = _or(regs[a], regs[b])
-    solid, negated = regs[int(ops[-1][1])] if len(ops) else (empty, False)
+
+    def leaf(i):
+        if i not in leaves:
+            leaves[i] = _manifold(m3d, facets[i], i)
+        return leaves[i]
+
+    solid, negated = _Builder(m3d, leaf).build(_expression(tape.instance_program[0]))
+    if not np.array_equal(frame, np.eye(4)):
+        solid = solid.transform(np.ascontiguousarray(frame[:3, :4]))
     if negated:
         solid = _clip_box(m3d, lo, hi, n) - solid
     else:

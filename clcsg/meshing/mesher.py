@@ -104,7 +104,7 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
         kinds = sorted({i.node.kind for i in tape.instances} - set(FACETED_KINDS))
         raise UsageError(f"{sc.source}: method 'facets' has no faceting for {', '.join(kinds)}; use 'contour' or 'auto'")
     if method != "contour" and facetable(tape):
-        got = mesh_by_facets(tape, tol, stats)
+        got = mesh_by_facets(sc.shape, tape, tol, stats)
         if not len(got.triangles):
             raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
         stats.update(triangles=int(len(got.triangles)), vertices=int(len(got.vertices)), cpu_s=time.process_time() - t0)

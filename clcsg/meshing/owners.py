@@ -71,50 +71,66 @@ def primitives_of(tape, quad, centroid, tol: float = 0.0):
     prim = np.full(len(quad), -1, dtype=np.int64)
     owners = tape.owners()
     slack = max(tol, 1e-9 * max(1.0, float(np.abs(tape.bound).max())))
+    table = _literal_table(tape)
+    order = np.argsort(quad, kind="stable")
+    starts = np.searchsorted(quad[order], np.arange(tape.n_quadrics + 1))
     for q in np.unique(quad[quad >= 0]):
-        sel = np.flatnonzero(quad == q)
-        best = np.full(len(sel), np.inf)
-        holding = []
-        for inst in (tape.instances[i] for i in owners[q]):
-            viol = np.zeros(len(sel))  # the largest first-order distance outside a literal
-            for lq, sign in inst.literals:
-                if lq == q:
-                    continue
-                f, j = residuals(tape.quadrics[[lq]][None].repeat(len(sel), 0), centroid[sel])
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    d = np.nan_to_num(sign * f[:, 0] / np.linalg.norm(j[:, 0], axis=1), nan=0.0, posinf=np.inf)
-                viol = np.maximum(viol, d)
-            viol = np.where(viol <= slack, 0.0, viol)  # within the slack: holds (the first such)
-            holding.append(viol == 0.0)
-            take = viol < best
-            prim[sel[take]] = inst.index
-            best[take] = viol[take]
-        if len(holding) > 1 and tape.instance_program is not None:
-            held = np.array(holding)  # (owners, triangles)
-            several = np.flatnonzero(held.sum(axis=0) > 1)
-            if len(several):
-                got = bounding_first(tape, int(q), [owners[q][k] for k in range(len(holding))],
-                                     held[:, several], centroid[sel[several]])
-                prim[sel[several]] = np.where(got >= 0, got, prim[sel[several]])
+        sel = order[starts[q]:starts[q + 1]]
+        carriers = np.asarray(owners[q], dtype=np.int64)
+        viol = _violations(tape, table, carriers, int(q), centroid[sel], slack)  # (carriers, points)
+        held = viol == 0.0
+        prim[sel] = carriers[np.argmin(viol, axis=0)]  # the first that holds, else the least missed
+        several = np.flatnonzero(held.sum(axis=0) > 1)
+        if len(several) and tape.instance_program is not None:
+            got = bounding_first(tape, int(q), carriers, held[:, several], centroid[sel[several]], table)
+            prim[sel[several]] = np.where(got >= 0, got, prim[sel[several]])
     return prim
 
 
-def _memberships(tape, q: int, points):
+def _violations(tape, table, carriers, q: int, points, slack: float) -> np.ndarray:
+    """(carriers, points): the largest first-order distance of each point outside a literal of
+    each carrier other than ``q`` (0 within ``slack``: the literal holds)."""
+    qs, signs = table[0][carriers], table[1][carriers]
+    live = (qs >= 0) & (qs != q)
+    out = np.zeros((len(carriers), len(points)))
+    if not live.any() or not len(points):
+        return out
+    used, index = np.unique(qs[live], return_inverse=True)
+    f, j = residuals(np.broadcast_to(tape.quadrics[used][None], (len(points), len(used), 4, 4)), points)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.nan_to_num(f / np.linalg.norm(j, axis=2), nan=0.0, posinf=np.inf, neginf=-np.inf).T  # (used, points)
+    per = np.full(qs.shape + (len(points),), -np.inf)
+    per[live] = signs[live][:, None] * d[index]
+    out = np.maximum(per.max(axis=1), 0.0)
+    return np.where(out <= slack, 0.0, out)
+
+
+def _literal_table(tape):
+    """(quadric, sign) per instance and literal slot, (instances, width); quadric -1 pads."""
+    width = max((len(i.literals) for i in tape.instances), default=1)
+    qs = np.full((len(tape.instances), width), -1, dtype=np.int64)
+    signs = np.ones((len(tape.instances), width))
+    for inst in tape.instances:
+        for k, (lq, sign) in enumerate(inst.literals):
+            qs[inst.index, k], signs[inst.index, k] = lq, sign
+    return qs, signs
+
+
+def _memberships(tape, q: int, points, table):
     """(on q's negative side, on its positive side): per instance (rows) and point (columns)
     its membership, literal q substituted by the side."""
-    n_inst = len(tape.instances)
-    values = {}
-    out = np.ones((2, n_inst, len(points)), dtype=bool)
-    for inst in tape.instances:
-        for lq, sign in inst.literals:
-            if lq == q:
-                out[0, inst.index] &= sign > 0
-                out[1, inst.index] &= sign < 0
-                continue
-            if lq not in values:
-                f, _ = residuals(tape.quadrics[[lq]][None].repeat(len(points), 0), points)
-                values[lq] = f[:, 0]
-            out[:, inst.index] &= (sign * values[lq] <= 0.0)[None]
+    qs, signs = table
+    used, index = np.unique(qs[qs >= 0], return_inverse=True)
+    f, _ = residuals(np.broadcast_to(tape.quadrics[used][None], (len(points), len(used), 4, 4)), points)
+    holds = np.ones(qs.shape + (len(points),), dtype=bool)  # (instances, slots, points)
+    lit = np.flatnonzero((qs >= 0).ravel())
+    holds.reshape(-1, len(points))[lit] = (signs.ravel()[lit][:, None] * f.T[index]) <= 0.0
+    own = qs == q
+    out = []
+    for side_holds in (signs > 0, signs < 0):  # on q's negative side a literal (q, +1) holds
+        h = holds.copy()
+        h[own] = side_holds[own][:, None]
+        out.append(h.all(axis=1))
     return out
 
 
@@ -135,7 +151,7 @@ def _solid(ops, member):
     return regs[ops[-1][1]]
 
 
-def bounding_first(tape, q: int, carriers, held, points):
+def bounding_first(tape, q: int, carriers, held, points, table):
     """Per point (on or near quadric ``q``, held by several of its ``carriers``: ``held``
     (carriers, points)) the first carrier that holds it and bounds the solid there: switching
     its membership on one side of q changes the solid's on that side (the instance program
@@ -144,17 +160,13 @@ def bounding_first(tape, q: int, carriers, held, points):
     x, ok = newton(tape.quadrics[[q]][None].repeat(len(points), 0), points)
     x = np.where(ok[:, None], x, points)
     ops = tape.instance_program[0]
-    sides = _memberships(tape, q, x)
-    plain = [_solid(ops, member) for member in sides]
-    out = np.full(len(points), -1, dtype=np.int64)
-    for i, h in zip(carriers, held):
-        todo = h & (out < 0)
-        if not todo.any():
-            continue
-        changed = np.zeros(len(points), dtype=bool)
-        for member, base in zip(sides, plain):
-            flipped = member[:, todo].copy()
-            flipped[i] = ~flipped[i]
-            changed[todo] |= _solid(ops, flipped) != base[todo]
-        out[todo & changed] = i
-    return out
+    n, c = len(points), len(carriers)
+    changed = np.zeros((c, n), dtype=bool)
+    for member in _memberships(tape, q, x, table):
+        # one run of the program over (plain, each carrier switched) x points
+        wide = np.repeat(member[:, None, :], c + 1, axis=1)
+        wide[carriers, np.arange(1, c + 1)] = ~wide[carriers, np.arange(1, c + 1)]
+        solid = _solid(ops, wide.reshape(len(member), -1)).reshape(c + 1, n)
+        changed |= solid[1:] != solid[0]
+    bounding = changed & held
+    return np.where(bounding.any(axis=0), carriers[np.argmax(bounding, axis=0)], -1)

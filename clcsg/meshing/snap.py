@@ -40,7 +40,7 @@ def vertex_sets(n_vertices: int, triangles, tri_quadric) -> np.ndarray:
     v = triangles.reshape(-1)
     q = np.repeat(tri_quadric, 3)
     keep = q >= 0
-    pairs = np.unique(np.stack([v[keep], q[keep]], 1), axis=0)
+    pairs = _unique_pairs(v[keep], q[keep])
     counts = np.bincount(pairs[:, 0], minlength=n_vertices)
     width = max(1, int(counts.max(initial=0)))
     out = np.full((n_vertices, width), -1, dtype=np.int64)
@@ -48,6 +48,15 @@ def vertex_sets(n_vertices: int, triangles, tri_quadric) -> np.ndarray:
     col = np.arange(len(pairs)) - starts[pairs[:, 0]]
     out[pairs[:, 0], col] = pairs[:, 1]
     return out
+
+
+def _unique_pairs(a, b) -> np.ndarray:
+    """The distinct rows of (a, b) (non-negative integers), sorted: one sort of 64-bit keys."""
+    if not len(a):
+        return np.zeros((0, 2), dtype=np.int64)
+    span = np.int64(b.max()) + 1
+    keys = np.unique(a.astype(np.int64) * span + b)
+    return np.stack([keys // span, keys % span], 1)
 
 
 def _independent_three(matrices, sets, x):
@@ -70,17 +79,16 @@ def _independent_three(matrices, sets, x):
 
 def _solve(matrices, subsets, x0, limit):
     """Newton from ``x0`` (N, 3) onto each of the ``subsets`` (list of (N, j) index arrays, one
-    j per list); per point the converged solution within ``limit`` that moved least:
-    (x, chosen subset index (-1: none), ...)."""
-    best = np.full(len(x0), np.inf)
-    pick = np.full(len(x0), -1)
-    x = x0.copy()
-    for s, sub in enumerate(subsets):
-        got, ok = newton(matrices[sub], x0)
-        move = np.linalg.norm(got - x0, axis=1)
-        better = ok & (move <= limit) & (move < best)
-        x[better], best[better], pick[better] = got[better], move[better], s
-    return x, pick
+    j for all; solved in one batch); per point the converged solution within ``limit`` that
+    moved least: (x, chosen subset index (-1: none))."""
+    n = len(x0)
+    got, ok = newton(matrices[np.concatenate(subsets)], np.tile(x0, (len(subsets), 1)))
+    move = np.where(ok & (np.linalg.norm(got - np.tile(x0, (len(subsets), 1)), axis=1) <= limit),
+                    np.linalg.norm(got - np.tile(x0, (len(subsets), 1)), axis=1), np.inf).reshape(len(subsets), n)
+    pick = np.argmin(move, axis=0)
+    found = np.isfinite(move[pick, np.arange(n)])
+    x = np.where(found[:, None], got.reshape(len(subsets), n, 3)[pick, np.arange(n)], x0)
+    return x, np.where(found, pick, -1)
 
 
 def snap(vertices, sets, matrices, tol: float):
@@ -167,7 +175,7 @@ def _neighbour_candidates(x, kept, triangles, matrices, tol):
     v = np.repeat(e[:, 0], 3)
     q = kept[e[:, 1]].reshape(-1)
     keep = (q >= 0) & ~(kept[v] == q[:, None]).any(axis=1)
-    pairs = np.unique(np.stack([v[keep], q[keep]], 1), axis=0)
+    pairs = _unique_pairs(v[keep], q[keep])
     if not len(pairs):
         return pairs, np.zeros(0)
     d = first_order_distance(matrices[pairs[:, 1]][:, None], x[pairs[:, 0]])
