@@ -37,11 +37,11 @@ def _scene(path):
 _CACHE: dict = {}
 
 
-def _mesh(path, tolerance="0.1%"):
-    key = (path, tolerance)
+def _mesh(path, tolerance="0.1%", method="auto"):
+    key = (path, tolerance, method)
     if key not in _CACHE:
         sc = _scene(path)
-        _CACHE[key] = (sc, clcsg.mesh(sc, tolerance=tolerance))
+        _CACHE[key] = (sc, clcsg.mesh(sc, tolerance=tolerance, method=method))
     return _CACHE[key]
 
 
@@ -155,6 +155,21 @@ def check_within_tolerance(tape, m) -> float:
     q = np.tile(tape.quadrics[m.quadric[on_one]], (3, 1, 1))
     assert _quadric_distance(q, pts).max() <= m.tolerance * 1.0 + 1e-12
     return float(on_one.mean())
+
+
+@pytest.mark.parametrize("path", ["examples/zoo/lens.json", "examples/zoo/drilled_die.json"])
+def test_contour_method_on_examples(path):
+    """The contour method (the default only for other quadrics) on two zoo models: closed,
+    vertices on the surface, triangles within the tolerance of their quadric, the surface
+    within the tolerance of the mesh."""
+    sc, m = _mesh(path, method="contour")
+    assert m.stats["method"] == "contour"
+    check_closed_manifold(m)
+    check_vertices_on_surface(sc, m)
+    assert check_within_tolerance(sc.compile(), m) > 0.98
+    sp = oracle.surface_points(sc.shape, sc.compile().bound, n_lines=400, seed=3)
+    d = point_mesh_distance(sp.points, m.vertices, m.triangles)
+    assert np.quantile(d, 0.99) <= m.tolerance
 
 
 @pytest.mark.parametrize("path", EXAMPLES[:4])
@@ -405,9 +420,20 @@ def test_binary_stl_layout():
     assert np.allclose(np.frombuffer(data[84:96], "<f4"), [0, 0, 1])
 
 
-def test_cli_writes_and_summarises(tmp_path, capsys):
+@pytest.mark.parametrize("method", ["auto", "contour"])
+def test_cli_writes_and_summarises(tmp_path, capsys, method):
     out = tmp_path / "die.3mf"
-    assert main(["mesh", os.path.join(ROOT, "examples/zoo/drilled_die.json"), "-o", str(out), "-t", "0.2%"]) == 0
+    assert main(["mesh", os.path.join(ROOT, "examples/zoo/drilled_die.json"), "-o", str(out), "-t", "0.2%",
+                 "--method", method]) == 0
     assert "triangles" in capsys.readouterr().out
     back = trimesh.load(str(out), force="mesh")
     assert back.is_watertight
+
+
+def test_cli_facets_refused_for_a_hyperboloid(tmp_path, capsys):
+    """--method facets on a scene with a hyperboloid: one line naming the kind, no file."""
+    out = tmp_path / "tower.stl"
+    assert main(["mesh", os.path.join(ROOT, "examples/cooling_tower.json"), "-o", str(out), "--method", "facets"]) != 0
+    err = capsys.readouterr().err
+    assert "hyperboloid_one_sheet" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()

@@ -19,7 +19,7 @@ def add_parser(subparsers):
             2-manifold triangle mesh whose vertices lie on the exact quadric surfaces in double
             precision, on their exact intersection curves at sharp edges and at the exact
             corners.  Method "facets" (the default wherever every primitive is a box, cylinder,
-            cone, sphere, ellipsoid, half-space, slab or infinite cylinder): each primitive
+            cone, sphere, ellipsoid, half-space, slab, infinite or elliptic cylinder): each primitive
             faceted within the tolerance (circles get the fewest segments whose chord error
             is under it), manifold3d's exact Booleans, then every vertex solved onto its
             quadrics; primitives faceted again finer where the result strays.  Method

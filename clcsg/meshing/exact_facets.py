@@ -18,7 +18,8 @@ edge midpoints, to first order) or not on a quadric all its vertices lie on (spa
 edge) means that the facets of the instances there met the wrong way round or missed a
 feature finer than them (surfaces that graze: two cylinders tangent along a line, a fillet
 0.01 off a face).  Those instances are faceted again at half their tolerance and the Booleans
-rerun, up to :data:`MAX_ROUNDS` times; what remains is counted in the stats.
+rerun, up to :data:`MAX_ROUNDS` times (the instances with a curved surface there: planes are
+exact at any tolerance); what remains is counted in the stats.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from .collapse import collapse_coincident
 from .facets import KINDS
 from .instance_booleans import boolean_mesh, common_frame, facets_of
 from .owners import primitives_of, shared_nearest
+from .planar import flat_quadrics
 from .project import first_order_distance
 from .snap import repair_off_surface, snap, vertex_sets
 
@@ -112,14 +114,41 @@ def _one_round(tape, facets, frame, tol: float, stats: dict) -> Faceted:
     index = np.cumsum(used) - 1
     quad = shared_nearest(tape, m.vertices, m.triangles, m.sets, m.faces)
     moved = np.flatnonzero(quad != m.faces)
-    prim = timed(stats, "owners", primitives_of, tape, quad, m.vertices[m.triangles].mean(axis=1), tol)
-    palette = np.array([inst.color for inst in tape.instances] + [DEFAULT_COLOR], dtype=np.float64)
     spanning = (quad >= 0) & ~(m.sets[m.triangles] == quad[:, None, None]).any(axis=2).all(axis=1)
     far = _deviation(tape, m.vertices, m.triangles, quad) > tol
     stats.update(snap_fallbacks=int(fallbacks), reassigned_triangles=int(len(moved)), off_surface=off,
                  off_surface_repaired=fixed, spanning_triangles=int(spanning.sum()), far_triangles=int(far.sum()))
-    return Faceted(m.vertices[used], index[m.triangles], quad, prim, palette[np.where(prim >= 0, prim, n_inst)],
-                   m.sets[used], spanning | far)
+    return Faceted(m.vertices[used], index[m.triangles], quad, None, None, m.sets[used], spanning | far)
+
+
+def _coloured(tape, got: Faceted, tol: float, stats: dict) -> Faceted:
+    """``got`` with each triangle's primitive (the colour rule) and colour."""
+    prim = timed(stats, "owners", primitives_of, tape, got.quadric, got.vertices[got.triangles].mean(axis=1), tol)
+    palette = np.array([inst.color for inst in tape.instances] + [DEFAULT_COLOR], dtype=np.float64)
+    got.primitive = prim
+    got.colors = palette[np.where(prim >= 0, prim, len(tape.instances))]
+    return got
+
+
+def _near_bad(tape, got, owners, flat, tol) -> np.ndarray:
+    """The instances to facet finer: those with a curved quadric of a bad triangle or of its
+    vertices as a literal, whose box (grown by the tolerance) holds the triangle's centroid
+    (planes are exact at any tolerance)."""
+    bad = np.flatnonzero(got.bad)
+    centroid = got.vertices[got.triangles[bad]].mean(axis=1)
+    quads = np.concatenate([got.quadric[bad, None], got.sets[got.triangles[bad]].reshape(len(bad), -1)], axis=1)
+    out = set()
+    for q in np.unique(quads[quads >= 0]).tolist():
+        if q in flat:
+            continue
+        rows = (quads == q).any(axis=1)
+        for i in owners[q]:
+            box = tape.instances[i].box
+            if box is None or i in out:
+                continue
+            if np.all((centroid[rows] >= box[0] - tol) & (centroid[rows] <= box[1] + tol), axis=1).any():
+                out.add(i)
+    return np.array(sorted(out), dtype=np.int64)
 
 
 def mesh_by_facets(shape, tape, tol: float, stats: dict) -> Faceted:
@@ -127,6 +156,7 @@ def mesh_by_facets(shape, tape, tol: float, stats: dict) -> Faceted:
     module docstring)."""
     tols = np.full(len(tape.instances), float(tol))
     owners = tape.owners()
+    flat = set(flat_quadrics(tape.quadrics).tolist())
     rounds = 0
     frame = common_frame(shape, tape.instances)
     while True:
@@ -135,8 +165,9 @@ def mesh_by_facets(shape, tape, tol: float, stats: dict) -> Faceted:
         rounds += 1
         if not got.bad.any() or rounds >= MAX_ROUNDS:
             break
-        near = np.unique(got.sets[got.triangles[got.bad]].reshape(-1))
-        inst = {i for q in near[near >= 0] for i in owners[int(q)]}
-        tols[sorted(inst)] *= 0.5
+        finer = _near_bad(tape, got, owners, flat, tol)
+        if not len(finer):
+            break
+        tols[finer] *= 0.5
     stats.update(method="facets", facet_rounds=rounds)
-    return got
+    return _coloured(tape, got, tol, stats)

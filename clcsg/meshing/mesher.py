@@ -109,6 +109,7 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
             raise SceneError(f"{sc.source}: the solid is empty: there is nothing to mesh")
         stats.update(triangles=int(len(got.triangles)), vertices=int(len(got.vertices)), cpu_s=time.process_time() - t0)
         return Mesh(got.vertices, got.triangles, got.quadric, got.primitive, got.colors, got.sets, tol, stats)
+    stats["method"] = "contour"
     grid = timed(stats, "cells", surface_cells, tape, cells)
     stats.update(cells=int(len(grid.ijk)), boxes_tested=int(grid.visited), h=grid.h)
 
