@@ -165,3 +165,21 @@ def test_methods_chosen_and_checked():
         clcsg.mesh(tower, method="facets")
     with pytest.raises(UsageError, match="method"):
         clcsg.mesh(box, method="marching")
+
+
+def test_chamfered_holes_narrower_than_the_tolerance():
+    """A plate with an 8 x 8 grid of holes, each chamfered by a cone whose narrow end lies
+    0.01 inside its bore (a sliver far under the tolerance): one faceting round; closed; every
+    vertex on the CSG surface; the triangles across the sliver within a quarter of the
+    tolerance of their quadric; points on the mesh within the tolerance of the CSG surface."""
+    from bench import zoo
+    from test_mesh import check_near_csg_surface
+
+    shape = zoo.plate(8, size=40.0)
+    sc = clcsg.Scene(shape)
+    m = clcsg.mesh(sc)
+    assert m.stats["method"] == "facets" and m.stats["facet_rounds"] == 1
+    check_closed_manifold(m)
+    check_vertices_on_surface(sc, m)
+    assert m.stats["spanning_wide_triangles"] == 0 and m.stats["far_triangles"] == 0
+    check_near_csg_surface(shape, m)

@@ -15,9 +15,9 @@
 
 The result is checked: a triangle farther than the tolerance from its quadric (centroid and
 edge midpoints, to first order) or not on a quadric all its vertices lie on (spanning a sharp
-edge) means that the facets of the instances there met the wrong way round or missed a
-feature finer than them (surfaces that graze: two cylinders tangent along a line, a fillet
-0.01 off a face).  Those instances are faceted again at half their tolerance and the Booleans
+edge) with a vertex more than :data:`SPAN_SLACK` tolerances off that quadric means that the
+facets of the instances there met the wrong way round or missed a feature finer than them
+(surfaces that graze: two cylinders tangent along a line).  Those instances are faceted again at half their tolerance and the Booleans
 rerun, up to :data:`MAX_ROUNDS` times (the instances with a curved surface there: planes are
 exact at any tolerance); what remains is counted in the stats.
 """
@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..compile.interpret import contains
+from ..compile.root_tapes import box_tapes
 from ..model.csg import DEFAULT_COLOR
 from . import refine
 from .collapse import collapse_coincident
@@ -42,6 +43,11 @@ from .snap import repair_off_surface, snap, vertex_sets
 
 #: faceting rounds at most (each halves the tolerance of the instances of bad triangles)
 MAX_ROUNDS = 5
+#: a triangle across a sharp edge whose vertices all lie within this many tolerances of its
+#: quadric spans a feature narrower than that (a fillet 0.01 mm off a face, a cone's end 0.01 mm
+#: inside its bore): it is within the tolerance, counted (``spanning_triangles``), and faceting
+#: finer is not tried for it (it would take rounds down to the feature's width)
+SPAN_SLACK = 0.25
 
 
 @dataclass
@@ -80,6 +86,22 @@ def _clip_planes(lo, hi) -> np.ndarray:
     return out
 
 
+def contains_around(tape, x, around) -> np.ndarray:
+    """The solid's membership at ``around`` (N, k, 3), points near each of ``x`` (N, 3): the
+    tape pruned per group of neighbouring points to the primitives whose boxes meet the group's
+    (:func:`clcsg.compile.root_tapes.box_tapes`), so that the work is local, not the whole tape
+    at every point."""
+    n, k = around.shape[:2]
+    lo, hi = around.min(axis=1), around.max(axis=1)
+    group, tapes = box_tapes(tape, lo, hi, np.zeros(n, dtype=np.int64))
+    out = np.zeros((n, k), dtype=bool)
+    for g, ops in enumerate(tapes):
+        rows = np.flatnonzero(group == g)
+        if len(rows):
+            out[rows] = contains(ops, tape.quadrics, around[rows].reshape(-1, 3)).reshape(len(rows), k)
+    return out
+
+
 def _deviation(tape, vertices, triangles, quad) -> np.ndarray:
     """Per triangle the largest first-order distance of its centroid and edge midpoints from
     its quadric (0 for a triangle on none)."""
@@ -103,9 +125,8 @@ def _one_round(tape, facets, frame, tol: float, stats: dict) -> Faceted:
     matrices = np.concatenate([tape.quadrics, _clip_planes(*got.clip)])
     sets = vertex_sets(len(got.vertices), got.triangles, tri_q)
     verts, kept, fallbacks = timed(stats, "snap", snap, got.vertices, sets, matrices, tol)
-    ops, qs = tape.ops, tape.quadrics
     off, fixed = timed(stats, "repair", repair_off_surface, verts, kept, got.triangles, matrices, tol,
-                        lambda p: contains(ops, qs, p))
+                       lambda x, around: contains_around(tape, x, around))
     kept[kept >= n_q] = -1
     m = refine.Surface(tape, verts, refine._compact(kept), got.triangles, np.where(tri_q < n_q, tri_q, -1), wide=True)
     timed(stats, "collapse", collapse_coincident, m, stats, False)
@@ -116,9 +137,17 @@ def _one_round(tape, facets, frame, tol: float, stats: dict) -> Faceted:
     moved = np.flatnonzero(quad != m.faces)
     spanning = (quad >= 0) & ~(m.sets[m.triangles] == quad[:, None, None]).any(axis=2).all(axis=1)
     far = _deviation(tape, m.vertices, m.triangles, quad) > tol
+    wide = spanning.copy()  # spanning a feature wider than SPAN_SLACK tolerances
+    rows = np.flatnonzero(spanning)
+    if len(rows):
+        v = m.vertices[m.triangles[rows]]
+        q = tape.quadrics[quad[rows]][:, None]
+        miss = np.max([first_order_distance(q, v[:, k]) for k in range(3)], axis=0)
+        wide[rows] = ~(miss <= SPAN_SLACK * tol)
     stats.update(snap_fallbacks=int(fallbacks), reassigned_triangles=int(len(moved)), off_surface=off,
-                 off_surface_repaired=fixed, spanning_triangles=int(spanning.sum()), far_triangles=int(far.sum()))
-    return Faceted(m.vertices[used], index[m.triangles], quad, None, None, m.sets[used], spanning | far)
+                 off_surface_repaired=fixed, spanning_triangles=int(spanning.sum()),
+                 spanning_wide_triangles=int(wide.sum()), far_triangles=int(far.sum()))
+    return Faceted(m.vertices[used], index[m.triangles], quad, None, None, m.sets[used], wide | far)
 
 
 def _coloured(tape, got: Faceted, tol: float, stats: dict) -> Faceted:

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..model.csg import DEFAULT_COLOR
 from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+from ..model.bvh import morton_order
 from .project import first_order_distance, newton, residuals
 from .refine import _compact, common
 
@@ -72,19 +73,44 @@ def primitives_of(tape, quad, centroid, tol: float = 0.0):
     owners = tape.owners()
     slack = max(tol, 1e-9 * max(1.0, float(np.abs(tape.bound).max())))
     table = _literal_table(tape)
-    order = np.argsort(quad, kind="stable")
+    boxes = _instance_boxes(tape)
+    rank = np.empty(len(centroid), dtype=np.int64)
+    rank[morton_order(centroid) if len(centroid) else rank] = np.arange(len(centroid))
+    order = np.lexsort((rank, quad))  # by quadric, then along a Morton curve
     starts = np.searchsorted(quad[order], np.arange(tape.n_quadrics + 1))
     for q in np.unique(quad[quad >= 0]):
-        sel = order[starts[q]:starts[q + 1]]
-        carriers = np.asarray(owners[q], dtype=np.int64)
-        viol = _violations(tape, table, carriers, int(q), centroid[sel], slack)  # (carriers, points)
-        held = viol == 0.0
-        prim[sel] = carriers[np.argmin(viol, axis=0)]  # the first that holds, else the least missed
-        several = np.flatnonzero(held.sum(axis=0) > 1)
-        if len(several) and tape.instance_program is not None:
-            got = bounding_first(tape, int(q), carriers, held[:, several], centroid[sel[several]], table)
-            prim[sel[several]] = np.where(got >= 0, got, prim[sel[several]])
+        every = np.asarray(owners[q], dtype=np.int64)
+        for a in range(starts[q], starts[q + 1], CHUNK):  # neighbouring points together
+            sel = order[a:min(a + CHUNK, starts[q + 1])]
+            carriers = _near(boxes, every, centroid[sel], slack)
+            viol = _violations(tape, table, carriers, int(q), centroid[sel], slack)  # (carriers, points)
+            held = viol == 0.0
+            prim[sel] = carriers[np.argmin(viol, axis=0)]  # the first that holds, else the least missed
+            several = np.flatnonzero(held.sum(axis=0) > 1)
+            if len(several) and tape.instance_program is not None:
+                got = bounding_first(tape, int(q), carriers, held[:, several], centroid[sel[several]], table, boxes)
+                prim[sel[several]] = np.where(got >= 0, got, prim[sel[several]])
     return prim
+
+
+#: points whose primitive is decided together (neighbours along a Morton curve)
+CHUNK = 256
+
+
+def _instance_boxes(tape):
+    """(lo, hi) (instances, 3): each instance's box, all of space where it has none listed."""
+    lo = np.array([i.box[0] if i.box is not None else np.full(3, -np.inf) for i in tape.instances]).reshape(-1, 3)
+    hi = np.array([i.box[1] if i.box is not None else np.full(3, np.inf) for i in tape.instances]).reshape(-1, 3)
+    return lo, hi
+
+
+def _near(boxes, instances, points, slack):
+    """The ``instances`` (tree order kept) whose box, grown by ``slack``, meets the points'
+    bounding box; the first of them if none does (a point off every box: the least missed)."""
+    lo, hi = boxes[0][instances], boxes[1][instances]
+    plo, phi = points.min(axis=0), points.max(axis=0)
+    meet = np.all((lo - slack <= phi) & (hi + slack >= plo), axis=1)
+    return instances[meet] if meet.any() else instances[:1]
 
 
 def _violations(tape, table, carriers, q: int, points, slack: float) -> np.ndarray:
@@ -116,9 +142,21 @@ def _literal_table(tape):
     return qs, signs
 
 
-def _memberships(tape, q: int, points, table):
+def _memberships(tape, q: int, points, table, boxes):
     """(on q's negative side, on its positive side): per instance (rows) and point (columns)
-    its membership, literal q substituted by the side."""
+    its membership, literal q substituted by the side; an instance whose box misses the points'
+    bounding box is out (its solid lies in its box)."""
+    qs, signs = table
+    near = _near(boxes, np.arange(len(qs)), points, 0.0)
+    out = []
+    for side in _near_memberships(tape, q, points, (qs[near], signs[near])):
+        full = np.zeros((len(qs), len(points)), dtype=bool)
+        full[near] = side
+        out.append(full)
+    return out
+
+
+def _near_memberships(tape, q: int, points, table):
     qs, signs = table
     used, index = np.unique(qs[qs >= 0], return_inverse=True)
     f, _ = residuals(np.broadcast_to(tape.quadrics[used][None], (len(points), len(used), 4, 4)), points)
@@ -151,7 +189,7 @@ def _solid(ops, member):
     return regs[ops[-1][1]]
 
 
-def bounding_first(tape, q: int, carriers, held, points, table):
+def bounding_first(tape, q: int, carriers, held, points, table, boxes):
     """Per point (on or near quadric ``q``, held by several of its ``carriers``: ``held``
     (carriers, points)) the first carrier that holds it and bounds the solid there: switching
     its membership on one side of q changes the solid's on that side (the instance program
@@ -162,7 +200,7 @@ def bounding_first(tape, q: int, carriers, held, points, table):
     ops = tape.instance_program[0]
     n, c = len(points), len(carriers)
     changed = np.zeros((c, n), dtype=bool)
-    for member in _memberships(tape, q, x, table):
+    for member in _memberships(tape, q, x, table, boxes):
         # one run of the program over (plain, each carrier switched) x points
         wide = np.repeat(member[:, None, :], c + 1, axis=1)
         wide[carriers, np.arange(1, c + 1)] = ~wide[carriers, np.arange(1, c + 1)]

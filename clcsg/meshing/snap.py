@@ -160,10 +160,11 @@ STRADDLE = 1e-7
 
 def straddles(x, contains, eps) -> np.ndarray:
     """Per point of ``x`` whether points at distance ``eps`` around it are both inside and
-    outside the solid (``contains``: points (N, 3) -> bool): it is on the surface."""
+    outside the solid (``contains(x, around)``: the membership of ``around`` (N, k, 3), the
+    points round each of ``x`` (N, 3), as (N, k) bool): it is on the surface."""
     if not len(x):
         return np.zeros(0, dtype=bool)
-    ins = contains((x[:, None] + eps * _DIRS[None]).reshape(-1, 3)).reshape(len(x), -1)
+    ins = contains(x, x[:, None] + eps * _DIRS[None])
     return ins.any(axis=1) & ~ins.all(axis=1)
 
 
@@ -189,9 +190,9 @@ def repair_off_surface(x, kept, triangles, matrices, tol, contains):
     """Vertices solved onto a curve beyond the corner where a third quadric cuts it off (the
     faceted cutter is inscribed, so its facets meet the curve short of the exact corner): such
     a vertex, off the solid's surface by the straddle test, is solved again with a neighbour's
-    quadric added (the corner; of a vertex on three, with each pair of them), the nearest
-    candidate first, and takes the first solution within :data:`MAX_MOVE` tolerances that
-    straddles.  In place; returns (the vertices found off the surface, those moved onto it)."""
+    quadric added (the corner; of a vertex on three, with each pair of them) or in place of one
+    of its own (a point of a curve that is not on the surface at all), the nearest candidate
+    first, and takes the first solution within :data:`MAX_MOVE` tolerances that straddles.  In place; returns (the vertices found off the surface, those moved onto it)."""
     pairs, _ = _neighbour_candidates(x, kept, triangles, matrices, tol)
     if not len(pairs):
         return 0, 0
@@ -201,27 +202,40 @@ def repair_off_surface(x, kept, triangles, matrices, tol, contains):
     off = rows[~straddles(x[rows], contains, eps)]
     if not len(off):
         return 0, 0
-    tries = []  # (vertex, rank, quadrics)
-    for rank, (v, c) in enumerate(pairs[np.isin(pairs[:, 0], off)].tolist()):
-        own = [int(q) for q in kept[v] if q >= 0]
-        combos = [own[:2]] if len(own) < 3 else [[own[0], own[1]], [own[0], own[2]], [own[1], own[2]]]
-        tries += [(v, 3 * rank + k, combo + [c]) for k, combo in enumerate(combos)]
-    best = {}
-    for size in (2, 3):
-        group = [t for t in tries if len(t[2]) == size]
-        if not group:
-            continue
-        v = np.array([t[0] for t in group])
-        qs = np.array([t[2] for t in group])
-        got, ok = newton(matrices[qs], x[v])
-        ok &= np.linalg.norm(got - x[v], axis=1) <= MAX_MOVE * tol
-        idx = np.flatnonzero(ok)
-        idx = idx[straddles(got[idx], contains, eps)]
-        for i in idx.tolist():
-            vi, rank = group[i][0], group[i][1]
-            if vi not in best or rank < best[vi][0]:
-                best[vi] = (rank, got[i], group[i][2])
-    for v, (_, p, qs) in best.items():
-        x[v] = p
-        kept[v] = (qs + [-1] * kept.shape[1])[:kept.shape[1]]
-    return len(off), len(best)
+    cand = pairs[np.isin(pairs[:, 0], off)]
+    v, c = cand[:, 0], cand[:, 1]
+    own = kept[v]  # (P, W) -1 padded, the quadrics first
+    n_own = (own >= 0).sum(axis=1)
+    best_rank = np.full(len(x), np.iinfo(np.int64).max)
+    best_x = np.zeros((len(x), 3))
+    best_q = np.full((len(x), 3), -1, dtype=np.int64)
+    # with the candidate: a vertex's two quadrics (its third), each pair of its three; then
+    # the candidate in place of one of them (a curve point of the wrong curve: the chamfer
+    # cone's circle on the top face, inside the bore, belongs on the bore's rim)
+    tries = [((0, 1), n_own == 2), ((0, 1), n_own >= 3), ((0, 2), n_own >= 3), ((1, 2), n_own >= 3),
+             ((0,), n_own == 1), ((0,), n_own >= 2), ((1,), n_own >= 2), ((2,), n_own >= 3)]
+    for k, (cols, which) in enumerate(tries):
+        sel = np.flatnonzero(which)
+        if len(sel):
+            qs = np.stack([own[sel, j] for j in cols] + [c[sel]], 1)
+            size = len(cols) + 1
+            got, ok = newton(matrices[qs], x[v[sel]])
+            ok &= np.linalg.norm(got - x[v[sel]], axis=1) <= MAX_MOVE * tol
+            idx = np.flatnonzero(ok)
+            idx = idx[straddles(got[idx], contains, eps)]
+            rank = len(tries) * sel[idx] + k  # candidates nearest first (pairs are sorted so), then the try
+            vi = v[sel[idx]]
+            order = np.lexsort((rank, vi))
+            vi, rank, idx = vi[order], rank[order], idx[order]
+            first = np.concatenate([[True], vi[1:] != vi[:-1]]) if len(vi) else np.zeros(0, dtype=bool)
+            vi, rank, idx = vi[first], rank[first], idx[first]
+            better = rank < best_rank[vi]
+            vi, rank, idx = vi[better], rank[better], idx[better]
+            best_rank[vi], best_x[vi] = rank, got[idx]
+            best_q[vi, :size] = qs[idx]
+            best_q[vi, size:] = -1
+    done = np.flatnonzero(best_rank < np.iinfo(np.int64).max)
+    x[done] = best_x[done]
+    kept[done] = -1
+    kept[done, :3] = best_q[done]
+    return len(off), len(done)
