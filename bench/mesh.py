@@ -72,7 +72,9 @@ def ours(scene, tape, tolerance, rng) -> dict:
     csg = csg_surface_error(tape, pts, 0.01 * m.tolerance).max() / diagonal(tape.bound)
     return {"triangles": len(m.triangles), "cpu_s": cpu, "max_rel_error": float(err), "max_rel_csg_error": float(csg),
             "tolerance_rel": m.tolerance / diagonal(tape.bound), "closed_manifold": _closed(m.vertices, m.triangles),
-            "spanning_triangles": m.stats.get("spanning_triangles"), "planar_patches": m.stats.get("planar_patches")}
+            "spanning_triangles": m.stats.get("spanning_triangles"), "planar_patches": m.stats.get("planar_patches"),
+            "method": m.stats.get("method"), "facet_rounds": m.stats.get("facet_rounds"),
+            "stage_cpu_s": m.stats.get("stage_cpu_s")}
 
 
 def manifold_row(shape, tape, target_rel, segments, rng) -> dict:

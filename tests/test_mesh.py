@@ -296,6 +296,8 @@ def test_random_programs(seed):
         return
     check_closed_manifold(m)
     check_vertices_on_surface(sc, m)
+    if m.stats["method"] == "facets":
+        assert m.stats["spanning_wide_triangles"] == 0 and m.stats["far_triangles"] == 0
 
 
 @pytest.mark.parametrize("seed", range(6))
