@@ -264,6 +264,30 @@ def _near_sets(tape, qs, regions, oriented=None) -> tuple[list, list]:
     return near, outside
 
 
+def local_instances(tape, lo, hi) -> tuple[list, list]:
+    """Per box [lo, hi] (R, 3): (near, outside) for :meth:`PrimitiveDag.pruned`, the
+    instances whose boxes meet it and the half-spaces whose plane may cross it, and the
+    half-spaces whose solid misses it; over the box the pruned tape is the solid."""
+    halves = half_spaces(tape)
+    is_half = np.zeros(len(tape.instances), dtype=bool)
+    is_half[halves] = True
+    ilo = np.array([i.box[0] if i.box is not None and not h else np.full(3, np.inf)
+                    for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
+    ihi = np.array([i.box[1] if i.box is not None and not h else np.full(3, -np.inf)
+                    for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
+    box_of, inst = BoxTree(ilo, ihi).query(lo, hi)
+    near = [set() for _ in range(len(lo))]
+    for b, i in zip(box_of.tolist(), inst.tolist()):
+        near[b].add(i)
+    outside: list = [set() for _ in range(len(lo))]
+    if halves:
+        crossing, missed = _half_space_sides(tape, halves, lo, hi)
+        for k in range(len(lo)):
+            near[k].update(crossing[k])
+            outside[k].update(missed[k])
+    return near, outside
+
+
 #: (node, half-space) pairs held at once by :func:`_half_space_sides` (the half-spaces are
 #: taken in chunks so that even a plane crossing every region keeps to it)
 _SIDE_CHUNK = 1 << 22

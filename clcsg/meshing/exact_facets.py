@@ -14,7 +14,8 @@
    there) and that primitive's colour.
 
 The result is checked: a triangle farther than the tolerance from its quadric (centroid and
-edge midpoints, to first order) or not on a quadric all its vertices lie on (spanning a sharp
+edge midpoints, to first order), or, round a vertex its solve moved more than the
+tolerance, from the solid's surface (the straddle test), or not on a quadric all its vertices lie on (spanning a sharp
 edge) with a vertex more than :data:`SPAN_SLACK` tolerances off that quadric means that the
 facets of the instances there met the wrong way round or missed a feature finer than them
 (surfaces that graze: two cylinders tangent along a line).  Those instances are faceted again at half their tolerance and the Booleans
@@ -30,7 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..compile.interpret import contains
-from ..compile.root_tapes import box_tapes
+from ..compile.root_tapes import local_instances, primitive_dag
+from ..model.bvh import morton_order
 from ..model.csg import DEFAULT_COLOR
 from . import refine
 from .collapse import collapse_coincident
@@ -38,8 +40,8 @@ from .facets import KINDS
 from .instance_booleans import boolean_mesh, common_frame, facets_of
 from .owners import primitives_of, shared_nearest
 from .planar import flat_quadrics
-from .project import first_order_distance
-from .snap import repair_off_surface, snap, vertex_sets
+from .project import first_order_distance, residuals
+from .snap import fibonacci_directions, repair_off_surface, snap, straddles, vertex_sets
 
 #: faceting rounds at most (each halves the tolerance of the instances of bad triangles)
 MAX_ROUNDS = 5
@@ -48,6 +50,13 @@ MAX_ROUNDS = 5
 #: inside its bore): it is within the tolerance, counted (``spanning_triangles``), and faceting
 #: finer is not tried for it (it would take rounds down to the feature's width)
 SPAN_SLACK = 0.25
+#: a vertex its solve moved farther than this many tolerances (farther than a point of the
+#: facets lies from its own surface) has its triangles checked against the solid, not only
+#: against their quadric
+SHIFTED = 1.0
+#: the radius (tolerances) and directions of that check
+NEAR_REACH = 1.1
+NEAR_DIRECTIONS = fibonacci_directions(64)
 
 
 @dataclass
@@ -87,19 +96,77 @@ def _clip_planes(lo, hi) -> np.ndarray:
 
 
 def contains_around(tape, x, around) -> np.ndarray:
-    """The solid's membership at ``around`` (N, k, 3), points near each of ``x`` (N, 3): the
-    tape pruned per group of neighbouring points to the primitives whose boxes meet the group's
-    (:func:`clcsg.compile.root_tapes.box_tapes`), so that the work is local, not the whole tape
-    at every point."""
+    """The solid's membership at ``around`` (N, k, 3), points near each of ``x`` (N, 3), as
+    (N, k) bool: per group of :data:`GROUP` neighbouring points (along a Morton curve) the tape
+    pruned to what can matter in the group's box G (:class:`clcsg.compile.root_tapes.PrimitiveDag`:
+    the instances whose boxes meet G and the half-spaces whose plane crosses it kept, the
+    half-spaces that miss G false, the rest at their defaults), so that the work is local."""
     n, k = around.shape[:2]
-    lo, hi = around.min(axis=1), around.max(axis=1)
-    group, tapes = box_tapes(tape, lo, hi, np.zeros(n, dtype=np.int64))
+    dag = primitive_dag(tape)
+    if dag is None or n <= GROUP:
+        return contains(tape.ops, tape.quadrics, around.reshape(-1, 3)).reshape(n, k)
+    order = morton_order(x)
+    starts = np.arange(0, n, GROUP)
+    glo = np.minimum.reduceat(around.min(axis=1)[order], starts, axis=0)
+    ghi = np.maximum.reduceat(around.max(axis=1)[order], starts, axis=0)
+    near, outside = local_instances(tape, glo, ghi)
     out = np.zeros((n, k), dtype=bool)
-    for g, ops in enumerate(tapes):
-        rows = np.flatnonzero(group == g)
-        if len(rows):
-            out[rows] = contains(ops, tape.quadrics, around[rows].reshape(-1, 3)).reshape(len(rows), k)
+    for g, a in enumerate(starts):
+        rows = order[a:a + GROUP]
+        ops, regs = dag.pruned(frozenset(near[g]), outside[g], registers=tape.n_regs)
+        if regs > tape.n_regs:
+            ops = tape.ops
+        out[rows] = contains(ops, tape.quadrics, around[rows].reshape(-1, 3)).reshape(len(rows), k)
     return out
+
+
+#: points whose membership is evaluated on one pruned tape
+GROUP = 64
+
+
+def _near_solid(tape, vertices, triangles, tol) -> np.ndarray:
+    """Per triangle whether its centroid and edge midpoints lie within about ``tol`` of the
+    solid's surface: of :data:`NEAR_DIRECTIONS` points at :data:`NEAR_REACH` tolerances round
+    each, some inside and some outside (the straddle test; a point at 0.97 tolerances from a
+    flat face sees it in a cap of 28 degrees round the normal, which 64 directions, 25 degrees
+    apart, hit)."""
+    v = vertices[triangles]
+    pts = np.concatenate([v.mean(axis=1), 0.5 * (v + np.roll(v, -1, axis=1)).reshape(-1, 3)])
+    ok = straddles(pts, lambda x, around: contains_around(tape, x, around), NEAR_REACH * tol, NEAR_DIRECTIONS)
+    return ok[:len(v)] & ok[len(v):].reshape(-1, 3).all(axis=1)
+
+
+def _far_chords(tape, vertices, triangles, quad, tol) -> np.ndarray:
+    """Per triangle whether one of its edges is a crease (its two triangles on different
+    quadrics: the edge runs along their curve) whose midpoint is farther than ``tol`` from the
+    curve, to first order: with signed distances d1, d2 to the two tangent planes and c the
+    cosine between their normals, the distance to the planes' line is
+    sqrt((d1^2 + d2^2 - 2 c d1 d2) / (1 - c^2)), with the angle taken as at least 30 degrees
+    (where surfaces graze the line is ill-posed, and the facets' own check covers them).  A
+    chord of a rim sags off both surfaces at once (a hole through a slope), so it can be
+    farther from the solid than from either."""
+    edges, tri_edge = refine.edges_of(triangles)
+    owner = np.full((len(edges), 2), -1, dtype=np.int64)
+    flat_edge, flat_tri = tri_edge.reshape(-1), np.repeat(np.arange(len(triangles)), 3)
+    order = np.argsort(flat_edge, kind="stable")
+    first = np.concatenate([[True], flat_edge[order][1:] != flat_edge[order][:-1]])
+    owner[flat_edge[order][first], 0] = flat_tri[order][first]
+    owner[flat_edge[order][~first], 1] = flat_tri[order][~first]
+    qa, qb = quad[owner[:, 0]], np.where(owner[:, 1] >= 0, quad[owner[:, 1]], -1)
+    crease = np.flatnonzero((qa >= 0) & (qb >= 0) & (qa != qb))
+    far_edge = np.zeros(len(edges), dtype=bool)
+    if len(crease):
+        mid = 0.5 * (vertices[edges[crease, 0]] + vertices[edges[crease, 1]])
+        fa, ja = residuals(tape.quadrics[qa[crease]][:, None], mid)
+        fb, jb = residuals(tape.quadrics[qb[crease]][:, None], mid)
+        na, nb = np.linalg.norm(ja[:, 0], axis=1), np.linalg.norm(jb[:, 0], axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d1, d2 = fa[:, 0] / na, fb[:, 0] / nb
+            c = np.einsum("ij,ij->i", ja[:, 0], jb[:, 0]) / (na * nb)
+            s2 = np.maximum(1.0 - c * c, 0.25)  # below 30 degrees taken as 30: grazing surfaces
+            dist = np.sqrt(np.maximum(d1 * d1 + d2 * d2 - 2.0 * c * d1 * d2, 0.0) / s2)
+        far_edge[crease] = np.nan_to_num(dist, nan=0.0) > tol
+    return far_edge[tri_edge].any(axis=1)
 
 
 def _deviation(tape, vertices, triangles, quad) -> np.ndarray:
@@ -136,7 +203,14 @@ def _one_round(tape, facets, frame, tol: float, stats: dict) -> Faceted:
     quad = shared_nearest(tape, m.vertices, m.triangles, m.sets, m.faces)
     moved = np.flatnonzero(quad != m.faces)
     spanning = (quad >= 0) & ~(m.sets[m.triangles] == quad[:, None, None]).any(axis=2).all(axis=1)
-    far = _deviation(tape, m.vertices, m.triangles, quad) > tol
+    far = (_deviation(tape, m.vertices, m.triangles, quad) > tol) | _far_chords(tape, m.vertices, m.triangles, quad, tol)
+    # a vertex moved far by its solve (a corner where two curves meet at a shallow angle) may
+    # drag its triangles across a curve: those are checked against the solid itself
+    shifted = np.linalg.norm(m.vertices - got.vertices, axis=1) > SHIFTED * tol
+    check = np.flatnonzero(shifted[m.triangles].any(axis=1) & ~far)
+    if len(check):
+        far[check] |= ~timed(stats, "check", _near_solid, tape, m.vertices, m.triangles[check], tol)
+    stats["checked_triangles"] = stats.get("checked_triangles", 0) + int(len(check))
     wide = spanning.copy()  # spanning a feature wider than SPAN_SLACK tolerances
     rows = np.flatnonzero(spanning)
     if len(rows):

@@ -149,22 +149,27 @@ def with_satisfied(matrices, sets, kept, x):
     return out
 
 
-#: directions of the straddle test (a Fibonacci sphere)
-_K = np.arange(32) + 0.5
-_Z = 1.0 - 2.0 * _K / 32
-_DIRS = np.stack([np.sqrt(1 - _Z * _Z) * np.cos(_K * np.pi * (3.0 - np.sqrt(5.0)) + 0.3),
-                  np.sqrt(1 - _Z * _Z) * np.sin(_K * np.pi * (3.0 - np.sqrt(5.0)) + 0.3), _Z], axis=1)
+def fibonacci_directions(n: int) -> np.ndarray:
+    """``n`` unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = k * np.pi * (3.0 - np.sqrt(5.0)) + 0.3
+    return np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
+
+
+#: directions of the straddle test
+_DIRS = fibonacci_directions(32)
 #: the straddle test's radius, relative to max(1, largest |coordinate|)
 STRADDLE = 1e-7
 
 
-def straddles(x, contains, eps) -> np.ndarray:
+def straddles(x, contains, eps, directions=_DIRS) -> np.ndarray:
     """Per point of ``x`` whether points at distance ``eps`` around it are both inside and
     outside the solid (``contains(x, around)``: the membership of ``around`` (N, k, 3), the
     points round each of ``x`` (N, 3), as (N, k) bool): it is on the surface."""
     if not len(x):
         return np.zeros(0, dtype=bool)
-    ins = contains(x, x[:, None] + eps * _DIRS[None])
+    ins = contains(x, x[:, None] + eps * directions[None])
     return ins.any(axis=1) & ~ins.all(axis=1)
 
 
