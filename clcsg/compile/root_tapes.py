@@ -238,13 +238,7 @@ def _near_sets(tape, qs, regions, oriented=None) -> tuple[list, list]:
     solid misses the whole region (:func:`_half_space_sides`, then :func:`_oriented_sides` on
     the crossing ones where the region has an ``oriented`` box).  The other half-spaces hold
     it, their default in the :class:`PrimitiveDag` (:func:`primitive_dag`)."""
-    halves = half_spaces(tape)
-    is_half = np.zeros(len(tape.instances), dtype=bool)
-    is_half[halves] = True
-    lo = np.array([i.box[0] if i.box is not None and not h else np.full(3, np.inf)
-                   for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
-    hi = np.array([i.box[1] if i.box is not None and not h else np.full(3, -np.inf)
-                   for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
+    halves, lo, hi = _boxes_but_half_spaces(tape)
     rlo = np.array([regions[q][0] for q in qs]).reshape(-1, 3)
     rhi = np.array([regions[q][1] for q in qs]).reshape(-1, 3)
     region_of, inst = BoxTree(lo, hi).query(rlo, rhi)
@@ -264,17 +258,24 @@ def _near_sets(tape, qs, regions, oriented=None) -> tuple[list, list]:
     return near, outside
 
 
+def _boxes_but_half_spaces(tape):
+    """(the half-space instances, per instance the box lo and hi (n, 3)): empty (+inf, -inf)
+    for a half-space or an instance without a box, so that a box query never lists them."""
+    halves = half_spaces(tape)
+    is_half = np.zeros(len(tape.instances), dtype=bool)
+    is_half[halves] = True
+    lo = np.array([i.box[0] if i.box is not None and not h else np.full(3, np.inf)
+                   for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
+    hi = np.array([i.box[1] if i.box is not None and not h else np.full(3, -np.inf)
+                   for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
+    return halves, lo, hi
+
+
 def local_instances(tape, lo, hi) -> tuple[list, list]:
     """Per box [lo, hi] (R, 3): (near, outside) for :meth:`PrimitiveDag.pruned`, the
     instances whose boxes meet it and the half-spaces whose plane may cross it, and the
     half-spaces whose solid misses it; over the box the pruned tape is the solid."""
-    halves = half_spaces(tape)
-    is_half = np.zeros(len(tape.instances), dtype=bool)
-    is_half[halves] = True
-    ilo = np.array([i.box[0] if i.box is not None and not h else np.full(3, np.inf)
-                    for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
-    ihi = np.array([i.box[1] if i.box is not None and not h else np.full(3, -np.inf)
-                    for i, h in zip(tape.instances, is_half)]).reshape(-1, 3)
+    halves, ilo, ihi = _boxes_but_half_spaces(tape)
     box_of, inst = BoxTree(ilo, ihi).query(lo, hi)
     near = [set() for _ in range(len(lo))]
     for b, i in zip(box_of.tolist(), inst.tolist()):
