@@ -13,14 +13,17 @@
    colour rule (:func:`.owners.primitives_of`: the first instance that bounds the solid
    there) and that primitive's colour.
 
-The result is checked: a triangle farther than the tolerance from its quadric (centroid and
-edge midpoints, to first order), or, round a vertex its solve moved more than the
-tolerance, from the solid's surface (the straddle test), or not on a quadric all its vertices lie on (spanning a sharp
-edge) with a vertex more than :data:`SPAN_SLACK` tolerances off that quadric means that the
-facets of the instances there met the wrong way round or missed a feature finer than them
-(surfaces that graze: two cylinders tangent along a line).  Those instances are faceted again at half their tolerance and the Booleans
-rerun, up to :data:`MAX_ROUNDS` times (the instances with a curved surface there: planes are
-exact at any tolerance); what remains is counted in the stats.
+The result is checked.  A triangle is bad if
+* it is farther than the tolerance from its quadric (centroid and edge midpoints, to first
+  order), or one of its crease edges sags off both of its surfaces beyond it (:func:`_far_chords`);
+* a vertex of it moved more than :data:`SHIFTED` tolerances in its solve and it is not within
+  the tolerance of the solid itself (the straddle test, :func:`_near_solid`);
+* it spans a sharp edge (not on a quadric all its vertices lie on) with a vertex more than
+  :data:`SPAN_SLACK` tolerances off its quadric.
+Bad triangles mean that the facets met the wrong way round where surfaces graze (two cylinders
+tangent along a line) or were too coarse for a curve.  The curved instances round them (planes
+are exact at any tolerance) are faceted again at half their tolerance and the Booleans rerun,
+up to :data:`MAX_ROUNDS` times; what remains is counted in the stats.
 """
 
 from __future__ import annotations
@@ -60,7 +63,10 @@ NEAR_DIRECTIONS = fibonacci_directions(64)
 
 
 @dataclass
-class Faceted:
+class SnappedMesh:
+    """A round's mesh: vertices on their quadrics (``sets``), per triangle its quadric, primitive
+    and colour (set on the final round), and whether it is bad (see the module docstring)."""
+
     vertices: np.ndarray
     triangles: np.ndarray
     quadric: np.ndarray
@@ -181,7 +187,7 @@ def _deviation(tape, vertices, triangles, quad) -> np.ndarray:
     return out
 
 
-def _one_round(tape, facets, frame, tol: float, stats: dict) -> Faceted:
+def _one_round(tape, facets, frame, tol: float, stats: dict) -> SnappedMesh:
     got = timed(stats, "booleans", boolean_mesh, tape, facets, frame)
     n_inst, n_q = len(tape.instances), tape.n_quadrics
     table = np.full((n_inst + 1, 8), -1, dtype=np.int64)
@@ -221,10 +227,10 @@ def _one_round(tape, facets, frame, tol: float, stats: dict) -> Faceted:
     stats.update(snap_fallbacks=int(fallbacks), reassigned_triangles=int(len(moved)), off_surface=off,
                  off_surface_repaired=fixed, spanning_triangles=int(spanning.sum()),
                  spanning_wide_triangles=int(wide.sum()), far_triangles=int(far.sum()))
-    return Faceted(m.vertices[used], index[m.triangles], quad, None, None, m.sets[used], wide | far)
+    return SnappedMesh(m.vertices[used], index[m.triangles], quad, None, None, m.sets[used], wide | far)
 
 
-def _coloured(tape, got: Faceted, tol: float, stats: dict) -> Faceted:
+def _coloured(tape, got: SnappedMesh, tol: float, stats: dict) -> SnappedMesh:
     """``got`` with each triangle's primitive (the colour rule) and colour."""
     prim = timed(stats, "owners", primitives_of, tape, got.quadric, got.vertices[got.triangles].mean(axis=1), tol)
     palette = np.array([inst.color for inst in tape.instances] + [DEFAULT_COLOR], dtype=np.float64)
@@ -254,7 +260,7 @@ def _near_bad(tape, got, owners, flat, tol) -> np.ndarray:
     return np.array(sorted(out), dtype=np.int64)
 
 
-def mesh_by_facets(shape, tape, tol: float, stats: dict) -> Faceted:
+def mesh_by_facets(shape, tape, tol: float, stats: dict) -> SnappedMesh:
     """The mesh of ``shape``'s solid (``tape``: its compiled tape) within ``tol`` (see the
     module docstring)."""
     tols = np.full(len(tape.instances), float(tol))
