@@ -203,3 +203,85 @@ def test_every_triangle_near_the_solid(name):
     ins = oracle.contains(shape, probes.reshape(-1, 3)).reshape(len(pts), -1)
     near = ins.any(axis=1) & ~ins.all(axis=1)
     assert near.all(), f"{(~near).sum()} of {len(pts)} points farther than the tolerance from the surface"
+
+
+def test_hole_rims_on_a_slope_split_locally():
+    """A plate tilted by 20 degrees with three holes: the rims' chords sag off the tilted face
+    and the bore at once, beyond the tolerance.  The far chords are split at points solved
+    onto the rim curves (no second faceting round); the mesh is closed, every vertex on the
+    CSG surface, and every triangle's centroid and edge midpoints within the tolerance of the
+    CSG surface (the float64 oracle's straddle test at the tolerance itself: 128 directions,
+    then 20,000 round the points those miss)."""
+    from clcsg.meshing.snap import fibonacci_directions
+
+    plate = clcsg.box((4.0, 4.0, 0.5)).rotate([0, 1, 0], 20)
+    holes = clcsg.union(*[clcsg.cylinder(height=6.0, radius=r, center=(x, y, 0.0))
+                          for x, y, r in ((-1, -1, 0.3), (1, -1, 0.5), (0, 1, 0.4))])
+    shape = clcsg.difference(plate, holes)
+    sc = clcsg.Scene(shape)
+    m = clcsg.mesh(sc)
+    assert m.stats["facet_rounds"] == 1 and m.stats["chord_splits"] > 0
+    assert m.stats["far_triangles"] == 0 and m.stats["spanning_wide_triangles"] == 0
+    check_closed_manifold(m)
+    check_vertices_on_surface(sc, m)
+    v = m.vertices[m.triangles]
+    pts = np.concatenate([v.mean(axis=1), 0.5 * (v + np.roll(v, -1, axis=1)).reshape(-1, 3)])
+    for n in (128, 20000):
+        probes = pts[:, None] + m.tolerance * fibonacci_directions(n)[None]
+        ins = oracle.contains(shape, probes.reshape(-1, 3)).reshape(len(pts), -1)
+        pts = pts[~(ins.any(axis=1) & ~ins.all(axis=1))]
+    assert not len(pts), f"{len(pts)} points farther than the tolerance from the CSG surface"
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 3))
+def test_min_norm_step_is_the_least_squares_step(seed, k):
+    """The closed-form Newton step J^T (J J^T)^-1 F equals numpy's minimum-norm least-squares
+    solution of J dx = F for well-conditioned random J (k rows of 3)."""
+    from clcsg.meshing.project import min_norm_step
+
+    rng = np.random.default_rng(seed)
+    j = rng.normal(size=(8, k, 3))
+    j = j[np.linalg.svd(j, compute_uv=False).min(axis=1) > 0.1]
+    f = rng.normal(size=(len(j), k))
+    got = min_norm_step(f, j)
+    want = np.stack([np.linalg.lstsq(jj, ff, rcond=None)[0] for jj, ff in zip(j, f)]) if len(j) else got
+    assert np.allclose(got, want, rtol=1e-9, atol=1e-9)
+
+
+def test_newton_stops_points_that_leave_their_reach():
+    """Three planes with no common point (two parallel): Newton leaves with 'not converged'
+    once the point passes the reach; three planes through a corner converge onto it."""
+    from clcsg.meshing.project import newton
+
+    def plane(n, d):
+        m = np.zeros((4, 4))
+        m[:3, 3] = m[3, :3] = 0.5 * np.asarray(n, dtype=np.float64)
+        m[3, 3] = -d
+        return m
+
+    corner = np.array([[plane((1, 0, 0), 1.0), plane((0, 1, 0), 2.0), plane((0, 0, 1), 3.0)]])
+    x, ok = newton(corner, np.zeros((1, 3)), reach=10.0)
+    assert ok[0] and np.allclose(x[0], [1.0, 2.0, 3.0])
+    apart = np.array([[plane((1, 0, 0), 1.0), plane((1, 0, 0), 2.0), plane((0, 0, 1), 3.0)]])
+    assert not newton(apart, np.zeros((1, 3)), reach=10.0)[1][0]
+
+
+@pytest.mark.parametrize("name", ["flange", "gear"])
+def test_membership_around_points_equals_the_interpreter(name):
+    """The membership at c + e d from each leaf's expansion about c equals the tape run at
+    those points (random centres in the bound, e = 1% of the diagonal)."""
+    from bench import zoo
+    from clcsg.compile.interpret import contains, contains_around
+    from clcsg.meshing.exact_facets import contains_near
+    from clcsg.meshing.snap import fibonacci_directions
+
+    tape = clcsg.Scene(zoo.model(name).build()).compile()
+    lo, hi = (np.asarray(b) for b in tape.bound)
+    rng = np.random.default_rng(3)
+    c = lo + (hi - lo) * rng.random((300, 3))
+    eps = 0.01 * float(np.linalg.norm(hi - lo))
+    d = fibonacci_directions(16)
+    want = contains(tape.ops, tape.quadrics, (c[:, None] + eps * d[None]).reshape(-1, 3)).reshape(len(c), -1)
+    assert np.array_equal(contains_around(tape.ops, tape.quadrics, c, eps, d), want)
+    assert np.array_equal(contains_near(tape, c, eps, d), want)

@@ -164,6 +164,45 @@ def contains(ops, quadrics, points) -> np.ndarray:
     return member(ops, quadrics, points)[0]
 
 
+def contains_around(ops, quadrics, centers, eps: float, directions) -> np.ndarray:
+    """Membership (closed solid) at the points c_i + eps d_j round ``centers`` (N, 3) in the
+    unit ``directions`` (k, 3), as (N, k) bool.  A leaf's value there comes from its expansion
+    about c, exact for a quadric:
+
+        K(c + e d) = K(c) + 2 e (K c)[:3] . d + e^2 d^T K[:3, :3] d
+
+    (the tape's leaf quadrics expanded in one batched product, instead of the form at N k
+    points)."""
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(directions, dtype=np.float64)
+    ch = np.concatenate([c, np.ones((len(c), 1))], axis=1)
+    shape = (len(c), len(d))
+    rows = np.asarray(ops).tolist()
+    used = sorted({a for op, _, a, _ in rows if op == OP_LEAF})
+    slot = {q: i for i, q in enumerate(used)}
+    k = quadrics[used]  # (Q, 4, 4): every leaf's expansion at once
+    kc = np.einsum("nj,qjk->qnk", ch, k)
+    bend = (eps * eps) * np.einsum("kj,qji,ki->qk", d, k[:, :3, :3], d)
+    vals = (kc * ch[None]).sum(axis=2)[:, :, None] + (2.0 * eps) * (kc[:, :, :3] @ d.T) + bend[:, None, :]
+
+    def values(q):
+        return vals[slot[q]]
+
+    regs: dict = {}
+    for op, out, a, b in rows:
+        if op == OP_LEAF:
+            regs[out] = b * values(a) <= 0.0
+        elif op == OP_AND:
+            regs[out] = regs[a] & regs[b]
+        elif op == OP_OR:
+            regs[out] = regs[a] | regs[b]
+        elif op == OP_COPY:
+            regs[out] = regs[a]
+        elif op == OP_CONST:
+            regs[out] = np.full(shape, bool(a))
+    return regs[rows[-1][1]]
+
+
 # -- pruning -------------------------------------------------------------------------------------
 
 _F, _T, _LIVE = 0, 1, 2

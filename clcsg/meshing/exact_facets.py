@@ -33,11 +33,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..compile.interpret import contains
+from ..compile.interpret import contains_around
 from ..compile.root_tapes import local_instances, primitive_dag
 from ..model.bvh import morton_order
 from ..model.csg import DEFAULT_COLOR
 from . import refine
+from .chord_splits import edge_sides, edges_to_split, split_far
 from .collapse import collapse_coincident
 from .facets import KINDS
 from .instance_booleans import boolean_mesh, common_frame, facets_of
@@ -53,6 +54,8 @@ MAX_ROUNDS = 5
 #: inside its bore): it is within the tolerance, counted (``spanning_triangles``), and faceting
 #: finer is not tried for it (it would take rounds down to the feature's width)
 SPAN_SLACK = 0.25
+#: passes of local chord splits (:mod:`.chord_splits`) before the instances are faceted again
+SPLIT_PASSES = 3
 #: a vertex its solve moved farther than this many tolerances (farther than a point of the
 #: facets lies from its own surface) has its triangles checked against the solid, not only
 #: against their quadric
@@ -101,28 +104,29 @@ def _clip_planes(lo, hi) -> np.ndarray:
     return out
 
 
-def contains_around(tape, x, around) -> np.ndarray:
-    """The solid's membership at ``around`` (N, k, 3), points near each of ``x`` (N, 3), as
-    (N, k) bool: per group of :data:`GROUP` neighbouring points (along a Morton curve) the tape
-    pruned to what can matter in the group's box G (:class:`clcsg.compile.root_tapes.PrimitiveDag`:
-    the instances whose boxes meet G and the half-spaces whose plane crosses it kept, the
-    half-spaces that miss G false, the rest at their defaults), so that the work is local."""
-    n, k = around.shape[:2]
+def contains_near(tape, x, eps: float, directions) -> np.ndarray:
+    """The solid's membership at the points x_i + eps d_j (:func:`~clcsg.compile.interpret.contains_around`)
+    as (N, k) bool: per group of :data:`GROUP` neighbouring points (along a Morton curve) the
+    tape pruned to what can matter in the group's box G grown by ``eps``
+    (:class:`clcsg.compile.root_tapes.PrimitiveDag`: the instances whose boxes meet G and the
+    half-spaces whose plane crosses it kept, the half-spaces that miss G false, the rest at
+    their defaults), so that the work is local."""
+    n = len(x)
     dag = primitive_dag(tape)
     if dag is None or n <= GROUP:
-        return contains(tape.ops, tape.quadrics, around.reshape(-1, 3)).reshape(n, k)
+        return contains_around(tape.ops, tape.quadrics, x, eps, directions)
     order = morton_order(x)
     starts = np.arange(0, n, GROUP)
-    glo = np.minimum.reduceat(around.min(axis=1)[order], starts, axis=0)
-    ghi = np.maximum.reduceat(around.max(axis=1)[order], starts, axis=0)
+    glo = np.minimum.reduceat(x[order], starts, axis=0) - eps
+    ghi = np.maximum.reduceat(x[order], starts, axis=0) + eps
     near, outside = local_instances(tape, glo, ghi)
-    out = np.zeros((n, k), dtype=bool)
+    out = np.zeros((n, len(directions)), dtype=bool)
     for g, a in enumerate(starts):
         rows = order[a:a + GROUP]
         ops, regs = dag.pruned(frozenset(near[g]), outside[g], registers=tape.n_regs)
         if regs > tape.n_regs:
             ops = tape.ops
-        out[rows] = contains(ops, tape.quadrics, around[rows].reshape(-1, 3)).reshape(len(rows), k)
+        out[rows] = contains_around(ops, tape.quadrics, x[rows], eps, directions)
     return out
 
 
@@ -138,27 +142,20 @@ def _near_solid(tape, vertices, triangles, tol) -> np.ndarray:
     apart, hit)."""
     v = vertices[triangles]
     pts = np.concatenate([v.mean(axis=1), 0.5 * (v + np.roll(v, -1, axis=1)).reshape(-1, 3)])
-    ok = straddles(pts, lambda x, around: contains_around(tape, x, around), NEAR_REACH * tol, NEAR_DIRECTIONS)
+    ok = straddles(pts, lambda x, eps, dirs: contains_near(tape, x, eps, dirs), NEAR_REACH * tol, NEAR_DIRECTIONS)
     return ok[:len(v)] & ok[len(v):].reshape(-1, 3).all(axis=1)
 
 
-def _far_chords(tape, vertices, triangles, quad, tol) -> np.ndarray:
-    """Per triangle whether one of its edges is a crease (its two triangles on different
-    quadrics: the edge runs along their curve) whose midpoint is farther than ``tol`` from the
-    curve, to first order: with signed distances d1, d2 to the two tangent planes and c the
-    cosine between their normals, the distance to the planes' line is
+def _far_chords(tape, vertices, edges, side, tol) -> np.ndarray:
+    """Per edge whether it is a crease (``side``: the quadrics of its two triangles differ: the
+    edge runs along their curve) whose midpoint is farther than ``tol`` from the curve, to
+    first order: with signed distances d1, d2 to the two tangent planes and c the cosine
+    between their normals, the distance to the planes' line is
     sqrt((d1^2 + d2^2 - 2 c d1 d2) / (1 - c^2)), with the angle taken as at least 30 degrees
     (where surfaces graze the line is ill-posed, and the facets' own check covers them).  A
     chord of a rim sags off both surfaces at once (a hole through a slope), so it can be
     farther from the solid than from either."""
-    edges, tri_edge = refine.edges_of(triangles)
-    owner = np.full((len(edges), 2), -1, dtype=np.int64)
-    flat_edge, flat_tri = tri_edge.reshape(-1), np.repeat(np.arange(len(triangles)), 3)
-    order = np.argsort(flat_edge, kind="stable")
-    first = np.concatenate([[True], flat_edge[order][1:] != flat_edge[order][:-1]])
-    owner[flat_edge[order][first], 0] = flat_tri[order][first]
-    owner[flat_edge[order][~first], 1] = flat_tri[order][~first]
-    qa, qb = quad[owner[:, 0]], np.where(owner[:, 1] >= 0, quad[owner[:, 1]], -1)
+    qa, qb = side[:, 0], side[:, 1]
     crease = np.flatnonzero((qa >= 0) & (qb >= 0) & (qa != qb))
     far_edge = np.zeros(len(edges), dtype=bool)
     if len(crease):
@@ -172,7 +169,7 @@ def _far_chords(tape, vertices, triangles, quad, tol) -> np.ndarray:
             s2 = np.maximum(1.0 - c * c, 0.25)  # below 30 degrees taken as 30: grazing surfaces
             dist = np.sqrt(np.maximum(d1 * d1 + d2 * d2 - 2.0 * c * d1 * d2, 0.0) / s2)
         far_edge[crease] = np.nan_to_num(dist, nan=0.0) > tol
-    return far_edge[tri_edge].any(axis=1)
+    return far_edge
 
 
 def _deviation(tape, vertices, triangles, quad) -> np.ndarray:
@@ -199,35 +196,71 @@ def _one_round(tape, facets, frame, tol: float, stats: dict) -> SnappedMesh:
     sets = vertex_sets(len(got.vertices), got.triangles, tri_q)
     verts, kept, fallbacks = timed(stats, "snap", snap, got.vertices, sets, matrices, tol)
     off, fixed = timed(stats, "repair", repair_off_surface, verts, kept, got.triangles, matrices, tol,
-                       lambda x, around: contains_around(tape, x, around))
+                       lambda x, eps, dirs: contains_near(tape, x, eps, dirs))
     kept[kept >= n_q] = -1
     m = refine.Surface(tape, verts, refine._compact(kept), got.triangles, np.where(tri_q < n_q, tri_q, -1), wide=True)
     timed(stats, "collapse", collapse_coincident, m, stats, False)
     used = np.zeros(len(m.vertices), dtype=bool)
     used[m.triangles] = True
     index = np.cumsum(used) - 1
-    quad = shared_nearest(tape, m.vertices, m.triangles, m.sets, m.faces)
-    moved = np.flatnonzero(quad != m.faces)
-    spanning = (quad >= 0) & ~(m.sets[m.triangles] == quad[:, None, None]).any(axis=2).all(axis=1)
-    far = (_deviation(tape, m.vertices, m.triangles, quad) > tol) | _far_chords(tape, m.vertices, m.triangles, quad, tol)
+    tri = index[m.triangles]
+    quad = shared_nearest(tape, m.vertices[used], tri, m.sets[used], m.faces)
+    stats.update(snap_fallbacks=int(fallbacks), reassigned_triangles=int((quad != m.faces).sum()), off_surface=off,
+                 off_surface_repaired=fixed)
+    mesh = SnappedMesh(m.vertices[used], tri, quad, None, None, m.sets[used], None)
+    return _split_to_tolerance(tape, mesh, got.vertices[used], tol, stats)
+
+
+def _split_to_tolerance(tape, mesh: SnappedMesh, before, tol: float, stats: dict) -> SnappedMesh:
+    """``mesh`` checked, and where only chords sag too far, split locally
+    (:mod:`.chord_splits`) and checked again, up to :data:`SPLIT_PASSES` times."""
+    near_ok = np.ones(len(mesh.triangles), dtype=bool)
+    fresh = near_ok.copy()
+    for passes in range(SPLIT_PASSES + 1):
+        edges, tri_edge, far_edge, off_quadric = timed(stats, "check", _check, tape, mesh, before, fresh, near_ok,
+                                                        tol, stats)
+        if not mesh.bad.any() or passes == SPLIT_PASSES or stats["spanning_wide_triangles"] or not near_ok.all():
+            break
+        want = edges_to_split(tape, mesh.vertices, mesh.triangles, mesh.quadric, tri_edge, far_edge, off_quadric, tol)
+        got = timed(stats, "split", split_far, tape, mesh.vertices, mesh.triangles, mesh.sets, mesh.quadric, before,
+                    edges, tri_edge, want, lambda x, eps, dirs: contains_near(tape, x, eps, dirs), tol)
+        if got is None:
+            break
+        stats["chord_splits"] = stats.get("chord_splits", 0) + int(want.sum())
+        quad = shared_nearest(tape, got.vertices, got.triangles, got.sets, got.quadric)
+        mesh = SnappedMesh(got.vertices, got.triangles, quad, None, None, got.sets, None)
+        before, fresh, near_ok = got.before, got.fresh, near_ok[got.parent] | got.fresh
+    return mesh
+
+
+def _check(tape, mesh: SnappedMesh, before, fresh, near_ok, tol: float, stats: dict):
+    """Sets ``mesh.bad`` (see the module docstring; the solid itself checked round the
+    ``fresh`` triangles' vertices moved more than :data:`SHIFTED` tolerances from ``before``,
+    ``near_ok`` updated in place); returns (edges, per triangle its edges, far crease edges,
+    triangles off their quadric)."""
+    v, t, quad = mesh.vertices, mesh.triangles, mesh.quadric
+    edges, tri_edge = refine.edges_of(t)
+    far_edge = _far_chords(tape, v, edges, edge_sides(edges, tri_edge, quad), tol)
+    off_quadric = _deviation(tape, v, t, quad) > tol
+    far = off_quadric | far_edge[tri_edge].any(axis=1)
     # a vertex moved far by its solve (a corner where two curves meet at a shallow angle) may
     # drag its triangles across a curve: those are checked against the solid itself
-    shifted = np.linalg.norm(m.vertices - got.vertices, axis=1) > SHIFTED * tol
-    check = np.flatnonzero(shifted[m.triangles].any(axis=1) & ~far)
+    shifted = np.linalg.norm(v - before, axis=1) > SHIFTED * tol
+    check = np.flatnonzero(fresh & shifted[t].any(axis=1) & ~far)
     if len(check):
-        far[check] |= ~timed(stats, "check", _near_solid, tape, m.vertices, m.triangles[check], tol)
+        near_ok[check] = _near_solid(tape, v, t[check], tol)
     stats["checked_triangles"] = stats.get("checked_triangles", 0) + int(len(check))
+    spanning = (quad >= 0) & ~(mesh.sets[t] == quad[:, None, None]).any(axis=2).all(axis=1)
     wide = spanning.copy()  # spanning a feature wider than SPAN_SLACK tolerances
     rows = np.flatnonzero(spanning)
     if len(rows):
-        v = m.vertices[m.triangles[rows]]
         q = tape.quadrics[quad[rows]][:, None]
-        miss = np.max([first_order_distance(q, v[:, k]) for k in range(3)], axis=0)
+        miss = np.max([first_order_distance(q, v[t[rows, k]]) for k in range(3)], axis=0)
         wide[rows] = ~(miss <= SPAN_SLACK * tol)
-    stats.update(snap_fallbacks=int(fallbacks), reassigned_triangles=int(len(moved)), off_surface=off,
-                 off_surface_repaired=fixed, spanning_triangles=int(spanning.sum()),
-                 spanning_wide_triangles=int(wide.sum()), far_triangles=int(far.sum()))
-    return SnappedMesh(m.vertices[used], index[m.triangles], quad, None, None, m.sets[used], wide | far)
+    mesh.bad = wide | far | ~near_ok
+    stats.update(spanning_triangles=int(spanning.sum()), spanning_wide_triangles=int(wide.sum()),
+                 far_triangles=int((far | ~near_ok).sum()))
+    return edges, tri_edge, far_edge, off_quadric
 
 
 def _coloured(tape, got: SnappedMesh, tol: float, stats: dict) -> SnappedMesh:

@@ -80,6 +80,9 @@ def primitives_of(tape, quad, centroid, tol: float = 0.0):
     starts = np.searchsorted(quad[order], np.arange(tape.n_quadrics + 1))
     for q in np.unique(quad[quad >= 0]):
         every = np.asarray(owners[q], dtype=np.int64)
+        if len(every) == 1:  # one carrier: the only one, or the least missed
+            prim[order[starts[q]:starts[q + 1]]] = every[0]
+            continue
         for a in range(starts[q], starts[q + 1], CHUNK):  # neighbouring points together
             sel = order[a:min(a + CHUNK, starts[q + 1])]
             carriers = _near(boxes, every, centroid[sel], slack)

@@ -18,6 +18,8 @@ ITERATIONS = 40
 REL = 1e-12
 #: settled: a step below this times max(1, |x|) (a few units in the last place)
 SETTLED = 4 * np.finfo(np.float64).eps
+#: a step below this times max(1, |x|) that is no smaller than the one before is rounding noise
+NOISE = 1e-9
 
 
 def residuals(matrices, x):
@@ -36,35 +38,59 @@ def first_order_distance(matrices, x) -> np.ndarray:
     return d.max(axis=1)
 
 
-def newton(matrices, x0):
+def min_norm_step(f, j):
+    """J^T (J J^T)^-1 F per row (F (N, k), J (N, k, 3), k <= 3) in closed form: for one row of
+    J the step along it; for two the 2 x 2 inverse of J J^T; for three J^-1 F by the rows'
+    cross products (Cramer).  Not finite where J J^T is singular."""
+    k = j.shape[1]
+    if k == 1:
+        g = j[:, 0]
+        return g * (f[:, 0] / np.einsum("ni,ni->n", g, g))[:, None]
+    if k == 2:
+        a, b = j[:, 0], j[:, 1]
+        aa, ab, bb = (np.einsum("ni,ni->n", u, v) for u, v in ((a, a), (a, b), (b, b)))
+        det = aa * bb - ab * ab
+        la, lb = (bb * f[:, 0] - ab * f[:, 1]) / det, (aa * f[:, 1] - ab * f[:, 0]) / det
+        return la[:, None] * a + lb[:, None] * b
+    c0, c1, c2 = np.cross(j[:, 1], j[:, 2]), np.cross(j[:, 2], j[:, 0]), np.cross(j[:, 0], j[:, 1])
+    det = np.einsum("ni,ni->n", j[:, 0], c0)
+    return (f[:, 0, None] * c0 + f[:, 1, None] * c1 + f[:, 2, None] * c2) / det[:, None]
+
+
+def newton(matrices, x0, reach=None):
     """(x, converged) after Newton on the quadrics ``matrices`` (N, k, 4, 4) from ``x0``.
 
     A point leaves the iteration once its step is at the rounding of its coordinates
-    (:data:`SETTLED` times its scale) or not finite: the later steps of the fixed
-    :data:`ITERATIONS` could not move it further, so only the points still converging (most
-    settle within a few steps, quadratic convergence) pay for the rest."""
+    (:data:`SETTLED` times its scale), stops shrinking while below :data:`NOISE` times its
+    scale (rounding noise of an ill-conditioned intersection), is not finite, or (with
+    ``reach``) has gone farther than ``reach`` from its start (not converged: quadrics with no
+    common point near it): the later steps of the fixed :data:`ITERATIONS` could not move it
+    usefully, so only the points still converging (most settle within a few steps, quadratic
+    convergence) pay for the rest."""
     x = np.array(x0, dtype=np.float64, copy=True)
-    k = matrices.shape[1]
-    eye = 1e-300 * np.eye(k)
+    start = np.array(x0, dtype=np.float64)
     live = np.arange(len(x))
-    mats, xa = matrices, x
+    lost = np.zeros(len(x), dtype=bool)
+    mats, xa, prev = matrices, x, np.full(len(x), np.inf)
     with np.errstate(all="ignore"):
         for _ in range(ITERATIONS):
             f, j = residuals(mats, xa)
-            jjt = np.matmul(j, j.transpose(0, 2, 1)) + eye
-            ok = np.abs(np.linalg.det(jjt)) > 0
-            lam = np.zeros_like(f)
-            if ok.any():
-                lam[ok] = np.linalg.solve(jjt[ok], f[ok][..., None])[..., 0]
-            step = np.matmul(lam[:, None, :], j)[:, 0]
+            step = min_norm_step(f, j)
             moving = np.isfinite(step).all(axis=1)
             xa = np.where(moving[:, None], xa - step, xa)
             x[live] = xa
-            moving &= np.abs(step).max(axis=1) > SETTLED * np.maximum(1.0, np.abs(xa).max(axis=1))
+            scale = np.maximum(1.0, np.abs(xa).max(axis=1))
+            size = np.abs(step).max(axis=1)
+            moving &= (size > SETTLED * scale) & ~((size >= prev) & (size < NOISE * scale))
+            if reach is not None:
+                away = np.linalg.norm(xa - start[live], axis=1) > reach
+                lost[live[away]] = True
+                moving &= ~away
+            prev = size
             if not moving.all():
-                live, mats, xa = live[moving], mats[moving], xa[moving]
+                live, mats, xa, prev = live[moving], mats[moving], xa[moving], prev[moving]
                 if not len(live):
                     break
         d = first_order_distance(matrices, x)
     scale = np.maximum(1.0, np.abs(x).max(axis=1))
-    return x, np.isfinite(d) & (d <= REL * scale) & np.isfinite(x).all(axis=1)
+    return x, np.isfinite(d) & (d <= REL * scale) & np.isfinite(x).all(axis=1) & ~lost

@@ -421,17 +421,20 @@ def _upgrade_ends(m, tol, ends, x, sets, got, rows):
                 got[rows[i]] = False
 
 
-def split_triangles(tri, tri_edge, mid_vertex, vertices):
+def split_triangles(tri, tri_edge, mid_vertex, vertices, with_parents: bool = False):
     """The red-green split: a triangle with 1, 2, 3 split edges (``mid_vertex`` per edge, -1
-    if not split) becomes 2, 3, 4 triangles of the same orientation."""
+    if not split) becomes 2, 3, 4 triangles of the same orientation.  With ``with_parents``
+    also, per new triangle, the index of the triangle it came from."""
     mids = mid_vertex[tri_edge]  # (T, 3), mids[:, k] on edge (v_k, v_k+1)
     marked = mids >= 0
     c = marked.sum(axis=1)
-    out = [tri[c == 0]]
+    sel = np.flatnonzero(c == 0)
+    out, parents = [tri[sel]], [sel]
     sel = np.flatnonzero(c == 1)
     r = np.argmax(marked[sel], axis=1)
     v, mm = _rolled(tri[sel], r), _rolled(mids[sel], r)
     out += [np.stack([v[:, 0], mm[:, 0], v[:, 2]], 1), np.stack([mm[:, 0], v[:, 1], v[:, 2]], 1)]
+    parents += [sel, sel]
     sel = np.flatnonzero(c == 2)
     r = (np.argmin(marked[sel], axis=1) + 1) % 3
     v, mm = _rolled(tri[sel], r), _rolled(mids[sel], r)
@@ -441,10 +444,14 @@ def split_triangles(tri, tri_edge, mid_vertex, vertices):
     q1 = np.where(short[:, None], np.stack([v[:, 0], mm[:, 0], mm[:, 1]], 1), np.stack([mm[:, 0], mm[:, 1], v[:, 2]], 1))
     q2 = np.where(short[:, None], np.stack([v[:, 0], mm[:, 1], v[:, 2]], 1), np.stack([v[:, 0], mm[:, 0], v[:, 2]], 1))
     out += [q1, q2]
+    parents += [sel, sel, sel]
     sel = np.flatnonzero(c == 3)
     v, mm = tri[sel], mids[sel]
     out += [np.stack([v[:, 0], mm[:, 0], mm[:, 2]], 1), np.stack([mm[:, 0], v[:, 1], mm[:, 1]], 1),
             np.stack([mm[:, 2], mm[:, 1], v[:, 2]], 1), np.stack([mm[:, 0], mm[:, 1], mm[:, 2]], 1)]
+    parents += [sel] * 4
+    if with_parents:
+        return np.concatenate(out), np.concatenate(parents)
     return np.concatenate(out)
 
 

@@ -82,7 +82,7 @@ def _solve(matrices, subsets, x0, limit):
     j for all; solved in one batch); per point the converged solution within ``limit`` that
     moved least: (x, chosen subset index (-1: none))."""
     n = len(x0)
-    got, ok = newton(matrices[np.concatenate(subsets)], np.tile(x0, (len(subsets), 1)))
+    got, ok = newton(matrices[np.concatenate(subsets)], np.tile(x0, (len(subsets), 1)), 2.0 * limit)
     move = np.where(ok & (np.linalg.norm(got - np.tile(x0, (len(subsets), 1)), axis=1) <= limit),
                     np.linalg.norm(got - np.tile(x0, (len(subsets), 1)), axis=1), np.inf).reshape(len(subsets), n)
     pick = np.argmin(move, axis=0)
@@ -165,11 +165,11 @@ STRADDLE = 1e-7
 
 def straddles(x, contains, eps, directions=_DIRS) -> np.ndarray:
     """Per point of ``x`` whether points at distance ``eps`` around it are both inside and
-    outside the solid (``contains(x, around)``: the membership of ``around`` (N, k, 3), the
-    points round each of ``x`` (N, 3), as (N, k) bool): it is on the surface."""
+    outside the solid (``contains(x, eps, directions)``: the membership of the points
+    x_i + eps d_j as (N, k) bool): it is on the surface."""
     if not len(x):
         return np.zeros(0, dtype=bool)
-    ins = contains(x, x[:, None] + eps * directions[None])
+    ins = contains(x, eps, directions)
     return ins.any(axis=1) & ~ins.all(axis=1)
 
 
@@ -224,7 +224,7 @@ def repair_off_surface(x, kept, triangles, matrices, tol, contains):
         if len(sel):
             qs = np.stack([own[sel, j] for j in cols] + [c[sel]], 1)
             size = len(cols) + 1
-            got, ok = newton(matrices[qs], x[v[sel]])
+            got, ok = newton(matrices[qs], x[v[sel]], 2.0 * MAX_MOVE * tol)
             ok &= np.linalg.norm(got - x[v[sel]], axis=1) <= MAX_MOVE * tol
             idx = np.flatnonzero(ok)
             idx = idx[straddles(got[idx], contains, eps)]
