@@ -260,7 +260,7 @@ def test_examples_within_tolerance_of_the_csg_surface(path, method):
     else:
         assert m.stats["spanning_wide_triangles"] == 0 and m.stats["far_triangles"] == 0
         span = ~(m.vertex_quadrics[m.triangles] == m.quadric[:, None, None]).any(axis=2).all(axis=1)
-        assert span.sum() == m.stats["spanning_triangles"] <= 0.01 * len(m.triangles)
+        assert span.sum() == m.stats["spanning_triangles"] <= 0.02 * len(m.triangles)
 
 
 def test_volume_box_minus_cylinder():

@@ -285,3 +285,32 @@ def test_membership_around_points_equals_the_interpreter(name):
     want = contains(tape.ops, tape.quadrics, (c[:, None] + eps * d[None]).reshape(-1, 3)).reshape(len(c), -1)
     assert np.array_equal(contains_around(tape.ops, tape.quadrics, c, eps, d), want)
     assert np.array_equal(contains_near(tape, c, eps, d), want)
+
+
+def test_circles_shared_by_coaxial_primitives_get_one_segment_count():
+    """A bore (r = 1) with a countersink cone standing on it (r 1 -> 2) and a coaxial pin far
+    below it (r = 0.3): the bore and the cone share the circle r = 1 and take the larger count
+    (their polygons' vertices coincide there); the pin keeps the fewest its tolerance needs; a
+    cylinder on a parallel axis is not grouped.  The plate they cut meshes closed with the cone's
+    rim vertices on the bore's."""
+    from clcsg.meshing.facets import circle_segments, shared_segments
+
+    bore = clcsg.cylinder(height=2.0, radius=1.0, center=(0, 0, 0))
+    cone = clcsg.cone(height=1.0, r1=1.0, r2=2.0, center=(0, 0, 0.5))
+    pin = clcsg.cylinder(height=1.0, radius=0.3, center=(0, 0, -5))
+    beside = clcsg.cylinder(height=2.0, radius=1.0, center=(3, 0, 0))
+    tape = clcsg.Scene(clcsg.union(bore, cone, pin, beside)).compile()
+    tol = 0.01
+    got = shared_segments(tape.instances, np.full(len(tape.instances), tol), [i.matrix for i in tape.instances])
+    by_kind = {(i.node.kind, i.node.params.get("radius"), tuple(i.node.params.get("center", ()))): got[i.index]
+               for i in tape.instances}
+    want_cone = circle_segments(2.0, tol)
+    assert by_kind[("cone", None, (0, 0, 0.5))] == want_cone == by_kind[("cylinder", 1.0, (0, 0, 0))]
+    assert by_kind[("cylinder", 0.3, (0, 0, -5))] == circle_segments(0.3, tol)
+    assert by_kind[("cylinder", 1.0, (3, 0, 0))] == circle_segments(1.0, tol)
+    plate = clcsg.box((6.0, 6.0, 1.0), center=(0, 0, 0.5))
+    sc = clcsg.Scene(clcsg.difference(plate, clcsg.union(bore, cone)))
+    m = clcsg.mesh(sc, tolerance=tol)
+    check_closed_manifold(m)
+    check_vertices_on_surface(sc, m)
+    assert m.stats["far_triangles"] == 0 and m.stats["spanning_triangles"] == 0

@@ -21,9 +21,12 @@ The result is checked.  A triangle is bad if
 * it spans a sharp edge (not on a quadric all its vertices lie on) with a vertex more than
   :data:`SPAN_SLACK` tolerances off its quadric.
 Bad triangles mean that the facets met the wrong way round where surfaces graze (two cylinders
-tangent along a line) or were too coarse for a curve.  The curved instances round them (planes
-are exact at any tolerance) are faceted again at half their tolerance and the Booleans rerun,
-up to :data:`MAX_ROUNDS` times; what remains is counted in the stats.
+tangent along a line) or were too coarse for a curve.  Where the only faults are chords that
+sag too far (off a curve or off the quadric), those edges are split at points solved onto it
+(:mod:`.chord_splits`, up to :data:`SPLIT_PASSES` times).  Otherwise, or where a split is
+refused, the curved instances round the bad triangles (planes are exact at any tolerance) are
+faceted again at half their tolerance and the Booleans rerun, up to :data:`MAX_ROUNDS` times;
+what remains is counted in the stats.
 """
 
 from __future__ import annotations

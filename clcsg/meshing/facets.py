@@ -160,14 +160,20 @@ def cuboid(lo, hi, tags, m) -> Facets:
     return _oriented(v, t, np.tile(np.asarray(tags), 2), m)
 
 
-def _round(p, m, tol, kind):
+def _round_shape(p, m, kind):
+    """(w: the local frame (z the axis, origin the centre) in ``m``'s frame, height, r1, r2) of a
+    cylinder or cone."""
     h = float(p.get("height", 1.0))
     if kind == "cylinder":
         r1 = r2 = float(p.get("radius", 1.0))
     else:
         r1, r2 = float(p.get("r1", 1.0)), float(p.get("r2", 0.0))
-    w = _framed(m, p.get("axis", (0, 0, 1)), p.get("center", (0, 0, 0)))
-    n = circle_segments(max(r1, r2) * _sigma(w)[0], tol)
+    return _framed(m, p.get("axis", (0, 0, 1)), p.get("center", (0, 0, 0))), h, r1, r2
+
+
+def _round(p, m, tol, kind, segments=None):
+    w, h, r1, r2 = _round_shape(p, m, kind)
+    n = segments or circle_segments(max(r1, r2) * _sigma(w)[0], tol)
     v, t, tags = _prism(_ring(n, r1, r1, -h / 2), _ring(n, r2, r2, h / 2), n, (1, 2))
     return _oriented(v, t, tags, w)
 
@@ -221,17 +227,19 @@ def _infinite(p, m, tol, reach, kind):
     return _oriented(v, t, tags, w)
 
 
-def instance_facets(inst, tol: float, reach, matrix=None) -> Facets | None:
+def instance_facets(inst, tol: float, reach, matrix=None, segments=None) -> Facets | None:
     """The faceted mesh of ``inst`` (a :class:`clcsg.compile.tape.Instance`) within ``tol``;
     ``reach``: the ball (center, radius) the unbounded kinds must cover.  ``matrix``: the
     instance's transform into the frame the mesh is built in (default: its world matrix; the
-    tolerance and the ball are in that frame).  None for a kind without a closed form here."""
+    tolerance and the ball are in that frame); ``segments``: a cylinder's or cone's circle
+    segments, at least those ``tol`` needs (:func:`shared_segments`).  None for a kind without
+    a closed form here."""
     kind, p = inst.node.kind, inst.node.params
     m = np.asarray(inst.matrix if matrix is None else matrix, dtype=np.float64)
     if kind == "box":
         return _box(p, m)
     if kind in ("cylinder", "cone"):
-        return _round(p, m, tol, kind)
+        return _round(p, m, tol, kind, segments)
     if kind in ("sphere", "ellipsoid"):
         return _ellipsoid(p, m, tol, kind)
     if kind in ("halfspace", "slab"):
@@ -239,3 +247,63 @@ def instance_facets(inst, tol: float, reach, matrix=None) -> Facets | None:
     if kind in ("infinite_cylinder", "elliptic_cylinder"):
         return _infinite(p, m, tol, reach, kind)
     return None
+
+
+def shared_segments(instances, tols, matrices) -> dict:
+    """Per cylinder or cone instance (index -> n) its circle segments: the fewest within its
+    tolerance, raised to the most of those it shares a circle with.  Two share a circle when
+    they are coaxial with rings in phase (the same linear part of their local frames, the
+    origins on one axis) and an end ring of one lies on the other's side (a countersink's
+    cone standing on its bore, two cylinders stacked): then their polygons' vertices coincide
+    along the circle, where different counts would cut each other's facets into slivers."""
+    shapes, groups = {}, {}
+    for inst, tol, m in zip(instances, tols, matrices):
+        kind = inst.node.kind
+        if kind not in ("cylinder", "cone"):
+            continue
+        w, h, r1, r2 = _round_shape(inst.node.params, np.asarray(m, dtype=np.float64), kind)
+        n = circle_segments(max(r1, r2) * _sigma(w)[0], float(tol))
+        shapes[inst.index] = (w, h, r1, r2, n)
+        z = w[:3, 2] / np.linalg.norm(w[:3, 2])
+        o = w[:3, 3] - np.dot(w[:3, 3], z) * z
+        scale = max(1.0, float(np.abs(w).max()))
+        key = np.round(np.concatenate([w[:3, :3].ravel(), o]) / (1e-9 * scale)).astype(np.int64).tobytes()
+        groups.setdefault(key, []).append(inst.index)
+    out = {i: s[4] for i, s in shapes.items()}
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        parent = {i: i for i in members}
+
+        def root(i):
+            while parent[i] != i:
+                i = parent[i]
+            return i
+
+        for a in members:
+            for b in members:
+                if a < b and (_ring_on_side(shapes[a], shapes[b]) or _ring_on_side(shapes[b], shapes[a])):
+                    parent[root(a)] = root(b)
+        most: dict = {}
+        for i in members:
+            most[root(i)] = max(most.get(root(i), 0), out[i])
+        for i in members:
+            out[i] = most[root(i)]
+    return out
+
+
+def _ring_on_side(a, b) -> bool:
+    """Does an end ring of round shape ``a`` lie on the side of ``b`` (same linear frame, the
+    origins on one axis)?"""
+    wa, ha, a1, a2, _ = a
+    wb, hb, b1, b2, _ = b
+    z = wb[:3, 2]
+    t = float(np.dot(wa[:3, 3] - wb[:3, 3], z) / np.dot(z, z))  # a's local z + t = b's local z
+    eps = 1e-9 * max(1.0, abs(t), ha, hb, a1, a2, b1, b2)
+    for za, ra in ((-ha / 2, a1), (ha / 2, a2)):
+        zb = za + t
+        if -hb / 2 - eps <= zb <= hb / 2 + eps and ra > 0:
+            rb = b1 + (b2 - b1) * (zb + hb / 2) / hb if hb > 0 else b1
+            if abs(ra - rb) <= eps:
+                return True
+    return False

@@ -28,7 +28,7 @@ import numpy as np
 from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
 from ..compile.tape import instance_matrices
 from ..model.csg import Transformed, Union
-from .facets import Facets, cuboid, instance_facets
+from .facets import Facets, cuboid, instance_facets, shared_segments
 
 #: face IDs per instance: more than a primitive's literals (a box has six) plus the closing tag
 FACE_STRIDE = 8
@@ -160,8 +160,9 @@ def facets_of(tape, tols, frame=None):
     center = inv[:3, :3] @ (0.5 * (lo + hi)) + inv[:3, 3]
     radius = (0.5 * float(np.linalg.norm(hi - lo)) * 1.01 + 1e-9) * float(np.linalg.svd(inv[:3, :3], compute_uv=False)[0])
     out = []
+    segments = shared_segments(tape.instances, np.asarray(tols, dtype=np.float64) / stretch, mats)
     for inst, tol, m in zip(tape.instances, tols, mats):
-        f = instance_facets(inst, float(tol) / stretch, (center, radius), m)
+        f = instance_facets(inst, float(tol) / stretch, (center, radius), m, segments.get(inst.index))
         if f is None:
             return None
         out.append(f)
