@@ -137,15 +137,38 @@ def test_unbounded_kinds_clipped_to_the_bound():
 def test_grazing_cylinders_are_faceted_again():
     """The tricylinder's cylinders touch tangentially at six points; the first facets meet the
     wrong way round there, and the instances are faceted again until every triangle is within
-    the tolerance of its quadric and on it at its vertices."""
+    the tolerance of its quadric and on it at its vertices (a triangle may cross where two
+    cylinders touch tangentially, within the tolerance, as no sharp edge)."""
     sc = clcsg.load(oracle_path("examples/zoo/steinmetz.json"))
     m = clcsg.mesh(sc, method="facets")
     assert m.stats["facet_rounds"] >= 2
-    assert m.stats["far_triangles"] == 0 and m.stats["spanning_triangles"] == 0
+    assert m.stats["far_triangles"] == 0 and m.stats["spanning_wide_triangles"] == 0
+    _check_smooth_spans(sc.compile(), m)
     check_closed_manifold(m)
     check_vertices_on_surface(sc, m)
     sp = oracle.surface_points(sc.shape, sc.compile().bound, n_lines=200, seed=2)
     assert point_mesh_distance(sp.points, m.vertices, m.triangles).max() <= m.tolerance
+
+
+def _check_smooth_spans(tape, m):
+    """Every triangle whose vertices share no quadric with it has each vertex within the
+    tolerance of its quadric, and where one is more than SPAN_SLACK tolerances off it, the
+    vertex's own quadrics meet the triangle's at less than SHARP_DEGREES there."""
+    from clcsg.meshing.exact_facets import SHARP_DEGREES, SPAN_SLACK
+    from clcsg.meshing.project import residuals
+
+    span = np.flatnonzero(~(m.vertex_quadrics[m.triangles] == m.quadric[:, None, None]).any(axis=2).all(axis=1))
+    for t in span:
+        q = tape.quadrics[m.quadric[t]]
+        for v in m.triangles[t]:
+            f, g = residuals(q[None, None], m.vertices[v][None])
+            miss = abs(f[0, 0]) / np.linalg.norm(g[0, 0])
+            assert miss <= m.tolerance
+            if miss > SPAN_SLACK * m.tolerance:
+                for own in m.vertex_quadrics[v][m.vertex_quadrics[v] >= 0]:
+                    _, h = residuals(tape.quadrics[own][None, None], m.vertices[v][None])
+                    cos = abs(g[0, 0] @ h[0, 0]) / (np.linalg.norm(g[0, 0]) * np.linalg.norm(h[0, 0]))
+                    assert cos >= np.cos(np.radians(SHARP_DEGREES))
 
 
 def oracle_path(rel):
@@ -288,8 +311,9 @@ def test_membership_around_points_equals_the_interpreter(name):
 
 
 def test_circles_shared_by_coaxial_primitives_get_one_segment_count():
-    """A bore (r = 1) with a countersink cone standing on it (r 1 -> 2) and a coaxial pin far
-    below it (r = 0.3): the bore and the cone share the circle r = 1 and take the larger count
+    """A bore (r = 1) with a countersink cone standing on it (r 1 -> 2, 45 degrees: its chords'
+    points lie the sag times cos 45 from it) and a coaxial pin far below it (r = 0.3): the bore
+    and the cone share the circle r = 1 and take the larger count
     (their polygons' vertices coincide there); the pin keeps the fewest its tolerance needs; a
     cylinder on a parallel axis is not grouped.  The plate they cut meshes closed with the cone's
     rim vertices on the bore's."""
@@ -304,7 +328,8 @@ def test_circles_shared_by_coaxial_primitives_get_one_segment_count():
     got = shared_segments(tape.instances, np.full(len(tape.instances), tol), [i.matrix for i in tape.instances])
     by_kind = {(i.node.kind, i.node.params.get("radius"), tuple(i.node.params.get("center", ()))): got[i.index]
                for i in tape.instances}
-    want_cone = circle_segments(2.0, tol)
+    want_cone = circle_segments(2.0 / math.sqrt(2.0), tol)  # a 45-degree cone: the sag times cos 45
+    assert want_cone > circle_segments(1.0, tol)
     assert by_kind[("cone", None, (0, 0, 0.5))] == want_cone == by_kind[("cylinder", 1.0, (0, 0, 0))]
     assert by_kind[("cylinder", 0.3, (0, 0, -5))] == circle_segments(0.3, tol)
     assert by_kind[("cylinder", 1.0, (3, 0, 0))] == circle_segments(1.0, tol)
@@ -314,3 +339,34 @@ def test_circles_shared_by_coaxial_primitives_get_one_segment_count():
     check_closed_manifold(m)
     check_vertices_on_surface(sc, m)
     assert m.stats["far_triangles"] == 0 and m.stats["spanning_triangles"] == 0
+
+
+@pytest.mark.parametrize("r1, r2, height", [(1.0, 0.2, 0.3), (1.0, 0.0, 2.0), (0.5, 1.5, 0.2)])
+def test_cones_faceted_by_their_slant_within_the_tolerance(r1, r2, height):
+    """A cone's chords lie the sag times cos(alpha) from it, so a flat cone gets fewer segments
+    than a cylinder of its largest radius; turned and scaled uniformly, alone and cut from a
+    plate, its mesh still lies within the tolerance: every triangle's centroid and edge
+    midpoints of the exact distance (Newton onto the cone) and points on the mesh of the CSG
+    surface (float64 oracle)."""
+    from clcsg.meshing.facets import circle_segments, round_segments
+    from clcsg.meshing.project import newton
+    from test_mesh import check_near_csg_surface
+
+    tol = 0.004
+    cone = clcsg.cone(height=height, r1=r1, r2=r2).rotate([1, 2, 3], 40).scale(1.5)
+    tape = clcsg.Scene(cone).compile()
+    inst = tape.instances[0]
+    from clcsg.meshing.facets import _round_shape
+
+    assert round_segments(*_round_shape(inst.node.params, inst.matrix, "cone"), tol) < circle_segments(1.5 * max(r1, r2), tol)
+    for shape in (cone, clcsg.difference(clcsg.box(4.0), cone)):
+        sc = clcsg.Scene(shape)
+        m = clcsg.mesh(sc, tolerance=tol)
+        check_closed_manifold(m)
+        check_near_csg_surface(shape, m)
+        side = next(i for i in sc.compile().instances if i.node.kind == "cone").literals[0][0]
+        on = np.flatnonzero(m.quadric == side)
+        v = m.vertices[m.triangles[on]]
+        pts = np.concatenate([v.mean(axis=1), 0.5 * (v + np.roll(v, -1, axis=1)).reshape(-1, 3)])
+        foot, ok = newton(np.repeat(sc.compile().quadrics[[side]][None], len(pts), 0), pts)
+        assert ok.all() and np.linalg.norm(foot - pts, axis=1).max() <= tol

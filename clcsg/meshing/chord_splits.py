@@ -79,27 +79,9 @@ def edges_to_split(tape, vertices, triangles, quad, tri_edge, far_edge, off_quad
     return out
 
 
-def split_far(tape, vertices, triangles, sets, quad, before, edges, tri_edge, split, contains, tol):
+def split_far(tape, vertices, triangles, sets, quad, before, edges, tri_edge, split, contains):
     """The mesh with the ``split`` edges split (see the module docstring), or None where one of
-    them cannot be.  Where a new triangle turns over (a wedge between two curves that meet at
-    a shallow angle, narrower than the chord's sag), every edge of its parent is split too, up
-    to :data:`WIDEN` times."""
-    split = split.copy()
-    for _ in range(WIDEN + 1):
-        got = _split_once(tape, vertices, triangles, sets, quad, before, edges, tri_edge, split, contains)
-        if not isinstance(got, np.ndarray):
-            return got
-        split[tri_edge[got].reshape(-1)] = True
-    return None
-
-
-#: times the edges to split are widened to the parents of turned-over triangles
-WIDEN = 2
-
-
-def _split_once(tape, vertices, triangles, sets, quad, before, edges, tri_edge, split, contains):
-    """:func:`split_far` without the widening: a :class:`Split`, None, or the parents (array)
-    whose new triangles turn over."""
+    them cannot be."""
     e = np.flatnonzero(split)
     side = edge_sides(edges, tri_edge, quad)[e]
     two = (side[:, 1] >= 0) & (side[:, 1] != side[:, 0])
@@ -128,9 +110,8 @@ def _split_once(tape, vertices, triangles, sets, quad, before, edges, tri_edge, 
     all_v = np.concatenate([vertices, x])
     tri, parent = split_triangles(triangles, tri_edge, mid_vertex, all_v, with_parents=True)
     fresh = (mid_vertex[tri_edge] >= 0).any(axis=1)[parent]
-    flipped = _turned(vertices, triangles, all_v, tri[fresh], parent[fresh])
-    if len(flipped):
-        return flipped
+    if _turned(vertices, triangles, all_v, tri[fresh], parent[fresh]):
+        return None
     new_sets = np.full((len(e), sets.shape[1]), -1, dtype=np.int64)
     new_sets[:, 0] = side[:, 0]
     new_sets[two, 1] = side[two, 1]
@@ -138,9 +119,9 @@ def _split_once(tape, vertices, triangles, sets, quad, before, edges, tri_edge, 
                  fresh)
 
 
-def _turned(old_v, old_t, v, tri, parent) -> np.ndarray:
-    """The parents of the new triangles that face against them."""
+def _turned(old_v, old_t, v, tri, parent) -> bool:
+    """Does a new triangle face against the triangle it came from?"""
     def normal(vv, t):
         return np.cross(vv[t[:, 1]] - vv[t[:, 0]], vv[t[:, 2]] - vv[t[:, 0]])
 
-    return np.unique(parent[np.einsum("ij,ij->i", normal(v, tri), normal(old_v, old_t[parent])) <= 0])
+    return bool((np.einsum("ij,ij->i", normal(v, tri), normal(old_v, old_t[parent])) <= 0).any())

@@ -15,11 +15,14 @@
 
 The result is checked.  A triangle is bad if
 * it is farther than the tolerance from its quadric (centroid and edge midpoints, to first
-  order), or one of its crease edges sags off both of its surfaces beyond it (:func:`_far_chords`);
+  order), or one of its crease edges sags off both of its surfaces beyond it (:func:`_far_chords`)
+  and its midpoint is not proven within the tolerance of the solid (the straddle test at the
+  tolerance: inside and outside points that far round it);
 * a vertex of it moved more than :data:`SHIFTED` tolerances in its solve and it is not within
   the tolerance of the solid itself (the straddle test, :func:`_near_solid`);
 * it spans a sharp edge (not on a quadric all its vertices lie on) with a vertex more than
-  :data:`SPAN_SLACK` tolerances off its quadric.
+  :data:`SPAN_SLACK` tolerances off its quadric where the surfaces meet at more than
+  :data:`SHARP_DEGREES`, or more than the tolerance off it.
 Bad triangles mean that the facets met the wrong way round where surfaces graze (two cylinders
 tangent along a line) or were too coarse for a curve.  Where the only faults are chords that
 sag too far (off a curve or off the quadric), those edges are split at points solved onto it
@@ -57,6 +60,8 @@ MAX_ROUNDS = 5
 #: inside its bore): it is within the tolerance, counted (``spanning_triangles``), and faceting
 #: finer is not tried for it (it would take rounds down to the feature's width)
 SPAN_SLACK = 0.25
+#: surfaces that meet at less than this angle (degrees) make no sharp edge
+SHARP_DEGREES = 15.0
 #: passes of local chord splits (:mod:`.chord_splits`) before the instances are faceted again
 SPLIT_PASSES = 3
 #: a vertex its solve moved farther than this many tolerances (farther than a point of the
@@ -226,7 +231,7 @@ def _split_to_tolerance(tape, mesh: SnappedMesh, before, tol: float, stats: dict
             break
         want = edges_to_split(tape, mesh.vertices, mesh.triangles, mesh.quadric, tri_edge, far_edge, off_quadric, tol)
         got = timed(stats, "split", split_far, tape, mesh.vertices, mesh.triangles, mesh.sets, mesh.quadric, before,
-                    edges, tri_edge, want, lambda x, eps, dirs: contains_near(tape, x, eps, dirs), tol)
+                    edges, tri_edge, want, lambda x, eps, dirs: contains_near(tape, x, eps, dirs))
         if got is None:
             break
         stats["chord_splits"] = stats.get("chord_splits", 0) + int(want.sum())
@@ -244,6 +249,10 @@ def _check(tape, mesh: SnappedMesh, before, fresh, near_ok, tol: float, stats: d
     v, t, quad = mesh.vertices, mesh.triangles, mesh.quadric
     edges, tri_edge = refine.edges_of(t)
     far_edge = _far_chords(tape, v, edges, edge_sides(edges, tri_edge, quad), tol)
+    rows = np.flatnonzero(far_edge)
+    if len(rows):  # far from the curve, but within the tolerance of the solid (a cone's rim): fine
+        mid = 0.5 * (v[edges[rows, 0]] + v[edges[rows, 1]])
+        far_edge[rows[straddles(mid, lambda x, eps, dirs: contains_near(tape, x, eps, dirs), tol, NEAR_DIRECTIONS)]] = False
     off_quadric = _deviation(tape, v, t, quad) > tol
     far = off_quadric | far_edge[tri_edge].any(axis=1)
     # a vertex moved far by its solve (a corner where two curves meet at a shallow angle) may
@@ -254,16 +263,41 @@ def _check(tape, mesh: SnappedMesh, before, fresh, near_ok, tol: float, stats: d
         near_ok[check] = _near_solid(tape, v, t[check], tol)
     stats["checked_triangles"] = stats.get("checked_triangles", 0) + int(len(check))
     spanning = (quad >= 0) & ~(mesh.sets[t] == quad[:, None, None]).any(axis=2).all(axis=1)
-    wide = spanning.copy()  # spanning a feature wider than SPAN_SLACK tolerances
+    wide = spanning.copy()
     rows = np.flatnonzero(spanning)
     if len(rows):
-        q = tape.quadrics[quad[rows]][:, None]
-        miss = np.max([first_order_distance(q, v[t[rows, k]]) for k in range(3)], axis=0)
-        wide[rows] = ~(miss <= SPAN_SLACK * tol)
+        wide[rows] = _spans_a_sharp_edge(tape, v, t[rows], quad[rows], mesh.sets, tol)
     mesh.bad = wide | far | ~near_ok
     stats.update(spanning_triangles=int(spanning.sum()), spanning_wide_triangles=int(wide.sum()),
                  far_triangles=int((far | ~near_ok).sum()))
     return edges, tri_edge, far_edge, off_quadric
+
+
+def _spans_a_sharp_edge(tape, v, tri, quad, sets, tol: float) -> np.ndarray:
+    """Per triangle spanning a sharp edge (its vertices share no quadric with it) whether that
+    matters: a vertex more than the tolerance off the triangle's quadric, or more than
+    :data:`SPAN_SLACK` tolerances off it where one of the vertex's own quadrics meets the
+    triangle's at more than :data:`SHARP_DEGREES` (a narrower step is within the tolerance; a
+    flatter crossing is no sharp edge: two cylinders tangent at a point of the tricylinder)."""
+    out = np.zeros(len(tri), dtype=bool)
+    cos_sharp = np.cos(np.radians(SHARP_DEGREES))
+    for k in range(3):
+        x = v[tri[:, k]]
+        f, g = residuals(tape.quadrics[quad][:, None], x)
+        g = g[:, 0]
+        miss = np.abs(f[:, 0]) / np.linalg.norm(g, axis=1)
+        out |= ~(miss <= tol)
+        sharp = np.zeros(len(tri), dtype=bool)
+        own = sets[tri[:, k]]
+        for c in range(own.shape[1]):
+            sel = np.flatnonzero((own[:, c] >= 0) & (miss > SPAN_SLACK * tol))
+            if len(sel):
+                _, h = residuals(tape.quadrics[own[sel, c]][:, None], x[sel])
+                h = h[:, 0]
+                cos = np.abs(np.einsum("ij,ij->i", g[sel], h)) / (np.linalg.norm(g[sel], axis=1) * np.linalg.norm(h, axis=1))
+                sharp[sel] |= ~(cos >= cos_sharp)
+        out |= sharp & (miss > SPAN_SLACK * tol)
+    return out
 
 
 def _coloured(tape, got: SnappedMesh, tol: float, stats: dict) -> SnappedMesh:

@@ -171,9 +171,19 @@ def _round_shape(p, m, kind):
     return _framed(m, p.get("axis", (0, 0, 1)), p.get("center", (0, 0, 0))), h, r1, r2
 
 
+def round_segments(w, h, r1, r2, tol) -> int:
+    """The circle segments of a cylinder or cone (local frame ``w``): a point of an inscribed
+    ring's chord lies s = R (1 - cos(pi / n)) inside the circle, which is s cos(alpha) from
+    a cone of half-angle alpha (tan alpha = |r2 - r1| / h).  Under a non-uniform map the angle
+    is not kept: there the whole sag counts."""
+    sig = _sigma(w)
+    slant = h / math.hypot(h, r2 - r1) if h > 0 and sig[0] - sig[2] <= 1e-9 * sig[0] else 1.0
+    return circle_segments(max(r1, r2) * sig[0] * slant, tol)
+
+
 def _round(p, m, tol, kind, segments=None):
     w, h, r1, r2 = _round_shape(p, m, kind)
-    n = segments or circle_segments(max(r1, r2) * _sigma(w)[0], tol)
+    n = segments or round_segments(w, h, r1, r2, tol)
     v, t, tags = _prism(_ring(n, r1, r1, -h / 2), _ring(n, r2, r2, h / 2), n, (1, 2))
     return _oriented(v, t, tags, w)
 
@@ -259,16 +269,15 @@ def shared_segments(instances, tols, matrices) -> dict:
     shapes, groups = {}, {}
     for inst, tol, m in zip(instances, tols, matrices):
         kind = inst.node.kind
-        if kind not in ("cylinder", "cone"):
-            continue
-        w, h, r1, r2 = _round_shape(inst.node.params, np.asarray(m, dtype=np.float64), kind)
-        n = circle_segments(max(r1, r2) * _sigma(w)[0], float(tol))
-        shapes[inst.index] = (w, h, r1, r2, n)
+        if kind in ("cylinder", "cone"):
+            w, h, r1, r2 = _round_shape(inst.node.params, np.asarray(m, dtype=np.float64), kind)
+            shapes[inst.index] = (w, h, r1, r2, round_segments(w, h, r1, r2, float(tol)))
+    scale = max([1.0] + [float(np.abs(s[0]).max()) for s in shapes.values()])
+    for i, (w, *_rest) in shapes.items():
         z = w[:3, 2] / np.linalg.norm(w[:3, 2])
         o = w[:3, 3] - np.dot(w[:3, 3], z) * z
-        scale = max(1.0, float(np.abs(w).max()))
         key = np.round(np.concatenate([w[:3, :3].ravel(), o]) / (1e-9 * scale)).astype(np.int64).tobytes()
-        groups.setdefault(key, []).append(inst.index)
+        groups.setdefault(key, []).append(i)
     out = {i: s[4] for i, s in shapes.items()}
     for members in groups.values():
         if len(members) < 2:

@@ -18,6 +18,8 @@ ITERATIONS = 40
 REL = 1e-12
 #: settled: a step below this times max(1, |x|) (a few units in the last place)
 SETTLED = 4 * np.finfo(np.float64).eps
+#: a point whose residuals are below this many units of rounding of the form is on its quadrics
+ON_ULPS = 16
 #: a step below this times max(1, |x|) that is no smaller than the one before is rounding noise
 NOISE = 1e-9
 
@@ -60,7 +62,8 @@ def min_norm_step(f, j):
 def newton(matrices, x0, reach=None):
     """(x, converged) after Newton on the quadrics ``matrices`` (N, k, 4, 4) from ``x0``.
 
-    A point leaves the iteration once its step is at the rounding of its coordinates
+    A point already on its quadrics to rounding (:func:`on_all`) does not move.  A point
+    leaves the iteration once its step is at the rounding of its coordinates
     (:data:`SETTLED` times its scale), stops shrinking while below :data:`NOISE` times its
     scale (rounding noise of an ill-conditioned intersection), is not finite, or (with
     ``reach``) has gone farther than ``reach`` from its start (not converged: quadrics with no
@@ -69,11 +72,12 @@ def newton(matrices, x0, reach=None):
     convergence) pay for the rest."""
     x = np.array(x0, dtype=np.float64, copy=True)
     start = np.array(x0, dtype=np.float64)
-    live = np.arange(len(x))
     lost = np.zeros(len(x), dtype=bool)
-    mats, xa, prev = matrices, x, np.full(len(x), np.inf)
+    on = on_all(matrices, x)
+    live = np.flatnonzero(~on)
+    mats, xa, prev = matrices[live], x[live], np.full(len(live), np.inf)
     with np.errstate(all="ignore"):
-        for _ in range(ITERATIONS):
+        for _ in range(ITERATIONS if len(live) else 0):
             f, j = residuals(mats, xa)
             step = min_norm_step(f, j)
             moving = np.isfinite(step).all(axis=1)
@@ -93,4 +97,14 @@ def newton(matrices, x0, reach=None):
                     break
         d = first_order_distance(matrices, x)
     scale = np.maximum(1.0, np.abs(x).max(axis=1))
-    return x, np.isfinite(d) & (d <= REL * scale) & np.isfinite(x).all(axis=1) & ~lost
+    return x, ((np.isfinite(d) & (d <= REL * scale)) | on) & np.isfinite(x).all(axis=1) & ~lost
+
+
+def on_all(matrices, x) -> np.ndarray:
+    """Per point whether every K_i(x) is zero to rounding, |K_i(x)| <= :data:`ON_ULPS` eps
+    max|K_i| (1 + |x|)^2: on the quadrics already, where a step could only do harm (at a
+    cone's apex the gradient vanishes too, and |F| / |grad F| is rounding over rounding)."""
+    f, _ = residuals(matrices, x)
+    size = np.abs(matrices).max(axis=(2, 3))
+    reach = (1.0 + np.abs(x).max(axis=1)) ** 2
+    return np.all(np.abs(f) <= ON_ULPS * np.finfo(np.float64).eps * size * reach[:, None], axis=1)
