@@ -1,5 +1,5 @@
 """Shared benchmark plumbing: machine/device description, result files, timing helpers, the
-manifold3d translation of a clcsg shape (:class:`Translator`), the first-order surface error
+manifold3d translation of a clcsg shape (:class:`Translator`), the surface error
 (:func:`surface_error`) that the peer and mesh benchmarks both measure with and the distance to
 the CSG surface itself (:func:`csg_surface_error`), and the command and
 environment of fresh ``clcsg`` processes (:func:`clcsg_command`, :func:`environment_for_runs`).
@@ -293,7 +293,7 @@ def fit_to_silhouette(tape, width, height, direction, fill=0.9, ctx=None):
     return cam
 
 
-# -- manifold3d translation and the first-order surface error (bench.peers, bench.mesh) ---------
+# -- manifold3d translation and the surface error (bench.peers, bench.mesh) -----------------------
 
 class Unsupported(Exception):
     pass
@@ -392,8 +392,12 @@ class Translator:
 
 
 def surface_error(tape, points, chunk=20000):
-    """First-order distance to the nearest unique quadric of ``tape`` (a compiled scene, or
-    anything with ``quadrics`` (U, 4, 4)): min_u |Q_u(x)| / |grad Q_u(x)|."""
+    """Distance to the nearest unique quadric of ``tape`` (a compiled scene, or anything with
+    ``quadrics`` (U, 4, 4)) along each quadric's gradient line: min_u of the root of
+    Q_u(x + t n) nearest to 0 (n the unit gradient; exact for a quadric, the distance itself for
+    spheres, cylinders and planes, an upper bound elsewhere), first order (|Q_u| / |grad Q_u|)
+    where the line misses Q_u.  The first-order value alone overstates the sag of a chord
+    inside a circle of radius R by about s / 2R, for every mesher alike."""
     Qs = np.asarray(tape.quadrics)  # (U, 4, 4)
     chunk = max(16, min(chunk, 2_000_000 // max(len(Qs), 1)))  # (chunk, U, 4) values: at most 64 MB
     out = np.empty(len(points))
@@ -405,7 +409,11 @@ def surface_error(tape, points, chunk=20000):
         grad = 2.0 * mx[:, :, :3]
         g = np.linalg.norm(grad, axis=-1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.where(g > 0, np.abs(val) / g, np.where(val == 0, 0.0, np.inf))
+            n = grad / g[..., None]
+            bend = np.einsum("nui,uij,nuj->nu", n, Qs[:, :3, :3], n)
+            disc = g * g - 4.0 * val * bend
+            d = np.where(disc >= 0, 2.0 * np.abs(val) / (g + np.sqrt(np.maximum(disc, 0.0))), np.abs(val) / g)
+            d = np.where(g > 0, d, np.where(val == 0, 0.0, np.inf))
         out[s:s + chunk] = d.min(axis=1)
     return out
 
@@ -425,8 +433,8 @@ CSG_ERROR_STEP = 1.05
 
 def csg_surface_error(tape, points, floor, reach=None):
     """Distance (an upper bound) from each point to the CSG surface itself, not to the nearest
-    quadric: the smallest radius, growing by :data:`CSG_ERROR_STEP` from the first-order quadric
-    distance (:func:`surface_error`, a lower bound to first order) and at least ``floor``, at
+    quadric: the smallest radius, growing by :data:`CSG_ERROR_STEP` from the distance to the
+    nearest quadric (:func:`surface_error`) and at least ``floor``, at
     which some of 256 points on the sphere round the point are inside the solid and some
     outside (the boundary then passes within the radius).  A triangle on a quadric's extension
     (across a gap that quadric does not bound) is near its quadric and far from the solid: this

@@ -4,11 +4,12 @@ Per part, the mesh's triangle count, CPU time (process time of ``clcsg.mesh``; t
 time for openscad, from ``getrusage(RUSAGE_CHILDREN)``; manifold3d's build + ``to_mesh`` by
 process time; for clcsg and manifold3d the least of :data:`REPEATS` runs) and its measured
 largest error over every triangle's centroid and edge midpoints (where chords sag most) and
-area-weighted random points (against the CSG surface: the random points and the 2,000 points of
-largest first-order error), relative to the bound's diagonal: the first-order distance to the nearest quadric
-of the scene (``max_rel_error``) and, for clcsg and openscad, the distance to the CSG surface
-itself (``max_rel_csg_error``, :func:`~bench.common.csg_surface_error`, which also sees a
-triangle on a quadric's extension).  Rows:
+area-weighted random points, relative to the bound's diagonal: the distance to the nearest
+quadric of the scene along its gradient line (``max_rel_error``,
+:func:`~bench.common.surface_error`) and, for clcsg and openscad, on the random points and the
+2,000 points of largest such error, the distance to the CSG surface itself
+(``max_rel_csg_error``, :func:`~bench.common.csg_surface_error`, which also sees a triangle on
+a quadric's extension).  Rows:
 
 * the everyday OpenSCAD parts: openscad's STL at the file's own ``$fn`` (its error measured),
   clcsg at the default tolerance (0.1% of the diagonal) and at openscad's measured error
@@ -57,7 +58,7 @@ def _sample(vertices, triangles, rng, count=SAMPLES):
 
 
 def _errors(tape, vertices, triangles, rng, floor) -> tuple[float, float]:
-    """(largest first-order distance to the nearest quadric over :func:`_sample`'s points,
+    """(largest distance to the nearest quadric (:func:`~bench.common.surface_error`) over :func:`_sample`'s points,
     largest distance to the CSG surface over its random points and the :data:`WORST` points
     of the first measure), relative to the diagonal."""
     pts = _sample(vertices, triangles, rng)
@@ -67,7 +68,7 @@ def _errors(tape, vertices, triangles, rng, floor) -> tuple[float, float]:
     return float(err.max() / diag), float(csg_surface_error(tape, pts[pick], floor).max() / diag)
 
 
-#: points of the largest first-order error also measured against the CSG surface
+#: points of the largest error to the nearest quadric also measured against the CSG surface
 WORST = 2000
 
 

@@ -200,15 +200,20 @@ def check_near_csg_surface(shape, m, n=3000, seed=0):
     """Points on the triangles lie within the tolerance of the CSG surface itself, not merely
     of some quadric (a triangle on a quadric's extension, across a gap the quadric does not
     bound, is near its quadric and far from the solid): around each, the float64 oracle finds
-    points inside the solid and outside it among 64 at distance ``tolerance``."""
+    points inside the solid and outside it at distance ``tolerance`` (64 directions, then
+    20,000 round the points those miss: a point 0.99 tolerances from a face sees it only in a
+    cap of 8 degrees)."""
     x = _points_on(m, n, seed)
-    k = np.arange(64) + 0.5
-    z = 1.0 - 2.0 * k / 64
-    phi = k * np.pi * (3.0 - np.sqrt(5.0)) + 0.3
-    d = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
-    ins = oracle.contains(shape, (x[:, None] + m.tolerance * d[None]).reshape(-1, 3)).reshape(n, -1)
-    near = ins.any(axis=1) & ~ins.all(axis=1)
-    assert near.all(), f"{(~near).sum()} of {n} points on the mesh farther than the tolerance from the surface, e.g. {x[~near][:3]}"
+    for count in (64, 20000):
+        if not len(x):
+            break
+        k = np.arange(count) + 0.5
+        z = 1.0 - 2.0 * k / count
+        phi = k * np.pi * (3.0 - np.sqrt(5.0)) + 0.3
+        d = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1)
+        ins = oracle.contains(shape, (x[:, None] + m.tolerance * d[None]).reshape(-1, 3)).reshape(len(x), -1)
+        x = x[~(ins.any(axis=1) & ~ins.all(axis=1))]
+    assert not len(x), f"{len(x)} of {n} points on the mesh farther than the tolerance from the surface, e.g. {x[:3]}"
 
 
 def _turret():

@@ -110,7 +110,7 @@ def split_far(tape, vertices, triangles, sets, quad, before, edges, tri_edge, sp
     all_v = np.concatenate([vertices, x])
     tri, parent = split_triangles(triangles, tri_edge, mid_vertex, all_v, with_parents=True)
     fresh = (mid_vertex[tri_edge] >= 0).any(axis=1)[parent]
-    if _turned(vertices, triangles, all_v, tri[fresh], parent[fresh]):
+    if not _flip_turned(all_v, tri, _normals(vertices, triangles)[parent], quad[parent], len(vertices), fresh):
         return None
     new_sets = np.full((len(e), sets.shape[1]), -1, dtype=np.int64)
     new_sets[:, 0] = side[:, 0]
@@ -119,9 +119,45 @@ def split_far(tape, vertices, triangles, sets, quad, before, edges, tri_edge, sp
                  fresh)
 
 
-def _turned(old_v, old_t, v, tri, parent) -> bool:
-    """Does a new triangle face against the triangle it came from?"""
-    def normal(vv, t):
-        return np.cross(vv[t[:, 1]] - vv[t[:, 0]], vv[t[:, 2]] - vv[t[:, 0]])
+def _normals(v, t):
+    return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
 
-    return bool((np.einsum("ij,ij->i", normal(v, tri), normal(old_v, old_t[parent])) <= 0).any())
+
+def _flip_turned(v, tri, ref, quad, n_old: int, fresh) -> bool:
+    """Make every triangle face the way of ``ref`` (its parent's normal), in place: a new
+    triangle that turned over (its new vertex m, on a curve that bulges into the face, crossed
+    the edge opposite it: a sliver of the Booleans' triangulation) has that edge flipped with
+    the triangle across it when both lie on one quadric, (m, u, w) + (w, u, q) ->
+    (m, u, q) + (m, q, w), up to :data:`FLIP_PASSES` times.  Flipped triangles become
+    ``fresh``.  False where that does not set every triangle upright."""
+    for _ in range(FLIP_PASSES):
+        turned = np.flatnonzero(np.einsum("ij,ij->i", _normals(v, tri), ref) <= 0)
+        if not len(turned):
+            return True
+        keys = (tri * np.int64(len(v)) + np.roll(tri, -1, axis=1)).ravel()  # directed edges (k, k+1)
+        order = np.argsort(keys)
+        changed = set()
+        for t in turned.tolist():
+            newer = np.flatnonzero(tri[t] >= n_old)
+            if not len(newer) or t in changed:
+                return False
+            k = int(newer[0])
+            m, u, w = (int(tri[t, (k + i) % 3]) for i in range(3))
+            at = np.searchsorted(keys[order], w * len(v) + u)
+            if at >= len(keys) or keys[order[at]] != w * len(v) + u:
+                return False
+            j = int(order[at]) // 3
+            q = int(tri[j, (int(order[at]) % 3 + 2) % 3])
+            if j in changed or quad[j] != quad[t]:
+                return False
+            a, b = np.array([m, u, q]), np.array([m, q, w])
+            if min(float(_normals(v, a[None])[0] @ ref[j]), float(_normals(v, b[None])[0] @ ref[j])) <= 0:
+                return False
+            tri[t], tri[j], ref[t] = a, b, ref[j]
+            fresh[t] = fresh[j] = True
+            changed.update((t, j))
+    return not (np.einsum("ij,ij->i", _normals(v, tri), ref) <= 0).any()
+
+
+#: passes of :func:`_flip_turned`
+FLIP_PASSES = 3

@@ -14,8 +14,8 @@
    there) and that primitive's colour.
 
 The result is checked.  A triangle is bad if
-* it is farther than the tolerance from its quadric (centroid and edge midpoints, to first
-  order), or one of its crease edges sags off both of its surfaces beyond it (:func:`_far_chords`)
+* it is farther than the tolerance from its quadric (centroid and edge midpoints, along the
+  gradient line), or one of its crease edges sags off both of its surfaces beyond it (:func:`_far_chords`)
   and its midpoint is not proven within the tolerance of the solid (the straddle test at the
   tolerance: inside and outside points that far round it);
 * a vertex of it moved more than :data:`SHIFTED` tolerances in its solve and it is not within
@@ -50,7 +50,7 @@ from .facets import KINDS
 from .instance_booleans import boolean_mesh, common_frame, facets_of
 from .owners import primitives_of, shared_nearest
 from .planar import flat_quadrics
-from .project import first_order_distance, residuals
+from .project import first_order_distance, line_distance, residuals
 from .snap import fibonacci_directions, repair_off_surface, snap, straddles, vertex_sets
 
 #: faceting rounds at most (each halves the tolerance of the instances of bad triangles)
@@ -181,14 +181,14 @@ def _far_chords(tape, vertices, edges, side, tol) -> np.ndarray:
 
 
 def _deviation(tape, vertices, triangles, quad) -> np.ndarray:
-    """Per triangle the largest first-order distance of its centroid and edge midpoints from
-    its quadric (0 for a triangle on none)."""
+    """Per triangle the largest distance of its centroid and edge midpoints from its quadric
+    along the gradient line (:func:`~.project.line_distance`; 0 for a triangle on none)."""
     out = np.zeros(len(triangles))
     on = np.flatnonzero(quad >= 0)
     v = vertices[triangles[on]]
     q = tape.quadrics[quad[on]][:, None]
     for p in (v.mean(axis=1), 0.5 * (v[:, 0] + v[:, 1]), 0.5 * (v[:, 1] + v[:, 2]), 0.5 * (v[:, 2] + v[:, 0])):
-        out[on] = np.maximum(out[on], np.nan_to_num(first_order_distance(q, p), nan=np.inf))
+        out[on] = np.maximum(out[on], np.nan_to_num(line_distance(q, p), nan=np.inf))
     return out
 
 

@@ -40,10 +40,10 @@ KINDS = ("box", "cylinder", "cone", "sphere", "ellipsoid", "halfspace", "slab", 
 MIN_SEGMENTS = 3
 #: the most segments of a circle or sphere (a tolerance far below the primitive's size)
 MAX_SEGMENTS = 4096
-#: the chord sag the facets are made for, as a share of the tolerance: the distance a mesh
-#: is checked by is the first-order |Q| / |grad Q|, a little more than the sag (for a circle
-#: of radius R and sag s, s (1 + s / 2R) / (1 - s / R))
-SAG_SHARE = 0.95
+#: the chord sag the facets are made for, as a share of the tolerance (the mesh is checked by
+#: the distance along the gradient line, exact for a circle's chord; the rest is a margin for
+#: rounding)
+SAG_SHARE = 0.99
 
 
 @dataclass

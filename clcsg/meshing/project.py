@@ -40,6 +40,25 @@ def first_order_distance(matrices, x) -> np.ndarray:
     return d.max(axis=1)
 
 
+def line_distance(matrices, x) -> np.ndarray:
+    """max_i of the distance from ``x`` (N, 3) along the gradient line of K_i to where the line
+    meets K_i (N,): the root of K(x + t n) = K(x) + t |grad K| + t^2 n^T A n nearest to 0
+    (n = grad K / |grad K|, A = K[:3, :3]; exact for a quadric), taken as
+    2 |K(x)| / (|grad K| + sqrt(|grad K|^2 - 4 K(x) n^T A n)).  The line's point lies on the
+    quadric, so this bounds the distance from above; it is the distance itself for a sphere or
+    a cylinder (their gradient lines are normals), where the first-order |K| / |grad K|
+    overstates a chord's sag by about s / 2R.  First order where the line misses the quadric."""
+    f, j = residuals(matrices, x)
+    g = np.linalg.norm(j, axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = j / g[..., None]
+        bend = np.einsum("nki,nkij,nkj->nk", n, matrices[..., :3, :3], n)
+        disc = g * g - 4.0 * f * bend
+        d = np.where(disc >= 0, 2.0 * np.abs(f) / (g + np.sqrt(np.maximum(disc, 0.0))), np.abs(f) / g)
+        d = np.where(g > 0, d, np.where(f == 0, 0.0, np.inf))
+    return d.max(axis=1)
+
+
 def min_norm_step(f, j):
     """J^T (J J^T)^-1 F per row (F (N, k), J (N, k, 3), k <= 3) in closed form: for one row of
     J the step along it; for two the 2 x 2 inverse of J J^T; for three J^-1 F by the rows'
