@@ -71,6 +71,7 @@ SHIFTED = 1.0
 #: the radius (tolerances) and directions of that check
 NEAR_REACH = 1.1
 NEAR_DIRECTIONS = fibonacci_directions(64)
+COARSE_DIRECTIONS = fibonacci_directions(12)
 
 
 @dataclass
@@ -118,11 +119,13 @@ def contains_near(tape, x, eps: float, directions) -> np.ndarray:
     tape pruned to what can matter in the group's box G grown by ``eps``
     (:class:`clcsg.compile.root_tapes.PrimitiveDag`: the instances whose boxes meet G and the
     half-spaces whose plane crosses it kept, the half-spaces that miss G false, the rest at
-    their defaults), so that the work is local."""
+    their defaults), so that the work is local; a short tape runs whole."""
     n = len(x)
     dag = primitive_dag(tape)
-    if dag is None or n <= GROUP:
-        return contains_around(tape.ops, tape.quadrics, x, eps, directions)
+    if dag is None or n <= GROUP or len(tape.ops) <= WHOLE_TAPE:
+        step = max(1, CHUNK_ENTRIES // max(1, tape.n_quadrics * len(directions)))
+        return np.concatenate([contains_around(tape.ops, tape.quadrics, x[a:a + step], eps, directions)
+                               for a in range(0, n, step)]) if n else np.zeros((0, len(directions)), dtype=bool)
     order = morton_order(x)
     starts = np.arange(0, n, GROUP)
     glo = np.minimum.reduceat(x[order], starts, axis=0) - eps
@@ -140,6 +143,10 @@ def contains_near(tape, x, eps: float, directions) -> np.ndarray:
 
 #: points whose membership is evaluated on one pruned tape
 GROUP = 64
+#: a tape of at most this many rows is run whole over all the points (pruning would cost more)
+WHOLE_TAPE = 512
+#: leaf values (quadrics x points x directions) evaluated at once
+CHUNK_ENTRIES = 1 << 21
 
 
 def _near_solid(tape, vertices, triangles, tol) -> np.ndarray:
@@ -147,10 +154,16 @@ def _near_solid(tape, vertices, triangles, tol) -> np.ndarray:
     solid's surface: of :data:`NEAR_DIRECTIONS` points at :data:`NEAR_REACH` tolerances round
     each, some inside and some outside (the straddle test; a point at 0.97 tolerances from a
     flat face sees it in a cap of 28 degrees round the normal, which 64 directions, 25 degrees
-    apart, hit)."""
+    apart, hit).  Each distinct point is tested once, first with :data:`COARSE_DIRECTIONS`
+    (most lie well within the tolerance, where a few directions find both sides)."""
     v = vertices[triangles]
     pts = np.concatenate([v.mean(axis=1), 0.5 * (v + np.roll(v, -1, axis=1)).reshape(-1, 3)])
-    ok = straddles(pts, lambda x, eps, dirs: contains_near(tape, x, eps, dirs), NEAR_REACH * tol, NEAR_DIRECTIONS)
+    uniq, which = np.unique(pts, axis=0, return_inverse=True)
+    near = lambda x, eps, dirs: contains_near(tape, x, eps, dirs)
+    ok = straddles(uniq, near, NEAR_REACH * tol, COARSE_DIRECTIONS)
+    rest = np.flatnonzero(~ok)
+    ok[rest] = straddles(uniq[rest], near, NEAR_REACH * tol, NEAR_DIRECTIONS)
+    ok = ok[which.ravel()]
     return ok[:len(v)] & ok[len(v):].reshape(-1, 3).all(axis=1)
 
 
