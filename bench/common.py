@@ -398,9 +398,16 @@ def surface_error(tape, points, chunk=20000):
     spheres, cylinders and planes, an upper bound elsewhere), first order (|Q_u| / |grad Q_u|)
     where the line misses Q_u.  The first-order value alone overstates the sag of a chord
     inside a circle of radius R by about s / 2R, for every mesher alike."""
+    return nearest_quadric(tape, points, chunk)[0]
+
+
+def nearest_quadric(tape, points, chunk=20000):
+    """(:func:`surface_error`, the index of that nearest quadric, the point where its gradient
+    line meets it (the point itself where the line misses))."""
     Qs = np.asarray(tape.quadrics)  # (U, 4, 4)
     chunk = max(16, min(chunk, 2_000_000 // max(len(Qs), 1)))  # (chunk, U, 4) values: at most 64 MB
-    out = np.empty(len(points))
+    points = np.asarray(points, dtype=np.float64)
+    dist, which, foot = np.empty(len(points)), np.zeros(len(points), dtype=np.int64), points.copy()
     for s in range(0, len(points), chunk):
         x = points[s:s + chunk]
         xh = np.concatenate([x, np.ones((len(x), 1))], axis=1)
@@ -412,10 +419,15 @@ def surface_error(tape, points, chunk=20000):
             n = grad / g[..., None]
             bend = np.einsum("nui,uij,nuj->nu", n, Qs[:, :3, :3], n)
             disc = g * g - 4.0 * val * bend
-            d = np.where(disc >= 0, 2.0 * np.abs(val) / (g + np.sqrt(np.maximum(disc, 0.0))), np.abs(val) / g)
+            t = np.where(disc >= 0, -2.0 * val / (g + np.sqrt(np.maximum(disc, 0.0))), np.nan)
+            d = np.where(disc >= 0, np.abs(t), np.abs(val) / g)
             d = np.where(g > 0, d, np.where(val == 0, 0.0, np.inf))
-        out[s:s + chunk] = d.min(axis=1)
-    return out
+        k = np.argmin(d, axis=1)
+        rows = np.arange(len(x))
+        dist[s:s + chunk], which[s:s + chunk] = d[rows, k], k
+        step = np.nan_to_num(t[rows, k])[:, None] * np.nan_to_num(n[rows, k])
+        foot[s:s + chunk] = x + step
+    return dist, which, foot
 
 
 def _sphere_directions(n):
@@ -433,19 +445,27 @@ CSG_ERROR_STEP = 1.05
 
 def csg_surface_error(tape, points, floor, reach=None):
     """Distance (an upper bound) from each point to the CSG surface itself, not to the nearest
-    quadric: the smallest radius, growing by :data:`CSG_ERROR_STEP` from the distance to the
-    nearest quadric (:func:`surface_error`) and at least ``floor``, at
-    which some of 256 points on the sphere round the point are inside the solid and some
-    outside (the boundary then passes within the radius).  A triangle on a quadric's extension
-    (across a gap that quadric does not bound) is near its quadric and far from the solid: this
-    sees it, :func:`surface_error` does not.  inf past ``reach`` (default: the bound's
-    diagonal)."""
-    from clcsg.compile.interpret import contains
+    quadric.  Where the nearest quadric's gradient line meets it at a point of the CSG surface
+    (the solid's membership differs on the quadric's two sides there: substitution, exact), the
+    distance to that point (:func:`nearest_quadric`).  Elsewhere (a triangle on a quadric's
+    extension, across a gap that quadric does not bound, is near its quadric and far from the
+    solid) the smallest radius, growing by :data:`CSG_ERROR_STEP` from that distance and at
+    least ``floor``, at which some of 256 points on the sphere round the point are inside the
+    solid and some outside (the boundary then passes within the radius), the largest of those
+    tightened by bisection with denser probes (:func:`_tightened`); inf past ``reach``
+    (default: the bound's diagonal)."""
+    from clcsg.compile.interpret import contains, member
 
     points = np.asarray(points, dtype=np.float64)
-    r = np.maximum(surface_error(tape, points), floor)
+    d, which, foot = nearest_quadric(tape, points)
     out = np.full(len(points), np.inf)
-    alive = np.arange(len(points))
+    for q in np.unique(which):
+        rows = np.flatnonzero((which == q) & np.isfinite(d))
+        neg, pos = member(tape.ops, tape.quadrics, foot[rows], int(q))
+        out[rows[neg != pos]] = d[rows[neg != pos]]
+    exact = np.isfinite(out)
+    r = np.maximum(d, floor)
+    alive = np.flatnonzero(~exact)
     reach = diagonal(tape.bound) if reach is None else reach
     while len(alive):
         probes = (points[alive, None] + r[alive, None, None] * CSG_ERROR_DIRECTIONS[None]).reshape(-1, 3)
@@ -455,6 +475,40 @@ def csg_surface_error(tape, points, floor, reach=None):
         alive = alive[~hit]
         r[alive] *= CSG_ERROR_STEP
         alive = alive[r[alive] <= reach * CSG_ERROR_STEP]
+    return _tightened(tape, points, out, ~exact, floor)
+
+
+#: directions and bisection steps of :func:`_tightened`
+TIGHT_DIRECTIONS = _sphere_directions(4096)
+TIGHT_STEPS = 8
+TIGHT_POINTS = 256
+
+
+def _tightened(tape, points, out, probed, floor):
+    """``out`` where the probes set it (``probed``) above every other value: at most
+    :data:`TIGHT_POINTS` of the largest, each the smallest radius between it /
+    :data:`CSG_ERROR_STEP` and it at which :data:`TIGHT_DIRECTIONS` straddle (bisection; still
+    an upper bound, now within a fraction of a per cent)."""
+    from clcsg.compile.interpret import contains
+
+    finite = np.isfinite(out)
+    rest = out[finite & ~probed]
+    base = max(float(rest.max()) if len(rest) else 0.0, floor)
+    top = np.flatnonzero(finite & probed & (out > base))
+    top = top[np.argsort(out[top])[-TIGHT_POINTS:]]
+    if not len(top):
+        return out
+    hi = out[top].copy()
+    lo = hi / CSG_ERROR_STEP
+    for _ in range(TIGHT_STEPS):
+        mid = 0.5 * (lo + hi)
+        probes = (points[top, None] + mid[:, None, None] * TIGHT_DIRECTIONS[None]).reshape(-1, 3)
+        ins = contains(tape.ops, tape.quadrics, probes).reshape(len(top), -1)
+        hit = ins.any(axis=1) & ~ins.all(axis=1)
+        hi = np.where(hit, mid, hi)
+        lo = np.where(hit, lo, mid)
+    out = out.copy()
+    out[top] = np.minimum(out[top], hi)
     return out
 
 

@@ -3,7 +3,8 @@
 Per part, the mesh's triangle count, CPU time (process time of ``clcsg.mesh``; the child's CPU
 time for openscad, from ``getrusage(RUSAGE_CHILDREN)``; manifold3d's build + ``to_mesh`` by
 process time; for clcsg and manifold3d the least of :data:`REPEATS` runs) and its measured
-largest error over every triangle's centroid and edge midpoints (where chords sag most) and
+largest error over every triangle's centroid, edge midpoints (where chords sag most) and the
+point where its nearest quadric peaks on it (where a faceted sphere dips most), and
 area-weighted random points, relative to the bound's diagonal: the distance to the nearest
 quadric of the scene along its gradient line (``max_rel_error``,
 :func:`~bench.common.surface_error`) and, for clcsg and openscad, on the random points and the
@@ -48,20 +49,47 @@ SAMPLES = 20000
 REPEATS = 3
 
 
-def _sample(vertices, triangles, rng, count=SAMPLES):
+def _sample(vertices, triangles, rng, count=SAMPLES, tape=None):
     """Points where a mesh's error is measured: every triangle's centroid and edge midpoints
-    (a chord's sag peaks at its midpoint, which random points rarely hit) and ``count``
-    area-weighted random points (those last)."""
+    (a chord's sag peaks at its midpoint, which random points rarely hit), with ``tape`` the
+    point of each triangle where its nearest quadric's form peaks (:func:`_peaks`: a faceted
+    sphere's triangle dips deepest there, rarely at its centroid), and ``count`` area-weighted
+    random points (those last)."""
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
-    fixed = np.concatenate([(a + b + c) / 3.0, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)])
-    return np.concatenate([fixed, _random_points(a, b, c, rng, count)])
+    fixed = [(a + b + c) / 3.0, 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)]
+    if tape is not None:
+        fixed.append(_peaks(tape, a, b, c))
+    return np.concatenate(fixed + [_random_points(a, b, c, rng, count)])
+
+
+def _peaks(tape, a, b, c):
+    """Per triangle (a, b, c) the point where Q, its centroid's nearest quadric, restricted to
+    the triangle's plane is stationary, x = a + u (b - a) + v (c - a) with grad_(u, v) Q = 0
+    (a 2 x 2 system: Q is quadratic in u, v), where that lies inside the triangle; else the
+    centroid."""
+    from .common import nearest_quadric
+
+    cen = (a + b + c) / 3.0
+    q = np.asarray(tape.quadrics)[nearest_quadric(tape, cen)[1]]  # (T, 4, 4)
+    e = np.stack([b - a, c - a], axis=1)  # (T, 2, 3)
+    ah = np.concatenate([a, np.ones((len(a), 1))], axis=1)
+    eh = np.concatenate([e, np.zeros((len(a), 2, 1))], axis=2)  # directions: w = 0
+    h = np.einsum("tij,tjk,tlk->til", eh, q, eh)  # (T, 2, 2): e_i^T Q e_j
+    g = np.einsum("tij,tjk,tk->ti", eh, q, ah)  # (T, 2): e_i^T Q a
+    with np.errstate(all="ignore"):
+        det = h[:, 0, 0] * h[:, 1, 1] - h[:, 0, 1] * h[:, 1, 0]
+        u = (-g[:, 0] * h[:, 1, 1] + g[:, 1] * h[:, 0, 1]) / det
+        v = (-g[:, 1] * h[:, 0, 0] + g[:, 0] * h[:, 1, 0]) / det
+        inside = np.isfinite(u) & np.isfinite(v) & (u >= 0) & (v >= 0) & (u + v <= 1)
+    u, v = np.where(inside, u, 0.0), np.where(inside, v, 0.0)
+    return np.where(inside[:, None], a + u[:, None] * e[:, 0] + v[:, None] * e[:, 1], cen)
 
 
 def _errors(tape, vertices, triangles, rng, floor) -> tuple[float, float]:
     """(largest distance to the nearest quadric (:func:`~bench.common.surface_error`) over :func:`_sample`'s points,
     largest distance to the CSG surface over its random points and the :data:`WORST` points
     of the first measure), relative to the diagonal."""
-    pts = _sample(vertices, triangles, rng)
+    pts = _sample(vertices, triangles, rng, tape=tape)
     err = surface_error(tape, pts)
     pick = np.union1d(np.arange(len(pts) - SAMPLES, len(pts)), np.argsort(err)[-WORST:])
     diag = diagonal(tape.bound)
@@ -126,7 +154,7 @@ def manifold_row(shape, tape, target_rel, segments, rng) -> dict:
             return rec
         v = np.asarray(mesh.vert_properties, np.float64)[:, :3]
         t = np.asarray(mesh.tri_verts, np.int64)
-        err = float(surface_error(tape, _sample(v, t, rng)).max() / diagonal(tape.bound))
+        err = float(surface_error(tape, _sample(v, t, rng, tape=tape)).max() / diagonal(tape.bound))
         rec["levels"].append({"segments": n, "triangles": len(t), "cpu_s": cpu, "max_rel_error": err})
         if err <= target_rel:
             _, best = _least_cpu(lambda: Translator(manifold3d, n, tape.bound).build(shape).to_mesh())
