@@ -78,19 +78,18 @@ def _loops(tri):
 
 def flat_quadrics(quadrics) -> np.ndarray:
     """Indices of the quadrics made of planes: a plane (A = 0) or two parallel planes, a slab
-    (A = lambda n n^T of rank one, b parallel to n)."""
-    out = []
-    for k, m in enumerate(quadrics):
-        lam, vec = np.linalg.eigh(m[:3, :3])
-        big = np.abs(lam) > 1e-12 * max(1.0, np.abs(m).max())
-        if big.sum() == 0:
-            out.append(k)
-        elif big.sum() == 1:
-            n = vec[:, np.argmax(np.abs(lam))]
-            b = m[:3, 3]
-            if np.linalg.norm(b - (b @ n) * n) <= 1e-12 * max(1.0, np.abs(m).max()):
-                out.append(k)
-    return np.array(out, dtype=np.int64)
+    (A = lambda n n^T of rank one, b parallel to n).  One batched eigendecomposition."""
+    m = np.asarray(quadrics, dtype=np.float64).reshape(-1, 4, 4)
+    if not len(m):
+        return np.zeros(0, dtype=np.int64)
+    lam, vec = np.linalg.eigh(m[:, :3, :3])
+    scale = 1e-12 * np.maximum(1.0, np.abs(m).max(axis=(1, 2)))
+    big = np.abs(lam) > scale[:, None]
+    count = big.sum(axis=1)
+    n = vec[np.arange(len(m)), :, np.argmax(np.abs(lam), axis=1)]  # the largest eigenvalue's vector
+    b = m[:, :3, 3]
+    off = np.linalg.norm(b - np.einsum("ki,ki->k", b, n)[:, None] * n, axis=1)
+    return np.flatnonzero((count == 0) | ((count == 1) & (off <= scale))).astype(np.int64)
 
 
 def _frame(matrix, x):
