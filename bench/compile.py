@@ -36,7 +36,7 @@ from clcsg.model.quadric import Quadric
 from clcsg.model.scene import Scene
 from clcsg.sampling.sampler import root_tasks
 
-from .common import Load, fmt, write
+from .common import Load, fmt, least_cpu, write
 from .zoo import plate
 
 PLATE_GRIDS = (7, 10, 16, 22, 32, 50)
@@ -49,24 +49,15 @@ def spheres(n: int):
     return Union([clcsg.sphere(0.6, (i % k, (i // k) % k, i // (k * k))) for i in range(n)])
 
 
-def _cpu(fn, repeats):
-    best, out = math.inf, None
-    for _ in range(repeats):
-        t = time.process_time()
-        out = fn()
-        best = min(best, time.process_time() - t)
-    return best, out
-
-
 def measure(shape, repeats: int = 2) -> dict:
-    compile_s, tape = _cpu(lambda: Scene(shape).compile(), repeats)
-    bounds_s, _ = _cpu(lambda: tree_bounds(shape), repeats)
+    compile_s, tape = least_cpu(lambda: Scene(shape).compile(), repeats)
+    bounds_s, _ = least_cpu(lambda: tree_bounds(shape), repeats)
     radius = 0.01 * float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
     packed = pack(tape, np.float64)
     frames = [principal_frame(Quadric(m)) for m in packed.local_matrices]
-    roots_s, (tasks, cells, rows) = _cpu(lambda: root_tasks(tape, packed, frames, radius), repeats)
+    roots_s, (tasks, cells, rows) = least_cpu(lambda: root_tasks(tape, packed, frames, radius), repeats)
     regions = quadric_regions(tape.quadrics, tape.instances, tape.bound)
-    est_s, est = _cpu(lambda: estimate_regions(tape.quadrics, regions, radius), repeats)
+    est_s, est = least_cpu(lambda: estimate_regions(tape.quadrics, regions, radius), repeats)
     n = len(tape.instances)
     return {
         "primitives": n, "quadrics": tape.n_quadrics, "instructions": int(len(tape.ops)),

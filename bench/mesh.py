@@ -41,7 +41,7 @@ import numpy as np
 import clcsg
 
 from . import zoo
-from .common import Load, Translator, Unsupported, csg_surface_error, diagonal, fmt, surface_error, write
+from .common import Load, Translator, Unsupported, csg_surface_error, diagonal, fmt, least_cpu, surface_error, write
 
 SEGMENTS = (12, 14, 16, 18, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96, 128)
 QUICK_SEGMENTS = (16, 32, 64)
@@ -121,16 +121,6 @@ def _closed(vertices, triangles) -> bool:
     return bool(ok and trimesh.Trimesh(vertices, triangles, process=False).is_watertight)
 
 
-def _least_cpu(fn, repeats=REPEATS):
-    """(``fn()``, the least process time of ``repeats`` calls)."""
-    best, out = np.inf, None
-    for _ in range(repeats):
-        t0 = time.process_time()
-        out = fn()
-        best = min(best, time.process_time() - t0)
-    return out, best
-
-
 def _interleaved(rec, scene, tape, tolerance) -> None:
     """clcsg's and manifold3d's CPU times again, their runs alternating (the machine's speed
     drifts over a run; a ratio of times taken minutes apart carries the drift), each the least
@@ -142,14 +132,14 @@ def _interleaved(rec, scene, tape, tolerance) -> None:
         return
     n, shape = level["segments"], scene.shape
     for _ in range(REPEATS):
-        _, ours_cpu = _least_cpu(lambda: clcsg.mesh(scene, tolerance=tolerance), 1)
-        _, peer_cpu = _least_cpu(lambda: Translator(manifold3d, n, tape.bound).build(shape).to_mesh(), 1)
+        ours_cpu, _ = least_cpu(lambda: clcsg.mesh(scene, tolerance=tolerance), 1)
+        peer_cpu, _ = least_cpu(lambda: Translator(manifold3d, n, tape.bound).build(shape).to_mesh(), 1)
         rec["ours"]["cpu_s"] = min(rec["ours"]["cpu_s"], ours_cpu)
         level["cpu_s"] = min(level["cpu_s"], peer_cpu)
 
 
 def ours(scene, tape, tolerance, rng) -> dict:
-    m, cpu = _least_cpu(lambda: clcsg.mesh(scene, tolerance=tolerance))
+    cpu, m = least_cpu(lambda: clcsg.mesh(scene, tolerance=tolerance), REPEATS)
     err, csg = _errors(tape, m.vertices, m.triangles, rng, 0.01 * m.tolerance)
     return {"triangles": len(m.triangles), "cpu_s": cpu, "max_rel_error": float(err), "max_rel_csg_error": float(csg),
             "tolerance_rel": m.tolerance / diagonal(tape.bound), "closed_manifold": _closed(m.vertices, m.triangles),
@@ -176,7 +166,7 @@ def manifold_row(shape, tape, target_rel, segments, rng) -> dict:
         err = float(surface_error(tape, _sample(v, t, rng, tape=tape)).max() / diagonal(tape.bound))
         rec["levels"].append({"segments": n, "triangles": len(t), "cpu_s": cpu, "max_rel_error": err})
         if err <= target_rel:
-            _, best = _least_cpu(lambda: Translator(manifold3d, n, tape.bound).build(shape).to_mesh())
+            best, _ = least_cpu(lambda: Translator(manifold3d, n, tape.bound).build(shape).to_mesh(), REPEATS)
             rec["levels"][-1]["cpu_s"] = min(cpu, best)
             rec.update(at_tolerance=rec["levels"][-1])
             break

@@ -188,10 +188,16 @@ def contains_around(ops, quadrics, centers, eps: float, directions) -> np.ndarra
     def values(q):
         return vals[slot[q]]
 
+    return run_boolean(rows, lambda q, sign: sign * values(q) <= 0.0, shape)
+
+
+def run_boolean(rows, leaf, shape):
+    """A tape's rows (a list of (op, out, a, b)) over booleans: ``leaf(a, sign)`` a leaf's
+    membership array, AND / OR as & / |, constants filled to ``shape``; the last row's value."""
     regs: dict = {}
     for op, out, a, b in rows:
         if op == OP_LEAF:
-            regs[out] = b * values(a) <= 0.0
+            regs[out] = leaf(a, b)
         elif op == OP_AND:
             regs[out] = regs[a] & regs[b]
         elif op == OP_OR:

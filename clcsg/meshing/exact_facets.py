@@ -50,7 +50,7 @@ from .facets import KINDS
 from .instance_booleans import boolean_mesh, common_frame, facets_of
 from .owners import primitives_of, shared_nearest
 from .planar import flat_quadrics
-from .project import first_order_distance, line_distance, residuals
+from .project import line_distance, residuals
 from .snap import fibonacci_directions, repair_off_surface, snap, straddles, vertex_sets
 
 #: faceting rounds at most (each halves the tolerance of the instances of bad triangles)

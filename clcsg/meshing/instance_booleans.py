@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF
 from ..compile.tape import instance_matrices
 from ..model.csg import Transformed, Union
 from .facets import Facets, cuboid, instance_facets, shared_segments

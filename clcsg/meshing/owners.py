@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.csg import DEFAULT_COLOR
-from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF, OP_OR
+from ..compile.interpret import run_boolean
 from ..model.bvh import morton_order
 from .project import first_order_distance, newton, residuals
 from .refine import _compact, common
@@ -177,19 +177,8 @@ def _near_memberships(tape, q: int, points, table):
 
 def _solid(ops, member):
     """The instance program over memberships ``member`` (instances, points) -> (points,)."""
-    regs: dict = {}
-    for op, out, a, b in np.asarray(ops).tolist():
-        if op == OP_LEAF:
-            regs[out] = member[a] if b > 0 else ~member[a]
-        elif op == OP_AND:
-            regs[out] = regs[a] & regs[b]
-        elif op == OP_OR:
-            regs[out] = regs[a] | regs[b]
-        elif op == OP_COPY:
-            regs[out] = regs[a]
-        elif op == OP_CONST:
-            regs[out] = np.full(member.shape[1], bool(a))
-    return regs[ops[-1][1]]
+    return run_boolean(np.asarray(ops).tolist(), lambda a, sign: member[a] if sign > 0 else ~member[a],
+                       member.shape[1])
 
 
 def bounding_first(tape, q: int, carriers, held, points, table, boxes):
