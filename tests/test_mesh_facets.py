@@ -371,3 +371,30 @@ def test_cones_faceted_by_their_slant_within_the_tolerance(r1, r2, height):
         pts = np.concatenate([v.mean(axis=1), 0.5 * (v + np.roll(v, -1, axis=1)).reshape(-1, 3)])
         foot, ok = newton(np.repeat(sc.compile().quadrics[[side]][None], len(pts), 0), pts)
         assert ok.all() and np.linalg.norm(foot - pts, axis=1).max() <= tol
+
+
+@pytest.mark.parametrize("name", ["flange", "lens", "bracket"])
+def test_placed_unit_primitives_keep_their_literals(name):
+    """Cylinders, cones and spheres built once as unit manifolds and placed by a transform
+    give the Booleans' triangles the same instances and literals as the same facets read in
+    one by one with their face IDs: per (instance, literal) the same count of triangles, and
+    the same triangles (their centroids) on each."""
+    from bench import zoo
+    from clcsg.meshing import instance_booleans as ib
+
+    sc = clcsg.Scene(zoo.model(name).build())
+    tape = sc.compile()
+    frame = ib.common_frame(sc.shape, tape.instances)
+    tol = 1e-3 * float(np.linalg.norm(np.subtract(*tape.bound)))
+    facets = ib.facets_of(tape, np.full(len(tape.instances), tol), frame)
+    assert any(f.unit is not None for f in facets)
+    placed = ib.boolean_mesh(tape, facets, frame[0])
+    for f in facets:
+        f.unit = None
+    read = ib.boolean_mesh(tape, facets, frame[0])
+
+    def labelled(got):
+        c = np.round(got.vertices[got.triangles].mean(axis=1) / tol, 3)
+        return sorted(zip(got.instance.tolist(), got.tag.tolist(), map(tuple, c.tolist())))
+
+    assert labelled(placed) == labelled(read)

@@ -53,6 +53,8 @@ class Facets:
     vertices: np.ndarray  # (V, 3) float64
     triangles: np.ndarray  # (T, 3) int64
     tags: np.ndarray  # (T,) int64
+    #: (key, matrix): the mesh is :func:`unit_mesh` (key) under the affine ``matrix``, or None
+    unit: tuple | None = None
 
 
 def circle_segments(radius: float, tol: float) -> int:
@@ -184,8 +186,29 @@ def round_segments(w, h, r1, r2, tol) -> int:
 def _round(p, m, tol, kind, segments=None):
     w, h, r1, r2 = _round_shape(p, m, kind)
     n = segments or round_segments(w, h, r1, r2, tol)
-    v, t, tags = _prism(_ring(n, r1, r1, -h / 2), _ring(n, r2, r2, h / 2), n, (1, 2))
-    return _oriented(v, t, tags, w)
+    rm = max(r1, r2)
+    if not (h > 0 and rm > 0):
+        v, t, tags = _prism(_ring(n, r1, r1, -h / 2), _ring(n, r2, r2, h / 2), n, (1, 2))
+        return _oriented(v, t, tags, w)
+    key = ("round", n, r1 / rm, r2 / rm)
+    affine = w @ np.diag([rm, rm, h, 1.0])
+    v, t, tags = unit_mesh(key)
+    out = _oriented(v, t, tags, affine)
+    out.unit = (key, affine)
+    return out
+
+
+@lru_cache(maxsize=256)
+def unit_mesh(key):
+    """(vertices, triangles, tags) of a unit primitive: ("sphere", n) manifold3d's unit sphere
+    (tag 0); ("round", n, a, b) the n-gon frustum of radii a (z = -1/2) and b (z = 1/2),
+    sides tagged 0, its caps 1 (top) and 2 (bottom).  A cylinder or cone is one of these under
+    an affine map, so the Booleans can build each once and place it by a transform."""
+    if key[0] == "sphere":
+        v, t, _ = _unit_sphere(key[1])
+        return v, t, np.zeros(len(t), dtype=np.int64)
+    _, n, a, b = key
+    return _prism(_ring(n, a, a, -0.5), _ring(n, b, b, 0.5), n, (1, 2))
 
 
 def _ellipsoid(p, m, tol, kind):
@@ -193,8 +216,11 @@ def _ellipsoid(p, m, tol, kind):
     w = m @ np.diag([*r, 1.0])
     w[:3, 3] = _world(np.asarray(p.get("center", (0, 0, 0)), dtype=np.float64), m)
     s = _sigma(w)
-    v, t, _ = _unit_sphere(sphere_segments(SAG_SHARE * tol / s[0]))
-    return _oriented(v, t, np.zeros(len(t), dtype=np.int64), w)
+    key = ("sphere", sphere_segments(SAG_SHARE * tol / s[0]))
+    v, t, tags = unit_mesh(key)
+    out = _oriented(v, t, tags, w)
+    out.unit = (key, w)
+    return out
 
 
 def _reach_local(m, reach):

@@ -22,13 +22,14 @@ faces +x, -x, +y, -y, +z, -z).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
 from ..cl.constants import OP_AND, OP_CONST, OP_COPY, OP_LEAF
 from ..compile.tape import instance_matrices
 from ..model.csg import Transformed, Union
-from .facets import Facets, cuboid, instance_facets, shared_segments
+from .facets import Facets, cuboid, instance_facets, shared_segments, unit_mesh
 
 #: face IDs per instance: more than a primitive's literals (a box has six) plus the closing tag
 FACE_STRIDE = 8
@@ -51,6 +52,40 @@ def _manifold(m3d, facets: Facets, instance: int):
                       np.ascontiguousarray(facets.triangles, dtype=np.uint64), None, None, None, None, None, None,
                       np.ascontiguousarray(ids))
     return m3d.Manifold(mesh)
+
+
+@lru_cache(maxsize=256)
+def _unit_manifold(key):
+    """(the manifold of :func:`~clcsg.meshing.facets.unit_mesh` (key), built once per process,
+    the tag of each of its triangles in manifold3d's own order).  A copy made an original
+    gives its triangles that order's index as face ID; the tags follow from the unit shape:
+    a triangle with all three vertices at z = 1/2 is a frustum's top cap (1), at -1/2 its
+    bottom (2), any other its side (0); a sphere's are all 0."""
+    import manifold3d as m3d
+
+    v, t, _ = unit_mesh(key)
+    base = m3d.Manifold(m3d.Mesh64(np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(t, dtype=np.uint64)))
+    own = base.to_mesh64()
+    z = np.asarray(own.vert_properties, dtype=np.float64)[:, 2][np.asarray(own.tri_verts, dtype=np.int64).reshape(-1, 3)]
+    tags = np.zeros(len(z), dtype=np.int64)
+    if key[0] == "round":
+        tags[(z == 0.5).all(axis=1)] = 1
+        tags[(z == -0.5).all(axis=1)] = 2
+    return base, tags
+
+
+def _placed(m3d, facets: Facets, instance: int, placed: dict):
+    """The manifold of an instance's facets: a unit primitive's, built once and placed by its
+    transform (a copy made an original: its triangles carry their index in the unit manifold
+    as face ID, and ``placed`` maps its original ID to (instance, the unit manifold's tags)),
+    else read in with its face IDs (:func:`_manifold`)."""
+    if facets.unit is not None:
+        base, tags = _unit_manifold(facets.unit[0])
+        if base.status() == m3d.Error.NoError:
+            got = base.transform(np.ascontiguousarray(facets.unit[1][:3, :4])).as_original()
+            placed[int(got.original_id())] = (instance, tags)
+            return got
+    return _manifold(m3d, facets, instance)
 
 
 def _clip_box(m3d, lo, hi, instance):
@@ -178,9 +213,11 @@ def boolean_mesh(tape, facets, frame=np.eye(4)) -> Faceted:
     lo, hi = (np.asarray(b, dtype=np.float64) for b in tape.bound)
     leaves: dict = {}
 
+    placed: dict = {}
+
     def leaf(i):
         if i not in leaves:
-            leaves[i] = _manifold(m3d, facets[i], i)
+            leaves[i] = _placed(m3d, facets[i], i, placed)
         return leaves[i]
 
     solid, negated = _Builder(m3d, leaf).build(_expression(tape.instance_program[0]))
@@ -197,7 +234,14 @@ def boolean_mesh(tape, facets, frame=np.eye(4)) -> Faceted:
     v = np.array(got.vert_properties, dtype=np.float64)[:, :3]
     tri = np.array(got.tri_verts, dtype=np.int64).reshape(-1, 3)
     fid = np.array(got.face_id, dtype=np.int64)
-    return Faceted(v, tri, fid // FACE_STRIDE, fid % FACE_STRIDE - 1, (lo, hi))
+    instance, tag = fid // FACE_STRIDE, fid % FACE_STRIDE - 1
+    runs = np.asarray(got.run_index, dtype=np.int64) // 3
+    for r, oid in enumerate(np.asarray(got.run_original_id).tolist()):
+        if int(oid) in placed:
+            i, tags = placed[int(oid)]
+            instance[runs[r]:runs[r + 1]] = i
+            tag[runs[r]:runs[r + 1]] = tags[fid[runs[r]:runs[r + 1]]]
+    return Faceted(v, tri, instance, tag, (lo, hi))
 
 
 def _bbox(solid):
