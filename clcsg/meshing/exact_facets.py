@@ -15,9 +15,9 @@
 
 The result is checked.  A triangle is bad if
 * it is farther than the tolerance from its quadric (centroid and edge midpoints, along the
-  gradient line), or one of its crease edges sags off both of its surfaces beyond it (:func:`_far_chords`)
-  and its midpoint is not proven within the tolerance of the solid (the straddle test at the
-  tolerance: inside and outside points that far round it);
+  gradient line), or one of its crease edges sags off both of its surfaces beyond it
+  (:func:`_far_chords`) and its midpoint is not proven within the tolerance of the solid (the
+  straddle test at the tolerance: inside and outside points that far round it);
 * a vertex of it moved more than :data:`SHIFTED` tolerances in its solve and it is not within
   the tolerance of the solid itself (the straddle test, :func:`_near_solid`);
 * it spans a sharp edge (not on a quadric all its vertices lie on) with a vertex more than
@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -114,9 +115,10 @@ def _clip_planes(lo, hi) -> np.ndarray:
 
 
 def contains_near(tape, x, eps: float, directions) -> np.ndarray:
-    """The solid's membership at the points x_i + eps d_j (:func:`~clcsg.compile.interpret.contains_around`)
-    as (N, k) bool: per group of :data:`GROUP` neighbouring points (along a Morton curve) the
-    tape pruned to what can matter in the group's box G grown by ``eps``
+    """The solid's membership at the points x_i + eps d_j as (N, k) bool
+    (:func:`~clcsg.compile.interpret.contains_around`): per group of :data:`GROUP`
+    neighbouring points (along a Morton curve) the tape pruned to what can matter in the
+    group's box G grown by ``eps``
     (:class:`clcsg.compile.root_tapes.PrimitiveDag`: the instances whose boxes meet G and the
     half-spaces whose plane crosses it kept, the half-spaces that miss G false, the rest at
     their defaults), so that the work is local; a short tape runs whole."""
@@ -159,7 +161,7 @@ def _near_solid(tape, vertices, triangles, tol) -> np.ndarray:
     v = vertices[triangles]
     pts = np.concatenate([v.mean(axis=1), 0.5 * (v + np.roll(v, -1, axis=1)).reshape(-1, 3)])
     uniq, which = np.unique(pts, axis=0, return_inverse=True)
-    near = lambda x, eps, dirs: contains_near(tape, x, eps, dirs)
+    near = partial(contains_near, tape)
     ok = straddles(uniq, near, NEAR_REACH * tol, COARSE_DIRECTIONS)
     rest = np.flatnonzero(~ok)
     ok[rest] = straddles(uniq[rest], near, NEAR_REACH * tol, NEAR_DIRECTIONS)
@@ -217,7 +219,7 @@ def _one_round(tape, facets, frame, tol: float, stats: dict) -> SnappedMesh:
     sets = vertex_sets(len(got.vertices), got.triangles, tri_q)
     verts, kept, fallbacks = timed(stats, "snap", snap, got.vertices, sets, matrices, tol)
     off, fixed = timed(stats, "repair", repair_off_surface, verts, kept, got.triangles, matrices, tol,
-                       lambda x, eps, dirs: contains_near(tape, x, eps, dirs))
+                       partial(contains_near, tape))
     kept[kept >= n_q] = -1
     m = refine.Surface(tape, verts, refine._compact(kept), got.triangles, np.where(tri_q < n_q, tri_q, -1), wide=True)
     timed(stats, "collapse", collapse_coincident, m, stats, False)
@@ -244,7 +246,7 @@ def _split_to_tolerance(tape, mesh: SnappedMesh, before, tol: float, stats: dict
             break
         want = edges_to_split(tape, mesh.vertices, mesh.triangles, mesh.quadric, tri_edge, far_edge, off_quadric, tol)
         got = timed(stats, "split", split_far, tape, mesh.vertices, mesh.triangles, mesh.sets, mesh.quadric, before,
-                    edges, tri_edge, want, lambda x, eps, dirs: contains_near(tape, x, eps, dirs))
+                    edges, tri_edge, want, partial(contains_near, tape))
         if got is None:
             break
         stats["chord_splits"] = stats.get("chord_splits", 0) + int(want.sum())
@@ -265,7 +267,7 @@ def _check(tape, mesh: SnappedMesh, before, fresh, near_ok, tol: float, stats: d
     rows = np.flatnonzero(far_edge)
     if len(rows):  # far from the curve, but within the tolerance of the solid (a cone's rim): fine
         mid = 0.5 * (v[edges[rows, 0]] + v[edges[rows, 1]])
-        far_edge[rows[straddles(mid, lambda x, eps, dirs: contains_near(tape, x, eps, dirs), tol, NEAR_DIRECTIONS)]] = False
+        far_edge[rows[straddles(mid, partial(contains_near, tape), tol, NEAR_DIRECTIONS)]] = False
     off_quadric = _deviation(tape, v, t, quad) > tol
     far = off_quadric | far_edge[tri_edge].any(axis=1)
     # a vertex moved far by its solve (a corner where two curves meet at a shallow angle) may
@@ -307,7 +309,8 @@ def _spans_a_sharp_edge(tape, v, tri, quad, sets, tol: float) -> np.ndarray:
             if len(sel):
                 _, h = residuals(tape.quadrics[own[sel, c]][:, None], x[sel])
                 h = h[:, 0]
-                cos = np.abs(np.einsum("ij,ij->i", g[sel], h)) / (np.linalg.norm(g[sel], axis=1) * np.linalg.norm(h, axis=1))
+                cos = np.abs(np.einsum("ij,ij->i", g[sel], h))
+                cos /= np.linalg.norm(g[sel], axis=1) * np.linalg.norm(h, axis=1)
                 sharp[sel] |= ~(cos >= cos_sharp)
         out |= sharp & (miss > SPAN_SLACK * tol)
     return out

@@ -64,9 +64,11 @@ def _unit_manifold(key):
     import manifold3d as m3d
 
     v, t, _ = unit_mesh(key)
-    base = m3d.Manifold(m3d.Mesh64(np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(t, dtype=np.uint64)))
+    base = m3d.Manifold(m3d.Mesh64(np.ascontiguousarray(v, dtype=np.float64),
+                                   np.ascontiguousarray(t, dtype=np.uint64)))
     own = base.to_mesh64()
-    z = np.asarray(own.vert_properties, dtype=np.float64)[:, 2][np.asarray(own.tri_verts, dtype=np.int64).reshape(-1, 3)]
+    corners = np.asarray(own.tri_verts, dtype=np.int64).reshape(-1, 3)
+    z = np.asarray(own.vert_properties, dtype=np.float64)[:, 2][corners]
     tags = np.zeros(len(z), dtype=np.int64)
     if key[0] == "round":
         tags[(z == 0.5).all(axis=1)] = 1
