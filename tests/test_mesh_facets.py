@@ -33,12 +33,23 @@ def test_circle_segments_are_the_fewest_within_the_sag(radius, rel):
     assert n == 3 or sag(n - 1) > SAG_SHARE * tol
 
 
-@pytest.mark.parametrize("sag", [0.3, 0.05, 0.01, 0.002])
+@pytest.mark.parametrize("sag", [0.3, 0.05, 0.01, 0.002, 0.0004])
 def test_sphere_segments_meet_the_sag(sag):
-    """The unit sphere's triangles (their planes) stay within the sag of the sphere."""
-    n = sphere_segments(sag)
-    assert _unit_sphere(n)[2] <= sag
-    assert n == 4 or _unit_sphere(n - 4)[2] > sag
+    """The geodesic unit sphere of the chosen frequency has its triangles' planes within the sag
+    of the sphere, one of lower frequency does not; it is a closed outward 2-manifold with its
+    vertices on the sphere, and its measured sag is what a scan of each triangle's plane
+    distance gives."""
+    f = sphere_segments(sag)
+    v, t, got = _unit_sphere(f)
+    assert got <= sag
+    assert f == 1 or _unit_sphere(f - 1)[2] > sag
+    assert np.allclose(np.linalg.norm(v, axis=1), 1.0, atol=1e-15)
+    mesh = manifold3d.Manifold(manifold3d.Mesh64(np.ascontiguousarray(v), np.ascontiguousarray(t, dtype=np.uint64)))
+    assert mesh.status() == manifold3d.Error.NoError and mesh.volume() > 0 and mesh.num_tri() == len(t) == 20 * f * f
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    dips = [1.0 - abs(np.dot(np.cross(b[k] - a[k], c[k] - a[k]), a[k])) / np.linalg.norm(np.cross(b[k] - a[k], c[k] - a[k]))
+            for k in range(len(t))]
+    assert max(dips) == pytest.approx(got, rel=1e-12)
 
 
 def _affine(rng):

@@ -128,8 +128,9 @@ def _flip_turned(v, tri, ref, quad, n_old: int, fresh) -> bool:
     triangle that turned over (its new vertex m, on a curve that bulges into the face, crossed
     the edge opposite it: a sliver of the Booleans' triangulation) has that edge flipped with
     the triangle across it when both lie on one quadric, (m, u, w) + (w, u, q) ->
-    (m, u, q) + (m, q, w), up to :data:`FLIP_PASSES` times.  Flipped triangles become
-    ``fresh``.  False where that does not set every triangle upright."""
+    (m, u, q) + (m, q, w), up to :data:`FLIP_PASSES` times (a new triangle still turned holds m
+    and has its opposite edge flipped on the next pass, Lawson's walk).  Flipped triangles
+    become ``fresh``.  False where that does not set every triangle upright."""
     for _ in range(FLIP_PASSES):
         turned = np.flatnonzero(np.einsum("ij,ij->i", _normals(v, tri), ref) <= 0)
         if not len(turned):
@@ -150,14 +151,11 @@ def _flip_turned(v, tri, ref, quad, n_old: int, fresh) -> bool:
             q = int(tri[j, (int(order[at]) % 3 + 2) % 3])
             if j in changed or quad[j] != quad[t]:
                 return False
-            a, b = np.array([m, u, q]), np.array([m, q, w])
-            if min(float(_normals(v, a[None])[0] @ ref[j]), float(_normals(v, b[None])[0] @ ref[j])) <= 0:
-                return False
-            tri[t], tri[j], ref[t] = a, b, ref[j]
+            tri[t], tri[j], ref[t] = (m, u, q), (m, q, w), ref[j]  # still turned: flipped on next pass
             fresh[t] = fresh[j] = True
             changed.update((t, j))
     return not (np.einsum("ij,ij->i", _normals(v, tri), ref) <= 0).any()
 
 
 #: passes of :func:`_flip_turned`
-FLIP_PASSES = 3
+FLIP_PASSES = 4

@@ -9,8 +9,8 @@ Curved surfaces are inscribed: every vertex lies on its literal's quadric, and t
 count of a circle of world radius R is the least n with R (1 - cos(pi / n)) <= tol, the chord
 sag of the inscribed n-gon.  Under a linear map A (the instance's transform times the local
 radii) a circle's polygon of parameter step d deviates from the image ellipse by at most
-sigma_1 R d^2 / 8 (the largest |x''|), so R is taken as sigma_1 R.  A sphere is manifold3d's
-(octahedron-based) unit sphere with the fewest segments whose measured sag is at most
+sigma_1 R d^2 / 8 (the largest |x''|), so R is taken as sigma_1 R.  A sphere is the geodesic
+(icosahedron-based) unit sphere of the lowest frequency whose measured sag is at most
 tol sigma_3^2 / sigma_1^3 (the largest normal curvature of the image ellipsoid is
 sigma_1 / sigma_3^2 and its edges are at most sigma_1 times longer).
 
@@ -66,29 +66,55 @@ def circle_segments(radius: float, tol: float) -> int:
     return int(min(max(n, MIN_SEGMENTS), MAX_SEGMENTS))
 
 
-@lru_cache(maxsize=None)
-def _unit_sphere(segments: int):
-    """(vertices, triangles, sag) of manifold3d's unit sphere of ``segments``: sag is the
-    largest distance of a triangle's plane below the sphere (its deviation bound)."""
-    import manifold3d
+#: the icosahedron: its 12 vertices (unit length) and 20 outward faces
+_ICO_T = (1.0 + 5.0 ** 0.5) / 2.0
+_ICO_V = np.array([[-1, _ICO_T, 0], [1, _ICO_T, 0], [-1, -_ICO_T, 0], [1, -_ICO_T, 0], [0, -1, _ICO_T],
+                   [0, 1, _ICO_T], [0, -1, -_ICO_T], [0, 1, -_ICO_T], [_ICO_T, 0, -1], [_ICO_T, 0, 1],
+                   [-_ICO_T, 0, -1], [-_ICO_T, 0, 1]]) / math.sqrt(1.0 + _ICO_T ** 2)
+_ICO_F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+                   [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+                   [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+#: the finest geodesic sphere (20 f^2 triangles)
+MAX_FREQUENCY = 512
 
-    got = manifold3d.Manifold.sphere(1.0, segments).to_mesh64()
-    v = np.array(got.vert_properties, dtype=np.float64)[:, :3]
-    v /= np.linalg.norm(v, axis=1, keepdims=True)  # on the sphere to rounding
-    t = np.array(got.tri_verts, dtype=np.int64).reshape(-1, 3)
+
+@lru_cache(maxsize=None)
+def _unit_sphere(frequency: int):
+    """(vertices, triangles, sag) of the geodesic unit sphere of ``frequency`` f: each face of
+    the icosahedron cut into f^2 triangles on a barycentric grid, the points pushed out onto
+    the sphere; sag is the largest distance of a triangle's plane below the sphere (its
+    deviation bound).  Its triangles are nearly equal, so a sag needs about a tenth fewer of
+    them than manifold3d's octahedral sphere."""
+    f = int(frequency)
+    grid = [(i, j) for i in range(f + 1) for j in range(f + 1 - i)]
+    index = {p: k for k, p in enumerate(grid)}
+    cells = []
+    for i in range(f):
+        for j in range(f - i):
+            cells.append((index[(i, j)], index[(i + 1, j)], index[(i, j + 1)]))
+            if i + j < f - 1:
+                cells.append((index[(i + 1, j)], index[(i + 1, j + 1)], index[(i, j + 1)]))
+    uv = np.array(grid, dtype=np.float64) / f
+    a, b, c = (_ICO_V[_ICO_F[:, k]] for k in range(3))
+    pts = (a[:, None] + (b - a)[:, None] * uv[None, :, :1] + (c - a)[:, None] * uv[None, :, 1:]).reshape(-1, 3)
+    pts /= np.linalg.norm(pts, axis=1, keepdims=True)
+    tri = (np.array(cells)[None] + (np.arange(20) * len(grid))[:, None, None]).reshape(-1, 3)
+    _, first, inv = np.unique(np.round(pts * 1e9).astype(np.int64), axis=0, return_index=True, return_inverse=True)
+    v, t = pts[first], inv.ravel()[tri]  # points on the icosahedron's shared edges once
     a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
     n = np.cross(b - a, c - a)
     d = np.abs((n * a).sum(axis=1)) / np.linalg.norm(n, axis=1)
-    return v, t, float(1.0 - d.min())
+    return v, t.astype(np.int64), float(1.0 - d.min())
 
 
 def sphere_segments(sag: float) -> int:
-    """The fewest segments (a multiple of 4) of manifold3d's unit sphere with sag <= ``sag``."""
-    # the sphere's sag is about 2.7 times that of a circle of as many segments: start below
-    n = 4 * max(1, math.ceil(math.pi / math.acos(1.0 - min(sag / 2.5, 1.0))) // 4)
-    while n < MAX_SEGMENTS and _unit_sphere(n)[2] > sag:
-        n += 4
-    return n
+    """The lowest frequency of the geodesic unit sphere (:func:`_unit_sphere`) with sag <= ``sag``."""
+    # the sag is about 0.29 / f^2: start below
+    f = max(1, int(math.sqrt(0.25 / max(sag, 1e-300))))
+    f = min(f, MAX_FREQUENCY)
+    while f < MAX_FREQUENCY and _unit_sphere(f)[2] > sag:
+        f += 1
+    return f
 
 
 def _world(points, m):
@@ -200,8 +226,8 @@ def _round(p, m, tol, kind, segments=None):
 
 @lru_cache(maxsize=256)
 def unit_mesh(key):
-    """(vertices, triangles, tags) of a unit primitive: ("sphere", n) manifold3d's unit sphere
-    (tag 0); ("round", n, a, b) the n-gon frustum of radii a (z = -1/2) and b (z = 1/2),
+    """(vertices, triangles, tags) of a unit primitive: ("sphere", f) the geodesic unit sphere
+    of frequency f (tag 0); ("round", n, a, b) the n-gon frustum of radii a (z = -1/2) and b (z = 1/2),
     sides tagged 0, its caps 1 (top) and 2 (bottom).  A cylinder or cone is one of these under
     an affine map, so the Booleans can build each once and place it by a transform."""
     if key[0] == "sphere":
