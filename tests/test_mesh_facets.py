@@ -353,6 +353,92 @@ def test_circles_shared_by_coaxial_primitives_get_one_segment_count():
     assert m.stats["far_triangles"] == 0 and m.stats["spanning_triangles"] == 0
 
 
+def test_a_hidden_side_does_not_raise_its_circles_count():
+    """A countersunk hole (bore r = 1, 45-degree cone r 1 -> 2 up to the top face and a little
+    above it, a clearance cylinder r = 2 standing on the cone's top ring, all in the air above
+    the plate): the clearance cylinder's side bounds nothing, so its count (that of r = 2, more
+    than the cone's r = 2 cos 45) does not raise the group, which takes the cone's.  Without
+    the visibility test it does.  The plate meshes closed in one round, within the tolerance
+    of the CSG surface, with fewer triangles."""
+    from functools import partial
+
+    from clcsg.meshing import instance_booleans as ib
+    from clcsg.meshing.exact_facets import _on_surface
+    from clcsg.meshing.facets import circle_segments
+    from test_mesh import check_near_csg_surface
+
+    tol, lift = 0.004, 0.01
+    bore = clcsg.cylinder(height=3.0, radius=1.0, center=(0, 0, -0.5))
+    cone = clcsg.cone(height=1.0 + lift, r1=1.0, r2=2.0 + lift, center=(0, 0, 0.5 + lift / 2))
+    clear = clcsg.cylinder(height=1.0, radius=2.0 + lift, center=(0, 0, 1.0 + lift + 0.5))
+    plate = clcsg.box((8.0, 8.0, 1.0), center=(0, 0, 0.5))
+    shape = clcsg.difference(plate, clcsg.union(bore, cone, clear))
+    sc = clcsg.Scene(shape)
+    tape = sc.compile()
+    frame = ib.common_frame(sc.shape, tape.instances)
+    tols = np.full(len(tape.instances), tol)
+    counts = {}
+    for test in (None, partial(_on_surface, tape, tol)):
+        facets = ib.facets_of(tape, tols, frame, test)
+        counts[test is None] = {i.node.kind: len(f.vertices) for i, f in zip(tape.instances, facets) if i.node.kind == "cone"}
+    n_cone, n_clear = circle_segments((2.0 + lift) / math.sqrt(2.0), tol), circle_segments(2.0 + lift, tol)
+    assert n_cone < n_clear
+    assert counts[True]["cone"] == 2 * n_clear and counts[False]["cone"] == 2 * n_cone
+    m = clcsg.mesh(sc, tolerance=tol)
+    check_closed_manifold(m)
+    check_vertices_on_surface(sc, m)
+    check_near_csg_surface(shape, m)
+    assert m.stats["facet_rounds"] == 1 and m.stats["far_triangles"] == 0
+
+
+def test_a_rim_chord_within_the_tolerance_of_a_cone_is_accepted():
+    """The chord of a cone's rim on a plane (45 degrees) sags s from the rim circle but
+    s cos 45 from the cone: with s cos 45 < tol < s the foot test accepts its midpoint (the
+    foot on the cone is on the solid's surface), and rejects it with tol < s cos 45; a point
+    whose foot on the cone is out of the solid (the cone's extension above the plate) is not
+    accepted either."""
+    from clcsg.meshing.exact_facets import _foot_on_solid
+    from clcsg.meshing.project import line_steps
+
+    cone = clcsg.cone(height=1.0, r1=1.0, r2=2.0, center=(0, 0, -0.5))  # 45 degrees, rim r = 2 at z = 0
+    sc = clcsg.Scene(clcsg.difference(clcsg.box((8.0, 8.0, 1.0), center=(0, 0, -0.5)), cone))
+    tape = sc.compile()
+    side = next(i for i in tape.instances if i.node.kind == "cone").literals[0][0]
+    top = int(np.argmin(np.abs(tape.quadrics[:, 2, 3] * 2 - 1) + np.abs(tape.quadrics[:, 3, 3])))
+    n = 12
+    a, b = 2.0 * np.array([[1.0, 0, 0], [math.cos(2 * math.pi / n), math.sin(2 * math.pi / n), 0]])
+    mid = 0.5 * (a + b)[None]
+    s = 2.0 - float(np.linalg.norm(mid))
+    quads = np.array([[side, top]])
+    t, nrm = line_steps(tape.quadrics[quads], mid)
+    assert abs(abs(t[0, 0]) - s / math.sqrt(2.0)) < 1e-3 * s and abs(t[0, 1]) < 1e-15  # the gradient line: near the normal
+    assert _foot_on_solid(tape, mid, quads, 0.5 * (s + s / math.sqrt(2.0)))[0]
+    assert not _foot_on_solid(tape, mid, quads, 0.9 * s / math.sqrt(2.0))[0]
+    above = np.array([[1.8, 0.0, 0.5]])  # nearest the cone's extension above the plate, in the air
+    assert not _foot_on_solid(tape, above, np.array([[side, side]]), 1.0)[0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0.2, 3.0), st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(-2.0, 2.0))
+def test_a_line_step_lands_on_its_quadric(r, x, y, z):
+    """line_steps: x + t n lies on the quadric (a sphere of radius r, a cylinder and a plane
+    through the origin) in double precision, and |t| is line_distance."""
+    from clcsg.meshing.project import line_distance, line_steps
+    from clcsg.model.quadric import Quadric
+
+    qs = np.stack([q.matrix for q in (Quadric.sphere(radius=r), Quadric.cylinder(axis=(1, 1, 0), radius=r),
+                                      Quadric.half_space((1.0, 2.0, 2.0), 0.0))])
+    p = np.array([[x, y, z]])
+    t, n = line_steps(qs[None], p)
+    for k in range(3):
+        if not np.isfinite(t[0, k]):
+            continue
+        foot = p[0] + t[0, k] * n[0, k]
+        f = np.append(foot, 1.0) @ qs[k] @ np.append(foot, 1.0)
+        assert abs(f) <= 1e-12 * (1.0 + np.abs(qs[k]).max() * (1 + foot @ foot))
+    assert line_distance(qs[None], p)[0] == np.abs(t[0]).max()
+
+
 @pytest.mark.parametrize("r1, r2, height", [(1.0, 0.2, 0.3), (1.0, 0.0, 2.0), (0.5, 1.5, 0.2)])
 def test_cones_faceted_by_their_slant_within_the_tolerance(r1, r2, height):
     """A cone's chords lie the sag times cos(alpha) from it, so a flat cone gets fewer segments

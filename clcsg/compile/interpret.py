@@ -181,9 +181,13 @@ def contains_around(ops, quadrics, centers, eps: float, directions) -> np.ndarra
     used = sorted({a for op, _, a, _ in rows if op == OP_LEAF})
     slot = {q: i for i, q in enumerate(used)}
     k = quadrics[used]  # (Q, 4, 4): every leaf's expansion at once
-    kc = np.einsum("nj,qjk->qnk", ch, k)
-    bend = (eps * eps) * np.einsum("kj,qji,ki->qk", d, k[:, :3, :3], d)
-    vals = (kc * ch[None]).sum(axis=2)[:, :, None] + (2.0 * eps) * (kc[:, :, :3] @ d.T) + bend[:, None, :]
+    # (K c) per leaf and point, then its slopes along the directions: one small product per
+    # leaf each (a single large one would wake BLAS's threads, whose spinning costs more CPU
+    # time than the product)
+    kc = np.matmul(ch, k)
+    vals = np.matmul(np.ascontiguousarray(kc[:, :, :3]), (2.0 * eps) * d.T)
+    vals += np.einsum("qnj,nj->qn", kc, ch)[:, :, None]
+    vals += (eps * eps) * np.einsum("kj,qji,ki->qk", d, k[:, :3, :3], d)[:, None, :]
 
     def values(q):
         return vals[slot[q]]

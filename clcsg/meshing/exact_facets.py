@@ -51,7 +51,7 @@ from .facets import KINDS
 from .instance_booleans import boolean_mesh, common_frame, facets_of
 from .owners import primitives_of, shared_nearest
 from .planar import flat_quadrics
-from .project import line_distance, residuals
+from .project import line_distance, line_steps, residuals
 from .snap import fibonacci_directions, repair_off_surface, snap, straddles, vertex_sets
 
 #: faceting rounds at most (each halves the tolerance of the instances of bad triangles)
@@ -169,6 +169,33 @@ def _near_solid(tape, vertices, triangles, tol) -> np.ndarray:
     return ok[:len(v)] & ok[len(v):].reshape(-1, 3).all(axis=1)
 
 
+def _on_surface(tape, tol, points) -> np.ndarray:
+    """Per point whether the solid has points inside and outside within a quarter of ``tol``
+    round it (the straddle test with :data:`COARSE_DIRECTIONS`): it lies on the surface."""
+    return straddles(points, partial(contains_near, tape), 0.25 * tol, COARSE_DIRECTIONS)
+
+
+def _foot_on_solid(tape, x, quads, tol) -> np.ndarray:
+    """Per point of ``x`` whether one of its quadrics ``quads`` (N, 2) is met along its
+    gradient line within ``tol`` (less :data:`FOOT_REACH` tolerances) at a point on the solid's
+    surface (the straddle test that close round it): then ``x`` is within ``tol`` of the
+    surface.  A rim chord lies the sag times cos(alpha) from a cone, a distance the straddle
+    test at the whole tolerance only sees through a narrow cap of directions."""
+    t, n = line_steps(tape.quadrics[quads], x)
+    reach = FOOT_REACH * tol
+    cand = np.argwhere(np.abs(t) <= tol - reach)
+    out = np.zeros(len(x), dtype=bool)
+    if len(cand):
+        foot = x[cand[:, 0]] + t[cand[:, 0], cand[:, 1], None] * n[cand[:, 0], cand[:, 1]]
+        on = straddles(foot, partial(contains_near, tape), reach, COARSE_DIRECTIONS)
+        out[cand[on, 0]] = True
+    return out
+
+
+#: the straddle test's radius round a foot point (:func:`_foot_on_solid`), in tolerances
+FOOT_REACH = 1e-3
+
+
 def _far_chords(tape, vertices, edges, side, tol) -> np.ndarray:
     """Per edge whether it is a crease (``side``: the quadrics of its two triangles differ: the
     edge runs along their curve) whose midpoint is farther than ``tol`` from the curve, to
@@ -267,6 +294,9 @@ def _check(tape, mesh: SnappedMesh, before, fresh, near_ok, tol: float, stats: d
     rows = np.flatnonzero(far_edge)
     if len(rows):  # far from the curve, but within the tolerance of the solid (a cone's rim): fine
         mid = 0.5 * (v[edges[rows, 0]] + v[edges[rows, 1]])
+        near = _foot_on_solid(tape, mid, edge_sides(edges, tri_edge, quad)[rows], tol)
+        far_edge[rows[near]] = False
+        rows, mid = rows[~near], mid[~near]
         far_edge[rows[straddles(mid, partial(contains_near, tape), tol, NEAR_DIRECTIONS)]] = False
     off_quadric = _deviation(tape, v, t, quad) > tol
     far = off_quadric | far_edge[tri_edge].any(axis=1)
@@ -355,7 +385,7 @@ def mesh_by_facets(shape, tape, tol: float, stats: dict) -> SnappedMesh:
     rounds = 0
     frame = common_frame(shape, tape.instances)
     while True:
-        facets = timed(stats, "facets", facets_of, tape, tols, frame)
+        facets = timed(stats, "facets", facets_of, tape, tols, frame, partial(_on_surface, tape, tol))
         got = _one_round(tape, facets, frame[0], tol, stats)
         rounds += 1
         if not got.bad.any() or rounds >= MAX_ROUNDS:

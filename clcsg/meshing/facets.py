@@ -311,14 +311,21 @@ def instance_facets(inst, tol: float, reach, matrix=None, segments=None) -> Face
     return None
 
 
-def shared_segments(instances, tols, matrices) -> dict:
+def shared_segments(instances, tols, matrices, hidden=None) -> dict:
     """Per cylinder or cone instance (index -> n) its circle segments: the fewest within its
     tolerance, raised to the most of those it shares a circle with.  Two share a circle when
     they are coaxial with rings in phase (the same linear part of their local frames, the
     origins on one axis) and an end ring of one lies on the other's side (a countersink's
     cone standing on its bore, two cylinders stacked): then their polygons' vertices coincide
-    along the circle, where different counts would cut each other's facets into slivers."""
-    shapes, groups = {}, {}
+    along the circle, where different counts would cut each other's facets into slivers.
+
+    ``hidden(points)``: per row of ``points`` (K, N, 3: N points on the side of each of K
+    instances, in the matrices' frame) whether none lies on the solid's surface.  A member
+    above its group's least count whose side is hidden so (a countersink's clearance
+    cylinder, all in the air above the part) takes its group's count but does not raise it:
+    its chords bound nothing.  Were its side to show between the points, the mesher's check
+    finds the chords and refines them."""
+    shapes, groups, sets = {}, {}, {}
     for inst, tol, m in zip(instances, tols, matrices):
         kind = inst.node.kind
         if kind in ("cylinder", "cone"):
@@ -345,12 +352,37 @@ def shared_segments(instances, tols, matrices) -> dict:
             for b in members:
                 if a < b and (_ring_on_side(shapes[a], shapes[b]) or _ring_on_side(shapes[b], shapes[a])):
                     parent[root(a)] = root(b)
-        most: dict = {}
         for i in members:
-            most[root(i)] = max(most.get(root(i), 0), out[i])
-        for i in members:
-            out[i] = most[root(i)]
+            sets.setdefault(root(i), []).append(i)
+    mixed = [g for g in sets.values() if len({out[i] for i in g}) > 1]
+    tested = sorted(i for g in mixed for i in g if out[i] > min(out[j] for j in g)) if hidden else []
+    shown = {}
+    if tested:
+        gone = hidden(np.stack([side_points(*shapes[i][:4]) for i in tested]))
+        shown = {i: not bool(h) for i, h in zip(tested, gone)}
+    for group in mixed:
+        counts = [out[i] for i in group if shown.get(i, True)]
+        for i in group:
+            out[i] = max(counts)
     return out
+
+
+#: the side points a visibility test looks at: rings at these heights (fractions of the side)
+SIDE_HEIGHTS = (0.25, 0.75)
+#: points per ring
+SIDE_ANGLES = 8
+
+
+def side_points(w, h, r1, r2) -> np.ndarray:
+    """Points on the side of a cylinder or cone (local frame ``w``, height h, end radii r1 at
+    z = -h/2 and r2 at h/2), in ``w``'s frame: :data:`SIDE_ANGLES` per ring at
+    :data:`SIDE_HEIGHTS`, half a step out of phase with the polygon's vertices."""
+    f = np.asarray(SIDE_HEIGHTS)[:, None]
+    phi = 2.0 * np.pi * (np.arange(SIDE_ANGLES) + 0.5) / SIDE_ANGLES
+    r = r1 + (r2 - r1) * f
+    x, y = r * np.cos(phi), r * np.sin(phi)
+    local = np.stack([x, y, np.broadcast_to(h * (f - 0.5), x.shape)], axis=-1)
+    return _world(local.reshape(-1, 3), w)
 
 
 def _ring_on_side(a, b) -> bool:

@@ -185,11 +185,13 @@ def common_frame(shape, instances):
     return g, [m for _, m in local]
 
 
-def facets_of(tape, tols, frame=None):
+def facets_of(tape, tols, frame=None, on_surface=None):
     """Per instance of ``tape`` its :class:`~clcsg.meshing.facets.Facets` within its
     tolerance (``tols``, one per instance) in the frame ``frame`` = (G, matrices below G)
     (default: the world), or None if a kind has no closed form (the whole list is then
-    None)."""
+    None).  ``on_surface(points)``: per world point whether it lies on the solid's surface,
+    so that a cylinder or cone whose side is hidden does not set the segments of those it
+    shares a circle with (:func:`~clcsg.meshing.facets.shared_segments`)."""
     g, mats = frame if frame is not None else (np.eye(4), [i.matrix for i in tape.instances])
     lo, hi = (np.asarray(b, dtype=np.float64) for b in tape.bound)
     inv = np.linalg.inv(g)
@@ -197,7 +199,12 @@ def facets_of(tape, tols, frame=None):
     center = inv[:3, :3] @ (0.5 * (lo + hi)) + inv[:3, 3]
     radius = (0.5 * float(np.linalg.norm(hi - lo)) * 1.01 + 1e-9) * float(np.linalg.svd(inv[:3, :3], compute_uv=False)[0])
     out = []
-    segments = shared_segments(tape.instances, np.asarray(tols, dtype=np.float64) / stretch, mats)
+    hidden = None
+    if on_surface is not None:
+        def hidden(points):
+            shown = on_surface(points.reshape(-1, 3) @ g[:3, :3].T + g[:3, 3])
+            return ~shown.reshape(points.shape[:2]).any(axis=1)
+    segments = shared_segments(tape.instances, np.asarray(tols, dtype=np.float64) / stretch, mats, hidden)
     for inst, tol, m in zip(tape.instances, tols, mats):
         f = instance_facets(inst, float(tol) / stretch, (center, radius), m, segments.get(inst.index))
         if f is None:

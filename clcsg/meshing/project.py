@@ -48,6 +48,14 @@ def line_distance(matrices, x) -> np.ndarray:
     quadric, so this bounds the distance from above; it is the distance itself for a sphere or
     a cylinder (their gradient lines are normals), where the first-order |K| / |grad K|
     overstates a chord's sag by about s / 2R.  First order where the line misses the quadric."""
+    t, _ = line_steps(matrices, x)
+    return np.abs(t).max(axis=1)
+
+
+def line_steps(matrices, x):
+    """(t (N, k), n (N, k, 3)): per point of ``x`` and quadric K_i of ``matrices`` (N, k, 4, 4)
+    the signed step t along the unit gradient n to K_i (:func:`line_distance`'s root; x + t n
+    lies on K_i).  Infinite where the gradient vanishes off the quadric."""
     f, j = residuals(matrices, x)
     g = np.linalg.norm(j, axis=2)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -56,7 +64,7 @@ def line_distance(matrices, x) -> np.ndarray:
         disc = g * g - 4.0 * f * bend
         d = np.where(disc >= 0, 2.0 * np.abs(f) / (g + np.sqrt(np.maximum(disc, 0.0))), np.abs(f) / g)
         d = np.where(g > 0, d, np.where(f == 0, 0.0, np.inf))
-    return d.max(axis=1)
+    return -np.sign(f) * d, np.nan_to_num(n)
 
 
 def min_norm_step(f, j):
