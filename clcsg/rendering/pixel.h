@@ -52,6 +52,25 @@ inline void pixel_normalize8(real8 *x, real8 *y, real8 *z)
     *x = nx; *y = ny; *z = nz;
 }
 
+/* Pixels pix ... pix + lanes - 1 (lanes <= 8) as background: depth +inf, no quadric or
+ * primitive, the background colour. */
+inline void pixel_store_background(pixel_out out, __global const view_rec *view, int pix, int lanes)
+{
+    uchar4 bg = shade_background(view);
+    if (lanes == 8) {
+        vstore8((float8)(INFINITY), 0, out.depth + pix);
+        vstore8((int8)(-1), 0, out.quadric + pix);
+        vstore8((int8)(-1), 0, out.primitive + pix);
+        vstore8((uint8)(as_uint(bg)), 0, (__global uint *)(out.rgba + pix));
+        return;
+    }
+    for (int l = 0; l < lanes; ++l) {
+        out.depth[pix + l] = INFINITY;
+        out.quadric[pix + l] = out.primitive[pix + l] = -1;
+        out.rgba[pix + l] = bg;
+    }
+}
+
 /* The outputs of RAY_LANES consecutive pixels of a row, gathered lane by lane (pixel_lanes_set)
  * and shaded together (pixel_lanes_store): per lane the depth, quadric and primitive ids (a miss
  * keeps pixel_lanes_clear's +inf, -1, -1), the linear albedo (shade_albedo), the gradient of

@@ -131,6 +131,36 @@ inline int8 ray_classify8(quadric q, real3 e, real8 vx, real8 vy, real8 vz, real
     return select(select(k1, k2, ia), k0, convert_int8(none));
 }
 
+/* The classifications (ray_classify8) of the last RAY_CACHE quadrics a work-item's lanes
+ * were classified against, by quadric id: a quadric listed by several slabs of the tile (a
+ * sphere's cap spanning their depths) is solved once per ray, not once per slab.  The roots
+ * of a quadric along a ray do not depend on the slab, so the reuse is exact. */
+#define RAY_CACHE 8
+typedef struct {
+    int q[RAY_CACHE];
+    real r1[RAY_CACHE][8], r2[RAY_CACHE][8];
+    int kind[RAY_CACHE][8];
+    int n;
+} roots_cache;
+
+inline int8 cached_classify8(roots_cache *c, __global const quadric_rec *qs, int q, real3 e, real8 vx, real8 vy,
+                             real8 vz, real8 *r1, real8 *r2)
+{
+    for (int k = 0; k < min(c->n, RAY_CACHE); ++k)
+        if (c->q[k] == q) {
+            *r1 = vload8(0, c->r1[k]);
+            *r2 = vload8(0, c->r2[k]);
+            return vload8(0, c->kind[k]);
+        }
+    int8 kind = ray_classify8(quadric_load(qs, q), e, vx, vy, vz, r1, r2);
+    int slot = c->n++ % RAY_CACHE;
+    c->q[slot] = q;
+    vstore8(*r1, 0, c->r1[slot]);
+    vstore8(*r2, 0, c->r2[slot]);
+    vstore8(kind, 0, c->kind[slot]);
+    return kind;
+}
+
 /* sign of Q_m(e + t v) from the classification */
 inline int ray_sign(const ray_roots *rr, int m, real t)
 {
@@ -417,6 +447,8 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
     }
     ray_roots rr; /* filled by slab_hit anew per slab and lane */
     lane_roots lr;
+    roots_cache cache;
+    cache.n = 0;
     for (int s = 0; s < SLABS && walking; ++s) {
         int4 sl = slabs[tile * SLABS + s];
         if (sl.y == 0) continue;
@@ -442,7 +474,7 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
                 real8 r1 = INFINITY, r2 = INFINITY;
                 int8 k = lo.w < 0 ? 4 : 0;
                 if ((lane_bits(missed) & in) != in)
-                    k = ray_classify8(quadric_load(qs, q), e, vx8, vy8, vz8, &r1, &r2);
+                    k = cached_classify8(&cache, qs, q, e, vx8, vy8, vz8, &r1, &r2);
                 int8 gone = convert_int8(missed);
                 vstore8(select(r1, (real8)INFINITY, missed), 0, lr.r1[m]);
                 vstore8(select(r2, (real8)INFINITY, missed), 0, lr.r2[m]);
@@ -488,6 +520,14 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     int tile = (i / TILE) * ((W + TILE - 1) / TILE) + j0 / TILE;
     real3 e = view_eye(view), forward = vload3(0, view->forward);
     real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
+    /* a tile whose slabs hold no tape has no surface: its pixels are background (most of a
+     * frame round a compact model), without the rays' set-up */
+    int listed = 0;
+    for (int s = 0; s < SLABS; ++s) listed |= slabs[tile * SLABS + s].y;
+    if (!listed) {
+        pixel_store_background(PIXEL_OUT, view, i * W + j0, lanes);
+        return;
+    }
     pixel_lanes px;
     pixel_lanes_clear(&px);
     int last_prim = -2;

@@ -115,10 +115,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
         for (int l = 0; l < lanes; ++l) ((ulong *)&K)[l] = framebuffer[pix + l];
     }
     if (all(K == (ulong8)(EMPTY_KEY)) && lanes == RESOLVE_LANES) { /* the background only */
-        vstore8((float8)(INFINITY), 0, out.depth + pix);
-        vstore8((int8)(-1), 0, out.quadric + pix);
-        vstore8((int8)(-1), 0, out.primitive + pix);
-        vstore8((uint8)(as_uint(shade_background(view))), 0, (__global uint *)(out.rgba + pix));
+        pixel_store_background(out, view, pix, lanes);
         return;
     }
     /* eight hits of samples on one quadric with one fixed primitive (most of a surface's
