@@ -12,8 +12,9 @@
  * membership with q substituted differs between q's two sides, the other leaves being their
  * signs at t from the classification (no quadric is evaluated again), i.e. e + t v is on the
  * CSG surface.  No 1-D interval CSG beyond that and no "outside view" assumption: views from
- * inside the solid are exact.  The winning depth is refined by one more solve from the hit
- * point (accurate in float as well).  Outputs depth (+inf on background), quadric and
+ * inside the solid are exact.  In float the winning depth is refined by one more solve from
+ * the hit point; in double the root from the eye is already far below the float depth
+ * output's rounding (ray_depth).  Outputs depth (+inf on background), quadric and
  * primitive ids and RGBA8 shaded with shade.h, in the hit primitive's colour.
  *
  * Culling (ray_culling.py): quadric q has a box B_q (the hull of the boxes of the primitive
@@ -421,6 +422,18 @@ inline real refine_depth(quadric q, real3 e, real3 v, real t)
     return t;
 }
 
+/* The depth output of a hit at root t on quadric q: in double the root from the eye (its
+ * relative error, a few units of double's rounding, is far below the float depth's); in float
+ * refine_depth's. */
+inline real ray_depth(__global const quadric_rec *qs, int q, real3 e, real3 v, real t)
+{
+#ifdef CLCSG_DOUBLE
+    return t;
+#else
+    return refine_depth(quadric_load(qs, q), e, v, t);
+#endif
+}
+
 /* The hits of a work-item's lanes (rays e + t v, v = (vx, vy, vz)[l], lanes l < n) through
  * tile `tile`: per lane the tile's slabs are walked front to back until one holds a hit (a lane
  * walks them as if alone; the lanes only share the slabs' classifications, ray_classify8).
@@ -503,7 +516,7 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
         }
     }
     for (int l = 0; l < n; ++l)
-        if (qid[l] >= 0) depth[l] = refine_depth(quadric_load(qs, qid[l]), e, (real3)(vx[l], vy[l], vz[l]), best[l]);
+        if (qid[l] >= 0) depth[l] = ray_depth(qs, qid[l], e, (real3)(vx[l], vy[l], vz[l]), best[l]);
 }
 
 /* One work-item per RAY_LANES pixels of a row (all in one tile: TILE is a multiple of RAY_LANES):
