@@ -122,26 +122,31 @@ inline int slab_quadrics(__global tape_op *rows, int n, __global int *qlist)
     return nq;
 }
 
+/* A tile's statistics, added to the counters once per tile (atomics on one cache line from
+ * every work-item cost more than the prunes of a short tape): prune evaluations, slab rows,
+ * the longest slab quadric list. */
+typedef struct {
+    uint evals, rows, nq_max;
+} slab_tally;
+
 /* Slab s of a tile: its tape pruned from the tile's tape t (n rows) into scratch (n + 1 rows),
  * then copied compactly to the slab arena with its own quadric list.  Returns the record
  * (first row, rows, first listed quadric, quadrics); rows = 0 where the slab misses the bound
  * or the solid has no surface in it (or the arena is full: the host sees it in the counters). */
 inline int4 prune_slab(__global const quadric_rec *qs, __global const tape_op *t, int n, const prune_region *g,
                        __global tape_op *scratch, __global tape_op *arena, uint cap_arena, __global int *qlist,
-                       uint cap_qlist, __global volatile uint *counters)
+                       uint cap_qlist, __global volatile uint *counters, slab_tally *tally)
 {
-    uint evals = 0;
     int first, count;
-    tape_prune(t, n, qs, g, -1, scratch, &first, &count, &evals);
-    atomic_add(&counters[2], evals);
+    tape_prune(t, n, qs, g, -1, scratch, &first, &count, &tally->evals);
     if (count == 1 && scratch[first].op == OP_CONST) return (int4)(0);
     uint base = atomic_add(&counters[0], (uint)count);
     uint qbase = atomic_add(&counters[1], (uint)count);
     if (base + (uint)count > cap_arena || qbase + (uint)count > cap_qlist) return (int4)(0);
     for (int k = 0; k < count; ++k) arena[base + k] = scratch[first + k];
     int nq = slab_quadrics(arena + base, count, qlist + qbase);
-    atomic_add(&counters[3], (uint)count);
-    atomic_max(&counters[4], (uint)nq);
+    tally->rows += (uint)count;
+    tally->nq_max = max(tally->nq_max, (uint)nq);
     return (int4)((int)base, count, (int)qbase, nq);
 }
 
@@ -185,6 +190,7 @@ __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op
     rows[0] = n;
     real2 z = tile_z[tile];
     int tx = tile % ntx, ty = tile / ntx;
+    slab_tally tally = {0, 0, 0};
     for (int s = 0; s < SLABS; ++s) {
         /* levels whose node changes from slab s - 1 to s: below the highest flipped bit */
         int l0 = s == 0 ? 1 : SLAB_LEVELS - (31 - clz(s & -s));
@@ -195,11 +201,9 @@ __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op
             real2 zn = slab_node_range(z, l, s >> (SLAB_LEVELS - l));
             prune_region g;
             if (!tile_box(view, tx, ty, TILE, zn.x, zn.y, blo, bhi, &g)) continue;
-            uint evals = 0;
             int first, count;
             __global tape_op *out = work + (l - 1) * block;
-            tape_prune(node[l - 1], np, qs, &g, -1, out, &first, &count, &evals);
-            atomic_add(&counters[2], evals);
+            tape_prune(node[l - 1], np, qs, &g, -1, out, &first, &count, &tally.evals);
             if (count == 1 && out[first].op == OP_CONST) continue;
             node[l] = out + first;
             rows[l] = count;
@@ -210,6 +214,9 @@ __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op
         prune_region g;
         if (!tile_box(view, tx, ty, TILE, zs.x, zs.y, blo, bhi, &g)) continue;
         slabs[tile * SLABS + s] = prune_slab(qs, node[SLAB_LEVELS - 1], np, &g, work + (SLAB_LEVELS - 1) * block,
-                                             arena, cap_arena, qlist, cap_qlist, counters);
+                                             arena, cap_arena, qlist, cap_qlist, counters, &tally);
     }
+    if (tally.evals) atomic_add(&counters[2], tally.evals);
+    if (tally.rows) atomic_add(&counters[3], tally.rows);
+    if (tally.nq_max) atomic_max(&counters[4], tally.nq_max);
 }
