@@ -18,12 +18,17 @@
  * down a binary tree from the tile's tape (in scratch blocks), and copied compactly to the slab
  * arena; its leaves are renumbered to the slab's own quadric list (leaf row a = index
  * into that list), so the ray kernel can keep one ray-quadric solve per listed quadric in
- * private memory.
+ * private memory.  Below a node whose tape is short (SLAB_DIRECT_ROWS) the slabs are pruned
+ * from its tape directly.
  *
  * Both follow the sampler's overflow protocol: rows reserved with an atomic add and written
  * only below the capacity; the host grows the buffers and re-runs.
  */
 #include "tiles.h"
+/* a node of the slab tree whose tape has at most this many rows skips the levels below it: its
+ * slabs are pruned from its tape directly (an intermediate prune of a tape this short costs
+ * more than the rows it would save the slabs' prunes) */
+#define SLAB_DIRECT_ROWS 8
 #ifndef SUPER_TILE
 #error "SUPER_TILE (tiles per super-tile side) is set by the driver, clcsg/rendering/raytracer.py"
 #endif
@@ -198,6 +203,11 @@ __kernel void prune_slabs(__global const quadric_rec *qs, __global const tape_op
             rows[l] = 0;
             int np = rows[l - 1];
             if (np == 0) continue;
+            if (np <= SLAB_DIRECT_ROWS) { /* its slabs are pruned from this tape directly */
+                node[l] = node[l - 1];
+                rows[l] = np;
+                continue;
+            }
             real2 zn = slab_node_range(z, l, s >> (SLAB_LEVELS - l));
             prune_region g;
             if (!tile_box(view, tx, ty, TILE, zn.x, zn.y, blo, bhi, &g)) continue;
