@@ -290,11 +290,12 @@ def _check(tape, mesh: SnappedMesh, before, fresh, near_ok, tol: float, stats: d
     triangles off their quadric)."""
     v, t, quad = mesh.vertices, mesh.triangles, mesh.quadric
     edges, tri_edge = refine.edges_of(t)
-    far_edge = _far_chords(tape, v, edges, edge_sides(edges, tri_edge, quad), tol)
+    side = edge_sides(edges, tri_edge, quad)
+    far_edge = _far_chords(tape, v, edges, side, tol)
     rows = np.flatnonzero(far_edge)
     if len(rows):  # far from the curve, but within the tolerance of the solid (a cone's rim): fine
         mid = 0.5 * (v[edges[rows, 0]] + v[edges[rows, 1]])
-        near = _foot_on_solid(tape, mid, edge_sides(edges, tri_edge, quad)[rows], tol)
+        near = _foot_on_solid(tape, mid, side[rows], tol)
         far_edge[rows[near]] = False
         rows, mid = rows[~near], mid[~near]
         far_edge[rows[straddles(mid, partial(contains_near, tape), tol, NEAR_DIRECTIONS)]] = False
