@@ -127,9 +127,9 @@ inline int slab_quadrics(__global tape_op *rows, int n, __global int *qlist)
     return nq;
 }
 
-/* A tile's statistics, added to the counters once per tile (atomics on one cache line from
- * every work-item cost more than the prunes of a short tape): prune evaluations, slab rows,
- * the longest slab quadric list. */
+/* A tile's statistics, added to the counters once per tile instead of by three atomics per
+ * prune on a cache line every work-item shares: prune evaluations, slab rows, the longest
+ * slab quadric list. */
 typedef struct {
     uint evals, rows, nq_max;
 } slab_tally;
