@@ -9,6 +9,9 @@ hidden temporary name just before the rename, a window of two system calls).  El
 on a file system without ``O_TMPFILE``, a hidden named temporary ``.NAME.XXXX.tmp`` is used
 and removed on every failure Python sees.
 
+:func:`stage` splits the two steps: the file is written and synced first, and
+:meth:`Staged.publish` renames it later, so a caller can record in between that it is coming.
+
 Any ``OSError`` (a full disk, a read-only folder, a quota) becomes a one-line
 :class:`~clcsg.errors.OutputError` (exit code 6) naming the file; the previous file under
 that name is left as it was.
@@ -83,46 +86,99 @@ def _publish(fd: int, tmp: str | None, path: str) -> None:
         raise
 
 
+class Staged:
+    """A file written and synced but not yet under its name (:func:`stage`); :meth:`publish`
+    renames it into place, :meth:`discard` drops it.  Between the two a caller can record
+    that the file is coming (a batch journals its row there, so a file under its final name
+    always has its row)."""
+
+    def __init__(self, path: str, what: str = "file"):
+        self.path = os.fspath(path)
+        self.what = what
+        self.folder = os.path.dirname(os.path.abspath(self.path))
+        self.tmp = None
+        try:
+            self.fd = _open_unnamed(self.folder)
+            if self.fd is None:
+                self.tmp = _tmp_name(os.path.abspath(self.path))
+                self.fd = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+                os.fchmod(self.fd, _MODE & ~_umask())
+        except OSError as e:
+            raise self.error(e) from None
+
+    def error(self, e: OSError) -> OutputError:
+        return OutputError(f"{self.path}: cannot write {self.what}: {e.strerror or e}")
+
+    def sync(self) -> None:
+        try:
+            os.fsync(self.fd)
+        except OSError as e:
+            raise self.error(e) from None
+
+    def publish(self) -> None:
+        """Rename the synced file over :attr:`path` and sync the folder."""
+        try:
+            _publish(self.fd, self.tmp, self.path)
+            self.tmp = None
+            _sync_folder(self.folder)
+        except OSError as e:
+            raise self.error(e) from None
+        finally:
+            self.discard()
+
+    def discard(self) -> None:
+        """Close the file; a named temporary is removed (an unnamed one vanishes)."""
+        if self.fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(self.fd)
+            self.fd = None
+        if self.tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.tmp)
+            self.tmp = None
+
+
+def stage(path, data: bytes, what: str = "file") -> Staged:
+    """``data`` written and synced into a :class:`Staged` file for ``path``."""
+    st = Staged(path, what)
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(st.fd, view):]
+        st.sync()
+    except OSError as e:
+        st.discard()
+        raise st.error(e) from None
+    except BaseException:
+        st.discard()
+        raise
+    return st
+
+
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "wb", what: str = "file", encoding: str | None = None):
     """A file object for writing ``path`` atomically (see the module docstring): on a normal
     exit of the ``with`` block the data is synced and renamed into place; on any exception
     nothing is left and an existing ``path`` is unchanged.  ``mode`` is ``"wb"`` or ``"w"``
     (text, ``encoding`` default UTF-8)."""
-    p = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(p))
-    tmp = None
+    st = Staged(path, what)
     try:
-        fd = _open_unnamed(folder)
-        if fd is None:
-            tmp = _tmp_name(os.path.abspath(p))
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-            os.fchmod(fd, _MODE & ~_umask())
+        f = os.fdopen(os.dup(st.fd), mode, encoding=encoding or ("utf-8" if "b" not in mode else None))
     except OSError as e:
-        raise OutputError(f"{p}: cannot write {what}: {e.strerror or e}") from None
-    f = None
+        st.discard()
+        raise st.error(e) from None
     try:
-        f = os.fdopen(fd, mode, encoding=encoding or ("utf-8" if "b" not in mode else None))
-        yield f
-        f.flush()
-        os.fsync(f.fileno())
-        _publish(f.fileno(), tmp, p)
-        tmp = None
-        f.close()
-        f = None
-        _sync_folder(folder)
+        with f:
+            yield f
+            f.flush()
+        st.sync()
+        st.publish()
     except OSError as e:
-        raise OutputError(f"{p}: cannot write {what}: {e.strerror or e}") from None
+        raise st.error(e) from None
     finally:
-        if f is not None:
-            with contextlib.suppress(OSError):
-                f.close()
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+        st.discard()
 
 
 def write_bytes(path, data: bytes, what: str = "file") -> None:
     """Write ``data`` to ``path`` atomically."""
-    with atomic_open(path, "wb", what) as f:
-        f.write(data)
+    stage(path, data, what).publish()

@@ -160,3 +160,43 @@ def test_content_hash_covers_scad_includes_and_the_version(tmp_path, monkeypatch
     h = opts.content_hash("digest")
     monkeypatch.setattr(clcsg, "__version__", "0.0.0-other")
     assert opts.content_hash("digest") != h
+
+
+class _Killed(BaseException):
+    """Stands for a SIGKILL at one step of the driver's store (nothing after it runs)."""
+
+
+def _kill_at(monkeypatch, target, name):
+    def die(*args, **kwargs):
+        raise _Killed(name)
+
+    monkeypatch.setattr(target, name, die)
+
+
+@pytest.mark.parametrize("step", ["journal", "publish"])
+def test_a_file_is_named_only_after_its_row_is_journaled(scenes, tmp_path, monkeypatch, step):
+    """A rerun with other options killed before the row is journaled leaves neither the old
+    nor the new file under the scene's name; killed after it, the journaled row's file is
+    missing, so the row is not complete and the next run computes the scene again."""
+    from clcsg.batching import api
+
+    out = tmp_path / "out"
+    one = str(scenes / "s00.csg")
+    first = clcsg.batch(one, "4%", out, progress=False).to_pylist()[0]
+    assert first["status"] == "ok" and (out / first["samples_file"]).is_file()
+    if step == "journal":
+        _kill_at(monkeypatch, Manifest, "add")
+    else:
+        _kill_at(monkeypatch, api, "publish_files")
+    with pytest.raises(_Killed):
+        clcsg.batch(one, "5%", out, progress=False)
+    monkeypatch.undo()
+    assert _written(out) == set(), "a file is named without its row in the journal"
+    assert not [p for p in (out / "samples").iterdir()], "a temporary was left behind"
+    rows = Manifest(str(out)).rows
+    if step == "journal":
+        assert rows["s00"]["hash"] == first["hash"]
+    else:
+        assert rows["s00"]["hash"] != first["hash"] and rows["s00"]["status"] == "ok"
+    again = clcsg.batch(one, "5%", out, progress=False).to_pylist()[0]
+    assert again["status"] == "ok" and not again["skipped"] and (out / again["samples_file"]).is_file()

@@ -19,7 +19,7 @@ from . import inputs as _inputs
 from .dask_engine import parse_local
 from .manifest import Manifest
 from .options import Options, Radius, file_digests, require
-from .outputs import queries_path, samples_path, view_path, write_files
+from .outputs import discard_files, publish_files, queries_path, remove_files, samples_path, stage_files, view_path
 
 
 class _Tally:
@@ -69,15 +69,37 @@ def _finish_row(row: dict, job, options: Options, attempts) -> dict:
     return row
 
 
-def _store(result, job, options: Options, outdir: str, attempts) -> dict:
-    """Write a result's files (atomically); its finished manifest row."""
-    row = dict(result.row)
-    if row.get("status") == "ok":
-        try:
-            write_files(outdir, result.files)
-        except OutputError as e:
-            row.update(status="error", error=str(e), error_code=e.exit_code)
-    return _finish_row(row, job, options, attempts)
+def _error(row: dict, e: OutputError) -> dict:
+    return {**row, "status": "error", "error": str(e), "error_code": e.exit_code,
+            "samples_file": None, "images": [], "queries_file": None}
+
+
+def _store(result, job, options: Options, outdir: str, attempts, manifest: Manifest) -> dict:
+    """Write a result's files and journal its finished manifest row, in the order that keeps
+    the journal ahead of the files: the files are written and synced without names, this
+    scene's earlier files are removed, the row is journaled, and only then are the files
+    named.  A driver killed at any point leaves no file whose row is not journaled, and no
+    journaled row that names an older run's file."""
+    row = _finish_row(dict(result.row), job, options, attempts)
+    if row.get("status") != "ok":
+        manifest.add(row, durable=True)
+        return row
+    try:
+        staged = stage_files(outdir, result.files)
+    except OutputError as e:
+        row = _error(row, e)
+        manifest.add(row, durable=True)
+        return row
+    try:
+        remove_files(outdir, result.files)
+        manifest.add(row, durable=True)
+        publish_files(staged)
+    except OutputError as e:
+        row = _error(row, e)
+        manifest.add(row, durable=True)
+    finally:
+        discard_files(staged)
+    return row
 
 
 def dask_address(scheduler, dask) -> str | None:
@@ -182,8 +204,7 @@ def batch(scenes, radius, outdir, *, fmt: str = "parquet", views: int = 0, size=
         try:
             if todo:
                 for job, result, attempts in _engine(todo, options, workers, address, retries):
-                    row = _store(result, job, options, outdir, attempts)
-                    manifest.add(row, durable=True)
+                    row = _store(result, job, options, outdir, attempts, manifest)
                     manifest.flush()
                     tally.count(row)
                     st.update(done=tally.done, note=tally.note(), ok=tally.ok, failed=tally.failed,

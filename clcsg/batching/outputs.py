@@ -24,13 +24,14 @@ The schema's metadata holds ``clcsg.scene`` (the name), ``clcsg.radius`` and ``c
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 
 import numpy as np
 
 from ..errors import OutputError
-from ..atomic import write_bytes
+from ..atomic import stage, write_bytes
 from ..writers import ply
 from .options import FORMATS, require
 
@@ -105,7 +106,42 @@ def write_atomic(path: str, data: bytes) -> None:
     write_bytes(path, data, "batch output")
 
 
-def write_files(outdir: str, files: dict) -> None:
-    """Write every (relative path -> bytes) of a scene's result under ``outdir``."""
-    for rel, data in files.items():
-        write_atomic(os.path.join(outdir, rel), data)
+def stage_files(outdir: str, files: dict) -> list:
+    """Every (relative path -> bytes) of a scene's result written and synced under ``outdir``
+    but not yet named (:class:`clcsg.atomic.Staged`): the caller journals the scene's row,
+    then publishes them, so a scene's file under its final name always has its row."""
+    staged = []
+    try:
+        for rel, data in files.items():
+            path = os.path.join(outdir, rel)
+            folder = os.path.dirname(path)
+            try:
+                os.makedirs(folder, exist_ok=True)
+            except OSError as e:
+                raise OutputError(f"{folder}: cannot create the folder: {e.strerror or e}") from None
+            staged.append(stage(path, data, "batch output"))
+    except BaseException:
+        discard_files(staged)
+        raise
+    return staged
+
+
+def remove_files(outdir: str, rels) -> None:
+    """Remove an earlier run's files of a scene (before its new row is journaled, so that a
+    new row never names an old file)."""
+    for rel in rels:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(os.path.join(outdir, rel))
+
+
+def publish_files(staged: list) -> None:
+    try:
+        for st in staged:
+            st.publish()
+    finally:
+        discard_files(staged)
+
+
+def discard_files(staged: list) -> None:
+    for st in staged:
+        st.discard()
