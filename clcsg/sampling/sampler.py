@@ -85,6 +85,7 @@ import numpy as np
 from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build, kernel as program_kernel, launch
+from ..cl.buffer_pool import pool_of
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
@@ -412,6 +413,8 @@ def sample(
     t2 = time.perf_counter()
     timings["subdivide_s"] = t2 - t_sub
     samples = finisher.samples(sub, tape, radius)
+    sub.release()
+    finisher.release()
     timings["finish_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     if len(samples) == 0:
@@ -597,9 +600,16 @@ class _Subdivision:
         written (nor read for anything but copying the row).  Elsewhere zeroing would only cost
         time (a large arena is written through once per allocation)."""
         if not self.zeroed:
-            return device_buffer(self.ctx, nbytes, what)
+            return pool_of(self.ctx).take(nbytes, what)
         check_allocation(self.ctx, nbytes, what)
         return upload(self.ctx, np.zeros(max(int(nbytes), 16), dtype=np.uint8), writable=True, what=what)
+
+    def _replace(self, old, nbytes, what):
+        """A new working buffer for ``old``, which goes back to the pool: the commands already
+        enqueued on it run first (one in-order queue), and only later ones see its reuse."""
+        if not self.zeroed:
+            pool_of(self.ctx).give(old)
+        return self._buffer(nbytes, what)
 
     def _grown_copy(self, old, used_bytes, new_bytes, what):
         """A larger buffer holding the first ``used_bytes`` of ``old``, made from host memory (a
@@ -618,11 +628,11 @@ class _Subdivision:
         the class docstring), where that is allowed."""
         if self.sized["cells"] and MAX_CHILDREN * n_in > self.cap_cells:
             self.cap_cells = max(MAX_CHILDREN * n_in, self.cap_cells + self.cap_cells // 2)
-            self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+            self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
         rows = self.scene.packed.tape.itemsize
         if self.sized["arena"] and self.cap_out < arena_bound <= self.arena_budget / rows:
             self.cap_out = int(min(max(arena_bound, self.cap_out + self.cap_out // 2), self.arena_budget // rows))
-            self.arena_out = self._buffer(self.cap_out * rows, "tape arena")
+            self.arena_out = self._replace(self.arena_out, self.cap_out * rows, "tape arena")
 
     def _level(self, kernel, cells_in, n_in, n_samples):
         """Run one level until it fits (the overflow protocol); returns its counters."""
@@ -648,7 +658,7 @@ class _Subdivision:
             ok = True
             if n_cells_out > self.cap_cells:
                 self.cap_cells = _grow(self.cap_cells, n_cells_out)
-                self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+                self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
                 self.grown["cells"] += 1
                 ok = False
             if n_samples_out > self.cap_samples:
@@ -660,7 +670,7 @@ class _Subdivision:
                 ok = False
             if arena_out > self.cap_out:
                 self.cap_out = _grow(self.cap_out, arena_out)
-                self.arena_out = self._buffer(self.cap_out * rows, "tape arena")
+                self.arena_out = self._replace(self.arena_out, self.cap_out * rows, "tape arena")
                 self.grown["arena"] += 1
                 ok = False
             if ok:
@@ -714,19 +724,25 @@ class _Subdivision:
             cells_in, self.cells_out = self.cells_out, cells_in
             # the old input buffer becomes the next output: make sure it is large enough
             if self.cap_cells * self.cdt.itemsize > self.cells_out.size:
-                self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
+                self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
             self.arena_in, self.arena_out = self.arena_out, self.arena_in
             self.cap_in, self.cap_out = self.cap_out, self.cap_in
             n_in = n_cells_out
             arena_bound = 2 * (2 * arena_rows + n_in)
             level += 1
         self.progress.done()
+        self.cells_in_last = cells_in
         self.n_samples = n_samples
         self.raw = np.zeros(n_samples, dtype=self.sdt)
         if n_samples:
             cl.enqueue_copy(self.ctx.queue, self.raw, self.samples)
         self.totals["buffer_growths"] = dict(self.grown)
         self.totals["arena_rows"] = self.arena_peak
+
+    def release(self) -> None:
+        """Hand the working buffers to the context's pool (all commands on them are done)."""
+        if not self.zeroed:
+            pool_of(self.ctx).give(self.cells_in_last, self.cells_out, self.arena_in, self.arena_out, self.samples)
 
 
 #: the share of the device's largest allocation (or global memory, if smaller) that a tape
@@ -761,7 +777,8 @@ class _Finisher:
         self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else 1 << 14
         self.row_bytes = packed.tape.itemsize
         self.budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem) / self.row_bytes
-        self.clip_buf = device_buffer(ctx, self.cap_clip * self.row_bytes, "clip")
+        self.pooled = "oclgrind" not in ctx.info.platform.lower()
+        self.clip_buf = self._buffer(self.cap_clip * self.row_bytes, "clip")
         self.counters = upload(ctx, np.zeros(2, dtype=np.uint32), writable=True)
         self.used = 0  # clip rows known to be used
         self.reserved = 0  # upper bound of the clip rows used after the passes enqueued
@@ -769,6 +786,15 @@ class _Finisher:
         self.out = {}
         self.done = 0
         self.grown = 0
+
+    def _buffer(self, nbytes, what):
+        """A working buffer: from the context's pool (on Oclgrind a fresh one, as before)."""
+        return pool_of(self.ctx).take(nbytes, what) if self.pooled else device_buffer(self.ctx, nbytes, what)
+
+    def release(self) -> None:
+        """Hand the clip and output buffers to the context's pool (all commands on them are done)."""
+        if self.pooled:
+            pool_of(self.ctx).give(self.clip_buf, *self.out.values())
 
     def _outputs(self, need, cap_samples):
         """Output buffers for at least ``need`` samples (grown to ``cap_samples``, keeping the
@@ -780,9 +806,11 @@ class _Finisher:
         new = {}
         for name, dtype, k in _FINISH_OUTPUTS:
             item = (self.real if dtype == "real" else np.dtype(dtype)).itemsize * k
-            new[name] = device_buffer(self.ctx, cap_samples * item, "sample output")
+            new[name] = self._buffer(cap_samples * item, "sample output")
             if self.done and name in self.out:
                 cl.enqueue_copy(self.ctx.queue, new[name], self.out[name], byte_count=self.done * item)
+        if self.pooled:
+            pool_of(self.ctx).give(*self.out.values())
         self.out, self.cap_out = new, cap_samples
 
     def _read_used(self, checked_pass=False):
@@ -804,9 +832,11 @@ class _Finisher:
         rows it wrote in the same pass, so a device copy is enough)."""
         import pyopencl as cl
 
-        buf = device_buffer(self.ctx, rows * self.row_bytes, "clip")
+        buf = self._buffer(rows * self.row_bytes, "clip")
         if self.used:
             cl.enqueue_copy(self.ctx.queue, buf, self.clip_buf, byte_count=self.used * self.row_bytes)
+        if self.pooled:
+            pool_of(self.ctx).give(self.clip_buf)
         self.clip_buf, self.cap_clip = buf, rows
         self.grown += 1
 
