@@ -113,4 +113,45 @@ inline int primitive_at(PRIMITIVE_TABLE, __global const quadric_rec *qs, int q, 
     return first >= 0 ? first : o.count ? owner_list[o.first] : -1;
 }
 
+/* primitive_at's answer at every point of the box [lo, hi] on quadric q (points on q), or
+ * PRIMITIVE_VARIES where it may differ between them.  Per owner of q, over the box: it never
+ * holds (the box misses its padded box, or one of its literals other than q fails everywhere,
+ * leaf_over_region), surely holds (the box is inside its padded box and every such literal
+ * holds everywhere), or either.  The answer is fixed if no owner can hold (the first owner), or
+ * exactly one can and it surely holds or is the first owner (held, it is the only one; not
+ * held, none is, and the first owner is the answer).  The tests are the tile pruning's, so the
+ * box's points get what primitive_at gives each of them. */
+#define PRIMITIVE_VARIES (-2)
+inline int primitive_over_box(PRIMITIVE_TABLE, __global const quadric_rec *qs, int q, real3 lo, real3 hi)
+{
+    owner_rec o = owners[q];
+    if (o.count <= 1) return o.count ? owner_list[o.first] : -1;
+    real3 h = (real)0.5 * (hi - lo);
+    prune_region g = {(real)0.5 * (lo + hi), (real3)(h.x, 0, 0), (real3)(0, h.y, 0), (real3)(0, 0, h.z), 0};
+    prune_consts k = prune_consts_of(&g);
+    int possible = -1, n_possible = 0;
+    bool sure = false, first = false;
+    for (int m = 0; m < o.count; ++m) {
+        int pi = owner_list[o.first + m];
+        real4 blo = prim_box[2 * pi], bhi = prim_box[2 * pi + 1];
+        if (any(hi < blo.xyz) || any(lo > bhi.xyz)) continue;
+        bool never = false, always = all(lo >= blo.xyz) && all(hi <= bhi.xyz);
+        prim_rec pr = prims[pi];
+        for (int l = 0; l < pr.lit_count && !never; ++l) {
+            int2 lit = prim_lits[pr.lit_first + l];
+            if (lit.x == q) continue;
+            int st = leaf_over_region(qs, lit.x, lit.y, &g, &k);
+            never = st == ST_F;
+            always &= st == ST_T;
+        }
+        if (never) continue;
+        if (++n_possible > 1) return PRIMITIVE_VARIES;
+        possible = pi;
+        sure = always;
+        first = m == 0;
+    }
+    if (n_possible == 0) return owner_list[o.first];
+    return sure || first ? possible : PRIMITIVE_VARIES;
+}
+
 #endif
