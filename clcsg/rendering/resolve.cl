@@ -90,6 +90,44 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
 /* One work-item per RESOLVE_LANES pixels of a row: RESOLVE_GATHER per pixel, then, as
  * float8 vectors over the pixels, the view rays, the shaded points e + depth v, the normals
  * (grad Q / |grad Q|, eq. 4), the lighting (shade_light8) and the encoding (shade_encode8). */
+/* The colours of the lanes in `hits` (the others keep the background): in float (shading needs
+ * no more), the view rays of the lanes (view_ray), the points e + z v or, in the lanes of
+ * `exact`, (PX, PY, PZ), the normals grad Q / |grad Q|, the lighting (shade_light8) and the
+ * encoding (shade_encode8).  Inlined twice: for eight hits on one quadric and primitive the
+ * coefficients and albedo are broadcast scalars, which leaves the vector registers to the
+ * per-pixel values. */
+__attribute__((always_inline)) inline void resolve_colours8(__global const view_rec *view, int i, int j0, real3 e,
+    float8 Z, float8 PX, float8 PY, float8 PZ, int exact, int hits, float8 XX, float8 XY, float8 XZ, float8 BX,
+    float8 YY, float8 YZ, float8 BY, float8 ZZ, float8 BZ, float8 AX, float8 AY, float8 AZ, float8 AW,
+    uchar8 *rx, uchar8 *ry, uchar8 *rz, uchar8 *ra)
+{
+    uchar4 bg = shade_background(view);
+    *rx = bg.x; *ry = bg.y; *rz = bg.z; *ra = bg.w;
+    if (!hits) return;
+    float8 jj = (float8)(j0) + (float8)(0, 1, 2, 3, 4, 5, 6, 7), ii = (float8)((float)i);
+    float8 dX = (float)view->d00[0] + jj * (float)view->dx[0] + ii * (float)view->dy[0];
+    float8 dY = (float)view->d00[1] + jj * (float)view->dx[1] + ii * (float)view->dy[1];
+    float8 dZ = (float)view->d00[2] + jj * (float)view->dx[2] + ii * (float)view->dy[2];
+    float8 il = 1.0f / sqrt(dX * dX + dY * dY + dZ * dZ);
+    float8 vX = dX * il, vY = dY * il, vZ = dZ * il;
+    int8 use = (((int8)(exact) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
+    float8 pX = select((float)e.x + Z * vX, PX, use);
+    float8 pY = select((float)e.y + Z * vY, PY, use);
+    float8 pZ = select((float)e.z + Z * vZ, PZ, use);
+    /* grad Q / 2 = A p - b (layout.h: the w column holds -b) */
+    float8 gX = XX * pX + XY * pY + XZ * pZ + BX;
+    float8 gY = XY * pX + YY * pY + YZ * pZ + BY;
+    float8 gZ = XZ * pX + YZ * pY + ZZ * pZ + BZ;
+    float8 gl = 1.0f / sqrt(gX * gX + gY * gY + gZ * gZ);
+    float8 cx, cy, cz;
+    shade_light8(view, AX, AY, AZ, gX * gl, gY * gl, gZ * gl, vX, vY, vZ, &cx, &cy, &cz);
+    char8 hit = (((char8)((char)hits) >> (char8)(0, 1, 2, 3, 4, 5, 6, 7)) & (char8)(1)) != (char8)(0);
+    *rx = select(*rx, shade_encode8(view, cx), hit);
+    *ry = select(*ry, shade_encode8(view, cy), hit);
+    *rz = select(*rz, shade_encode8(view, cz), hit);
+    *ra = select(*ra, convert_uchar8_sat(AW * 255.0f + 0.5f), hit);
+}
+
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
                       PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
                       __global const float4 *albedo, int n_prims,
@@ -132,50 +170,25 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
 #undef RESOLVE_SAME
         uniform &= p0 >= 0;
     }
-    if (uniform) {
+    uchar8 rx, ry, rz, ra;
+    if (uniform) { /* all eight lanes hit: stored at once */
         Z = convert_float8(as_float8(convert_uint8(K >> 32)));
-        DEPTH = Z;
-        QID = (int8)(q0);
-        PRIM = (int8)(p0);
         __global const real *q = quadrics[q0].coef;
-        XX = (float8)((float)q[0]); XY = (float8)((float)q[1]); XZ = (float8)((float)q[2]); BX = (float8)((float)q[3]);
-        YY = (float8)((float)q[4]); YZ = (float8)((float)q[5]); BY = (float8)((float)q[6]); ZZ = (float8)((float)q[7]);
-        BZ = (float8)((float)q[8]);
         float4 alb = albedo[p0];
-        AX = (float8)(alb.x); AY = (float8)(alb.y); AZ = (float8)(alb.z); AW = (float8)(alb.w);
-        hits = 0xff;
-    } else {
-        RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
-        RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
+        resolve_colours8(view, i, j0, e, Z, PX, PY, PZ, 0, 0xff, (float8)((float)q[0]), (float8)((float)q[1]),
+                         (float8)((float)q[2]), (float8)((float)q[3]), (float8)((float)q[4]), (float8)((float)q[5]),
+                         (float8)((float)q[6]), (float8)((float)q[7]), (float8)((float)q[8]), (float8)(alb.x),
+                         (float8)(alb.y), (float8)(alb.z), (float8)(alb.w), &rx, &ry, &rz, &ra);
+        vstore8(Z, 0, out.depth + pix);
+        vstore8((int8)(q0), 0, out.quadric + pix);
+        vstore8((int8)(p0), 0, out.primitive + pix);
+        shade_store_rgba8((__global uchar *)(out.rgba + pix), rx, ry, rz, ra);
+        return;
     }
-    uchar4 bg = shade_background(view);
-    uchar8 rx = bg.x, ry = bg.y, rz = bg.z, ra = bg.w;
-    if (hits) {
-        /* in float (shading needs no more): the view rays of the lanes (view_ray), the points
-         * e + z v or the exact ones, the normals grad Q / |grad Q| */
-        float8 jj = (float8)(j0) + (float8)(0, 1, 2, 3, 4, 5, 6, 7), ii = (float8)((float)i);
-        float8 dX = (float)view->d00[0] + jj * (float)view->dx[0] + ii * (float)view->dy[0];
-        float8 dY = (float)view->d00[1] + jj * (float)view->dx[1] + ii * (float)view->dy[1];
-        float8 dZ = (float)view->d00[2] + jj * (float)view->dx[2] + ii * (float)view->dy[2];
-        float8 il = 1.0f / sqrt(dX * dX + dY * dY + dZ * dZ);
-        float8 vX = dX * il, vY = dY * il, vZ = dZ * il;
-        int8 use = (((int8)(exact) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
-        float8 pX = select((float)e.x + Z * vX, PX, use);
-        float8 pY = select((float)e.y + Z * vY, PY, use);
-        float8 pZ = select((float)e.z + Z * vZ, PZ, use);
-        /* grad Q / 2 = A p - b (layout.h: the w column holds -b) */
-        float8 gX = XX * pX + XY * pY + XZ * pZ + BX;
-        float8 gY = XY * pX + YY * pY + YZ * pZ + BY;
-        float8 gZ = XZ * pX + YZ * pY + ZZ * pZ + BZ;
-        float8 gl = 1.0f / sqrt(gX * gX + gY * gY + gZ * gZ);
-        float8 cx, cy, cz;
-        shade_light8(view, AX, AY, AZ, gX * gl, gY * gl, gZ * gl, vX, vY, vZ, &cx, &cy, &cz);
-        char8 hit = (((char8)((char)hits) >> (char8)(0, 1, 2, 3, 4, 5, 6, 7)) & (char8)(1)) != (char8)(0);
-        rx = select(rx, shade_encode8(view, cx), hit);
-        ry = select(ry, shade_encode8(view, cy), hit);
-        rz = select(rz, shade_encode8(view, cz), hit);
-        ra = select(ra, convert_uchar8_sat(AW * 255.0f + 0.5f), hit);
-    }
+    RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
+    RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
+    resolve_colours8(view, i, j0, e, Z, PX, PY, PZ, exact, hits, XX, XY, XZ, BX, YY, YZ, BY, ZZ, BZ, AX, AY, AZ, AW,
+                     &rx, &ry, &rz, &ra);
     /* the row's eight pixels at once, or the lanes one by one at the row's end */
     if (lanes == RESOLVE_LANES) {
         vstore8(DEPTH, 0, out.depth + pix);
