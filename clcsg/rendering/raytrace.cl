@@ -522,22 +522,24 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
         if (qid[l] >= 0) depth[l] = ray_depth(qs, qid[l], e, (real3)(vx[l], vy[l], vz[l]), best[l]);
 }
 
-/* The primitive of lane l's hit (primitive_at), and of the later lanes that hit its quadric
- * where primitive_over_box gives one for the box of their hits (neighbouring pixels mostly
- * show one primitive): those get it in prim_of, the others PRIMITIVE_POINT, where the next
- * call takes primitive_at at once. */
+/* The primitive of lane l's hit p on a quadric with several owners (primitive_at), and of the
+ * later lanes that hit the same quadric where primitive_over_box gives one for the box of
+ * their hits (neighbouring pixels mostly show one primitive): those get it in prim_of, the
+ * others PRIMITIVE_POINT, where primitive_at is taken at once.  Not inlined: the kernel's
+ * common path (a quadric of one owner) stays as lean as without it. */
 #define PRIMITIVE_UNKNOWN (-3)
 #define PRIMITIVE_POINT (-4)
-inline int lanes_primitive(PRIMITIVE_TABLE, __global const quadric_rec *qs, const int *qid, const real3 *hit,
-                           int *prim_of, int l, int lanes)
+__attribute__((noinline)) int lanes_primitive(PRIMITIVE_TABLE, __global const quadric_rec *qs, const int *qid,
+                                              const real *depth, const real *vx, const real *vy, const real *vz,
+                                              real3 e, real3 p, int *prim_of, int l, int lanes)
 {
     int q = qid[l], same = 0;
-    if (owners[q].count <= 1) return primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, hit[l]); /* its only owner */
-    real3 lo = hit[l], hi = hit[l];
+    real3 lo = p, hi = p;
     for (int m = l + 1; m < lanes; ++m) {
         if (qid[m] != q) continue;
-        lo = fmin(lo, hit[m]);
-        hi = fmax(hi, hit[m]);
+        real3 pm = e + depth[m] * (real3)(vx[m], vy[m], vz[m]);
+        lo = fmin(lo, pm);
+        hi = fmax(hi, pm);
         same |= 1 << m;
     }
     if (same) {
@@ -546,7 +548,7 @@ inline int lanes_primitive(PRIMITIVE_TABLE, __global const quadric_rec *qs, cons
             if (same & (1 << m)) prim_of[m] = fixed == PRIMITIVE_VARIES ? PRIMITIVE_POINT : fixed;
         if (fixed != PRIMITIVE_VARIES) return fixed;
     }
-    return primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, hit[l]);
+    return primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
 }
 
 /* One work-item per RAY_LANES pixels of a row (all in one tile: TILE is a multiple of RAY_LANES):
@@ -591,22 +593,18 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     trace_lanes(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, forward, slack, lanes, dx, dy, dz, qid, depth);
     real vx[8], vy[8], vz[8];
     vstore8(dx, 0, vx); vstore8(dy, 0, vy); vstore8(dz, 0, vz);
-    real3 hit[8];
-    int prim_of[8];
-    for (int l = 0; l < lanes; ++l) {
-        prim_of[l] = PRIMITIVE_UNKNOWN;
-        if (qid[l] >= 0) hit[l] = e + depth[l] * (real3)(vx[l], vy[l], vz[l]);
-    }
+    int prim_of[8] = {PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN,
+                      PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN};
     for (int l = 0; l < lanes; ++l) {
         int q = qid[l];
         if (q < 0) continue;
         real3 v = (real3)(vx[l], vy[l], vz[l]);
         real t = depth[l];
-        real3 p = hit[l];
+        real3 p = e + t * v;
         int prim = prim_of[l];
-        if (prim == PRIMITIVE_UNKNOWN)
-            prim = lanes_primitive(PRIMITIVE_TABLE_ARGS, qs, qid, hit, prim_of, l, lanes);
-        else if (prim == PRIMITIVE_POINT)
+        if (prim == PRIMITIVE_UNKNOWN && owners[q].count > 1)
+            prim = lanes_primitive(PRIMITIVE_TABLE_ARGS, qs, qid, depth, vx, vy, vz, e, p, prim_of, l, lanes);
+        else if (prim < 0)
             prim = primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
         if (prim != last_prim) { /* neighbours mostly show one primitive */
             albedo = shade_albedo(view, pixel_color(prims, prim));
