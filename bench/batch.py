@@ -49,7 +49,7 @@ def single(source: str, radius: str, outdir: str, device=None) -> dict:
     """Run every scene of ``source`` in this process; totals as a dict."""
     from clcsg.batching import inputs
     from clcsg.batching.options import Options, Radius
-    from clcsg.batching.outputs import write_files
+    from clcsg.batching.outputs import publish_files, stage_files
     from clcsg.batching.task import init_worker, run_job
 
     warnings.simplefilter("ignore")
@@ -59,7 +59,7 @@ def single(source: str, radius: str, outdir: str, device=None) -> dict:
     samples = ok = 0
     for job in inputs.jobs(source):
         res = run_job(job, options)
-        write_files(outdir, res.files)
+        publish_files(stage_files(outdir, res.files))  # as the driver writes them
         ok += res.row["status"] == "ok"
         samples += int(res.row.get("samples") or 0)
     return {"seconds": time.perf_counter() - t0, "ok": ok, "samples": samples}

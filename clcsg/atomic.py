@@ -146,11 +146,10 @@ def stage(path, data: bytes, what: str = "file") -> Staged:
         while view:
             view = view[os.write(st.fd, view):]
         st.sync()
-    except OSError as e:
+    except BaseException as e:
         st.discard()
-        raise st.error(e) from None
-    except BaseException:
-        st.discard()
+        if isinstance(e, OSError):
+            raise st.error(e) from None
         raise
     return st
 

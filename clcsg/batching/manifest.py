@@ -1,18 +1,19 @@
 """``OUTDIR/manifest.parquet``: one row per scene, the record of a batch and its restart point.
 
-A row with status ``ok`` whose files exist and whose ``hash`` equals the content hash of the scene text and the
-options (:meth:`clcsg.batching.options.Options.content_hash`) is *complete*: a rerun reuses it
-(``skipped`` true) instead of computing it again.  So is an error row of the same hash whose
-error follows from the scene and the options alone (``error_code`` 3, bad input, or 5, a limit),
-unless ``redo_errors``.  Anything else (no row, another hash, a file missing, a device error,
-a worker that died, an internal error) is run again.
+A row with status ``ok`` whose files exist and whose ``hash`` equals the content hash of the
+scene text and the options (:meth:`clcsg.batching.options.Options.content_hash`) is
+*complete*: a rerun reuses it (``skipped`` true) instead of computing it again.  So is an
+error row of the same hash whose error follows from the scene and the options alone
+(``error_code`` 3, bad input, or 5, a limit), unless ``redo_errors``.  Anything else (no row,
+another hash, a file missing, a device error, a worker that died, an internal error) is run
+again.
 
 Durability: every row is appended to the *journal* ``OUTDIR/manifest.journal`` (one JSON
 object per line, flushed and ``fsync`` ed) once its scene's files are written and synced but
 before they get their final names (the store step of :mod:`clcsg.batching.api`), so a driver
 killed at any moment (SIGKILL, a power cut) loses no finished scene and leaves no named file
-without its row; a row whose files never got their names is not complete and is run again.  The Parquet file
-is rewritten atomically (temporary file, fsync, ``os.replace``) at most every
+without its row; a row whose files never got their names is not complete and is run again.
+The Parquet file is rewritten atomically (temporary file, fsync, ``os.replace``) at most every
 :data:`FLUSH_INTERVAL` seconds and at the end of the run, after which the journal is emptied;
 a new run folds the journal into the rows it reads (later lines win; a last line cut short
 by the kill is ignored).  Rows of scenes that are not in the current run are kept.
