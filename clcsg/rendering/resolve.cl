@@ -87,15 +87,12 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
         }                                                                                           \
     }
 
-/* One work-item per RESOLVE_LANES pixels of a row: RESOLVE_GATHER per pixel, then, as
- * float8 vectors over the pixels, the view rays, the shaded points e + depth v, the normals
- * (grad Q / |grad Q|, eq. 4), the lighting (shade_light8) and the encoding (shade_encode8). */
-/* The colours of the lanes in `hits` (the others keep the background): in float (shading needs
- * no more), the view rays of the lanes (view_ray), the points e + z v or, in the lanes of
- * `exact`, (PX, PY, PZ), the normals grad Q / |grad Q|, the lighting (shade_light8) and the
- * encoding (shade_encode8).  Inlined twice: for eight hits on one quadric and primitive the
- * coefficients and albedo are broadcast scalars, which leaves the vector registers to the
- * per-pixel values. */
+/* The colours of the lanes in `hits` (the others keep the background), in float (shading
+ * needs no more): the view rays of the lanes (view_ray), the points e + z v or, in the lanes
+ * of `exact`, (PX, PY, PZ), the normals grad Q / |grad Q| (eq. 4), the lighting (shade_light8)
+ * and the encoding (shade_encode8).  Inlined twice: for eight hits on one quadric and
+ * primitive the coefficients and albedo are broadcast scalars, which leaves the vector
+ * registers to the per-pixel values. */
 __attribute__((always_inline)) inline void resolve_colours8(__global const view_rec *view, int i, int j0, real3 e,
     float8 Z, float8 PX, float8 PY, float8 PZ, int exact, int hits, float8 XX, float8 XY, float8 XZ, float8 BX,
     float8 YY, float8 YZ, float8 BY, float8 ZZ, float8 BZ, float8 AX, float8 AY, float8 AZ, float8 AW,
@@ -128,6 +125,9 @@ __attribute__((always_inline)) inline void resolve_colours8(__global const view_
     *ra = select(*ra, convert_uchar8_sat(AW * 255.0f + 0.5f), hit);
 }
 
+/* One work-item per RESOLVE_LANES pixels of a row: RESOLVE_GATHER per pixel (or, for eight
+ * hits on one quadric and primitive, its coefficients and albedo read once), then
+ * resolve_colours8 on the lanes as float8 vectors. */
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
                       PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
                       __global const float4 *albedo, int n_prims,
