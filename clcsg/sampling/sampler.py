@@ -734,8 +734,8 @@ class _Subdivision:
         self.cells_in_last = cells_in
         self.n_samples = n_samples
         self.raw = np.zeros(n_samples, dtype=self.sdt)
-        if n_samples:
-            cl.enqueue_copy(self.ctx.queue, self.raw, self.samples)
+        if n_samples:  # not waited for: the finisher's reads wait for it (an in-order queue)
+            cl.enqueue_copy(self.ctx.queue, self.raw, self.samples, is_blocking=False)
         self.totals["buffer_growths"] = dict(self.grown)
         self.totals["arena_rows"] = self.arena_peak
 
@@ -883,14 +883,17 @@ class _Finisher:
         if not n:
             return Samples.empty(radius, tape, packed, {})
         c = self._read_used()
+        # the reads are waited for once (each blocking read is a round trip to the device's
+        # threads)
         cat = {}
         for name, dtype, k in _FINISH_OUTPUTS:
             a = np.zeros((n, k) if k > 1 else n, dtype=self.real if dtype == "real" else dtype)
-            cl.enqueue_copy(self.ctx.queue, a, self.out[name])
+            cl.enqueue_copy(self.ctx.queue, a, self.out[name], is_blocking=False)
             cat[name] = a
         clip = np.zeros(self.used, dtype=packed.tape.dtype)
         if self.used:
-            cl.enqueue_copy(self.ctx.queue, clip, self.clip_buf)
+            cl.enqueue_copy(self.ctx.queue, clip, self.clip_buf, is_blocking=False)
+        self.ctx.queue.finish()
         clip_ops = np.asarray(clip.view(np.int32).reshape(-1, 4))
         first, count, ops = dedupe_programs(clip_ops, cat["clip_first"], cat["clip_count"])
         raw = sub.raw
