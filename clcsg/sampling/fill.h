@@ -55,17 +55,22 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
     while (y < y1) {
         hy = fmin(y1 - y, 2 * hy);
         real3 m = rect_slopes(pf, x0, x1, y, y + hy);
-        /* best aspect for these slopes: a few angles suffice (the area is flat at its max) */
-        real best_b = 0, best_area = -1;
+        /* best aspect for these slopes: a few angles suffice (the area is flat at its max).
+         * The area rho^2 cs sn with rho = r / sqrt(1 + e^2) is compared as the fraction
+         * cs sn / (1 + e^2), crosswise: no square root or division per angle (they were
+         * most of this function's time on rows near trimming curves, which are many) */
+        real best_num = 0, best_den = 1, best_sn = 0;
         for (int k = 0; k < 15; ++k) {
             real cs = FILL_COS[k], sn = FILL_SIN[k];
             real e = m.x * cs + m.y * sn;
-            real rho = radius / sqrt(1 + e * e);
-            if (rho * rho * cs * sn > best_area) {
-                best_area = rho * rho * cs * sn;
-                best_b = rho * sn;
+            real num = cs * sn, den = 1 + e * e;
+            if (num * best_den > best_num * den) {
+                best_num = num;
+                best_den = den;
+                best_sn = sn;
             }
         }
+        real best_b = radius / sqrt(best_den) * best_sn;
         if (hy > 2 * best_b) {
             hy = 2 * best_b;
             m = rect_slopes(pf, x0, x1, y, y + hy);
