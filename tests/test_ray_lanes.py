@@ -63,6 +63,51 @@ __kernel void classify_both(__global const quadric_rec *qs, __global const real 
         lanes[4 * n * get_global_size(1) + k * n + 8 * g + l] = f[l];
     }
 }
+
+/* work-item g: a slab of NQ listed quadrics classified on eight lanes (r1, r2, kind per quadric
+ * and lane), its tape (rows of tape g), the lanes' stretches [ta, tb]; per lane the hit and
+ * depth that slab_hit finds, and those of first_root_hits8 with its decided bit (hit -2 where
+ * it leaves the lane to slab_hit) */
+#define NQ 6
+__kernel void first_roots_both(__global const real *r1, __global const real *r2, __global const uchar *kind,
+                               __global const tape_op *tapes, __global const int *rows, __global const real *stretch,
+                               __global int *one_hit, __global real *one_depth, __global int *lanes_hit,
+                               __global real *lanes_depth)
+{
+    int g = get_global_id(0);
+    lane_roots lr;
+    for (int m = 0; m < NQ; ++m)
+        for (int l = 0; l < 8; ++l) {
+            lr.r1[m][l] = r1[(g * NQ + m) * 8 + l];
+            lr.r2[m][l] = r2[(g * NQ + m) * 8 + l];
+            lr.kind[m][l] = kind[(g * NQ + m) * 8 + l];
+        }
+    __global const tape_op *t = tapes + rows[2 * g];
+    int n = rows[2 * g + 1];
+    real ta[8], tb[8];
+    for (int l = 0; l < 8; ++l) {
+        ta[l] = stretch[(2 * g) * 8 + l];
+        tb[l] = stretch[(2 * g + 1) * 8 + l];
+    }
+    ray_roots rr;
+    for (int l = 0; l < 8; ++l) {
+        real d = NAN;
+        one_hit[8 * g + l] = slab_hit(0, t, n, 0, NQ, 0, (real3)(0), (real3)(0, 0, 1), (real3)(INFINITY, INFINITY, 1), 0,
+                                      ta[l], tb[l], &lr, l, &rr, &d);
+        one_depth[8 * g + l] = d;
+    }
+    int hit[8];
+    real depth[8];
+    for (int l = 0; l < 8; ++l) {
+        hit[l] = -1;
+        depth[l] = NAN;
+    }
+    int decided = first_root_hits8(t, n, NQ, &lr, vload8(0, ta), vload8(0, tb), 0xff, hit, depth);
+    for (int l = 0; l < 8; ++l) {
+        lanes_hit[8 * g + l] = (decided >> l & 1) ? hit[l] : -2;
+        lanes_depth[8 * g + l] = depth[l];
+    }
+}
 """
 
 
@@ -166,3 +211,62 @@ def test_ray_classify8_and_ray_box8_are_the_per_ray_functions_bit_for_bit(cl_con
     assert np.array_equal(_bits(one), _bits(lanes))
     seen = set(one[: 4 * n * nq].reshape(-1, 4)[:, 2].astype(int) % 4)
     assert kinds <= seen
+
+
+def _random_slab_tape(rng, nq):
+    """A random boolean tape over listed quadrics 0..nq-1 (tape_op rows: op, out, a, b), in SSA
+    form with one register per row (at most 8 rows, the program's TAPE_REGS)."""
+    from clcsg.cl.constants import OP_AND, OP_CONST, OP_LEAF, OP_OR
+
+    rows = []
+    for k in range(int(rng.integers(1, 9))):
+        if k < 2 or rng.random() < 0.4:
+            if rng.random() < 0.05:
+                rows.append((OP_CONST, k, int(rng.integers(0, 2)), 0))
+            else:
+                rows.append((OP_LEAF, k, int(rng.integers(0, nq)), int(rng.choice([-1, 1]))))
+        else:
+            a, b = rng.choice(k, size=2)
+            rows.append((int(rng.choice([OP_AND, OP_OR])), k, int(a), int(b)))
+    return rows
+
+
+def test_first_root_hits8_decides_lanes_as_slab_hit_does(cl_context):
+    """The eight-lane first visits (first_root_hits8) against slab_hit lane by lane on random
+    slabs: roots and stretch ends drawn from a few values, so roots tie with each other and
+    with the stretch's ends (a root at ta, ta = 0), culled quadrics, every kind of sign pattern.
+    A lane it decides gets slab_hit's hit and depth, or no hit where slab_hit finds none; on
+    these random slabs (random tapes, many roots per stretch) two thirds of the lanes are decided."""
+    real = _real(cl_context)
+    rng = np.random.default_rng(11)
+    groups, nq = 4000, 6
+    values = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, np.inf])
+    r = np.sort(rng.choice(values, size=(groups, nq, 8, 2)), axis=-1)
+    kind = rng.integers(0, 4, size=(groups, nq, 8)) | (rng.random((groups, nq, 8)) < 0.5) * 4
+    none = r[..., 0] == np.inf
+    kind = np.where(none, kind & 4, kind)  # no root: a constant sign (or zero along the ray)
+    one = (kind & 3) == 1
+    r[..., 1] = np.where(one, r[..., 0], r[..., 1])  # a line has one root
+    culled = rng.random((groups, nq, 8)) < 0.15
+    r = np.where(culled[..., None], np.inf, r)
+    kind = np.where(culled, (kind & 4) | 8, kind)
+    ends = np.sort(rng.choice(values[:-1], size=(groups, 8, 2)), axis=-1)
+    tapes, rows = [], []
+    for _ in range(groups):
+        t = _random_slab_tape(rng, nq)
+        rows.append((sum(len(x) for x in tapes), len(t)))
+        tapes.append(t)
+    tape = np.array([row for t in tapes for row in t], dtype=np.int32)
+    out = [np.empty(8 * groups, np.int32), np.empty(8 * groups, real), np.empty(8 * groups, np.int32),
+           np.empty(8 * groups, real)]
+    _run(cl_context, "first_roots_both", (groups,),
+         [np.ascontiguousarray(r[..., 0], dtype=real), np.ascontiguousarray(r[..., 1], dtype=real),
+          kind.astype(np.uint8), tape, np.array(rows, np.int32), np.ascontiguousarray(ends.transpose(0, 2, 1), dtype=real)],
+         out)
+    one_hit, one_depth, lanes_hit, lanes_depth = out
+    decided = lanes_hit != -2
+    assert decided.mean() > 0.5
+    assert np.array_equal(lanes_hit[decided], one_hit[decided])
+    hits = decided & (one_hit >= 0)
+    assert hits.sum() > 1000 and (decided & (one_hit < 0)).sum() > 1000
+    assert np.array_equal(_bits(lanes_depth[hits]), _bits(one_depth[hits]))

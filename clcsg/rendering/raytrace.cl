@@ -178,7 +178,34 @@ inline int ray_sign(const ray_roots *rr, int m, real t)
 
 /* Membership bits of a slab tape (leaves renumbered: a = listed quadric) at ray depth t with
  * listed quadric self substituted (tape_member's convention); for a tape in global memory
- * (slab_member) or in the ray's own rows (ray_member). */
+ * (slab_member) or in the ray's own rows (ray_member).  The registers' two bits each are kept
+ * packed in one 64-bit integer where they fit (TAPE_REGS <= 32): the interpreter then reads and
+ * writes a machine register, not a private array, whose byte stores and reloads were most of
+ * its time. */
+#if TAPE_REGS <= 32
+#define SLAB_MEMBER_BODY                                                              \
+    ulong r = 0;                                                                     \
+    for (int k = 0; k < n; ++k) {                                                    \
+        tape_op o = t[k];                                                            \
+        ulong v;                                                                     \
+        if (o.op == OP_LEAF) {                                                       \
+            if (o.a == self)                                                         \
+                v = o.b > 0 ? 1 : 2;                                                 \
+            else                                                                     \
+                v = o.b * ray_sign(rr, o.a, tt) <= 0 ? 3 : 0;                        \
+        } else if (o.op == OP_AND) {                                                 \
+            v = (r >> (2 * o.a)) & (r >> (2 * o.b)) & 3;                             \
+        } else if (o.op == OP_OR) {                                                  \
+            v = ((r >> (2 * o.a)) | (r >> (2 * o.b))) & 3;                           \
+        } else if (o.op == OP_COPY) {                                                \
+            v = (r >> (2 * o.a)) & 3;                                                \
+        } else {                                                                     \
+            v = o.a ? 3 : 0;                                                         \
+        }                                                                            \
+        r = (r & ~((ulong)3 << (2 * o.out))) | (v << (2 * o.out));                   \
+    }                                                                                \
+    return (uint)(r >> (2 * t[n - 1].out)) & 3;
+#else
 #define SLAB_MEMBER_BODY                                                     \
     uchar r[TAPE_REGS];                                                     \
     for (int k = 0; k < n; ++k) {                                           \
@@ -192,6 +219,7 @@ inline int ray_sign(const ray_roots *rr, int m, real t)
             TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, 3, 0);                \
     }                                                                       \
     return r[t[n - 1].out];
+#endif
 
 inline uint slab_member(__global const tape_op *t, int n, const ray_roots *rr, real tt, int self)
 {
@@ -412,6 +440,88 @@ __attribute__((always_inline)) inline int slab_hit(__global const quadric_rec *q
     return window_hit(rr, ns, t, n, t_cur, tb, depth);
 }
 
+/* ray_sign on the eight lanes of a shared slab's classification (lane_roots) at depths tt:
+ * per lane ray_sign's cases, expression for expression, as selects. */
+inline int8 ray_sign8(const lane_roots *lr, int m, real8 tt)
+{
+    int8 k = convert_int8(vload8(0, lr->kind[m])) & 7;
+    real8 r1 = vload8(0, lr->r1[m]), r2 = vload8(0, lr->r2[m]);
+    int8 s = select((int8)1, (int8)-1, (k & 4) != 0);
+    int8 kind = k & 3;
+    int8 at1 = convert_int8(tt == r1), past1 = convert_int8(tt > r1), past2 = convert_int8(tt > r2);
+    int8 line = select(select(-s, s, past1), (int8)0, at1);
+    int8 parabola = select(select(-s, s, past1 == past2), (int8)0, at1 | convert_int8(tt == r2));
+    return select(select(select(parabola, line, kind == 1), (int8)0, kind == 3), s, kind == 0);
+}
+
+/* slab_member on the eight lanes (listed quadric self substituted): the membership bits per
+ * lane at its depth tt. */
+inline int8 slab_member8(__global const tape_op *t, int n, const lane_roots *lr, real8 tt, int self)
+{
+    int8 r[TAPE_REGS];
+    for (int k = 0; k < n; ++k) {
+        tape_op o = t[k];
+        if (o.op == OP_LEAF) {
+            if (o.a == self)
+                r[o.out] = (int8)(o.b > 0 ? 1 : 2);
+            else
+                r[o.out] = select((int8)0, (int8)3, o.b * ray_sign8(lr, o.a, tt) <= 0);
+        } else
+            TAPE_BOOLEAN_ROW(r, o, BITS_AND, BITS_OR, (int8)3, (int8)0);
+    }
+    return r[t[n - 1].out];
+}
+
+/* What slab_hit's first RAY_PRUNE_AFTER visits find, on all lanes of a shared slab at once:
+ * each lane's roots in its stretch [ta, tb] in depth order (next_root, a root at ta counted
+ * where ta > 0), and the listed quadric, in list order, on whose CSG surface one lies
+ * (root_hit).  Returns the lanes of `in` decided here: those whose stretch runs out of roots
+ * (no hit in the slab) and those with a hit among the visited roots (hit[l], depth[l]); the
+ * others are left to slab_hit, which walks the rest.  Most rays hit at their first or second
+ * root (the second where the solid is an intersection), so most lanes skip slab_hit's per-lane
+ * walk. */
+inline int first_root_hits8(__global const tape_op *t, int n, int nq, const lane_roots *lr, real8 ta, real8 tb,
+                            int in, int *hit, real *depth)
+{
+    realmask8 first = ta > 0;
+    real8 t_cur = ta;
+    int open = in, decided = 0;
+    for (int visited = 0; visited < RAY_PRUNE_AFTER && open; ++visited) {
+        real8 tn = INFINITY;
+        for (int m = 0; m < nq; ++m) {
+            real8 r1 = vload8(0, lr->r1[m]), r2 = vload8(0, lr->r2[m]);
+            realmask8 solved = convert_realmask8((convert_int8(vload8(0, lr->kind[m])) & 8) == 0) & (r1 <= tb);
+            realmask8 c1 = solved & ((r1 > t_cur) | (first & (r1 == t_cur))) & (r1 < tn);
+            tn = select(tn, r1, c1);
+            realmask8 c2 = solved & ((r2 > t_cur) | (first & (r2 == t_cur))) & (r2 < tn);
+            tn = select(tn, r2, c2);
+        }
+        int out = open & ~lane_bits(tn <= tb); /* no root left: no hit in the slab */
+        decided |= out;
+        open &= ~out;
+        for (int m = 0; m < nq && open; ++m) {
+            real8 r1 = vload8(0, lr->r1[m]), r2 = vload8(0, lr->r2[m]);
+            realmask8 solved = convert_realmask8((convert_int8(vload8(0, lr->kind[m])) & 8) == 0) & (r1 <= tb);
+            int at = open & lane_bits(solved & ((r1 == tn) | (r2 == tn)));
+            if (!at) continue;
+            int8 bits = slab_member8(t, n, lr, tn, m);
+            int won = at & lane_bits(convert_realmask8((bits == 1) | (bits == 2)));
+            real tns[8];
+            vstore8(tn, 0, tns);
+            for (int l = 0; l < 8; ++l)
+                if (won >> l & 1) {
+                    hit[l] = m;
+                    depth[l] = tns[l];
+                }
+            open &= ~won;
+            decided |= won;
+        }
+        t_cur = tn;
+        first = 0;
+    }
+    return decided;
+}
+
 /* The refined depth: solve again from the hit, Q(p0 + tau v) = 0 with p0 = e + t v, and take
  * the root nearest 0 (Q(p0) is tiny there: as accurate as the splats' near-sample solve). */
 inline real refine_depth(quadric q, real3 e, real3 v, real t)
@@ -503,6 +613,18 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
                 has |= (r1 >= ta8 & r1 <= tb8) | (r2 >= ta8 & r2 <= tb8);
             }
             in &= lane_bits(has);
+            if (!in) continue;
+            int hit[8];
+            real t_hit[8];
+            for (int l = 0; l < 8; ++l) hit[l] = -1;
+            int decided = first_root_hits8(arena + sl.x, sl.y, sl.w, &lr, ta8, tb8, in, hit, t_hit);
+            for (int l = 0; l < n; ++l)
+                if ((decided >> l & 1) && hit[l] >= 0) {
+                    qid[l] = qlist[sl.z + hit[l]];
+                    best[l] = t_hit[l];
+                    walking &= ~(1 << l);
+                }
+            in &= ~decided;
             if (!in) continue;
         }
         real ta[8], tb[8];
