@@ -717,6 +717,8 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     vstore8(dx, 0, vx); vstore8(dy, 0, vy); vstore8(dz, 0, vz);
     int prim_of[8] = {PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN,
                       PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN};
+    int last_q = -1;
+    quadric Q;
     for (int l = 0; l < lanes; ++l) {
         int q = qid[l];
         if (q < 0) continue;
@@ -724,16 +726,20 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         real t = depth[l];
         real3 p = e + t * v;
         int prim = prim_of[l];
-        if (prim == PRIMITIVE_UNKNOWN && owners[q].count > 1)
+        owner_rec o = owners[q];
+        if (prim == PRIMITIVE_UNKNOWN && o.count > 1)
             prim = lanes_primitive(PRIMITIVE_TABLE_ARGS, qs, qid, depth, vx, vy, vz, e, p, prim_of, l, lanes);
-        else if (prim < 0)
-            prim = primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
+        else if (prim < 0) /* one owner: primitive_at's answer without the call */
+            prim = o.count == 1 ? owner_list[o.first] : primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
         if (prim != last_prim) { /* neighbours mostly show one primitive */
             albedo = shade_albedo(view, pixel_color(prims, prim));
             last_prim = prim;
         }
-        pixel_lanes_set(&px, l, (float)t, q, prim, albedo, quadric_gradient(quadric_load(qs, q), p),
-                        convert_float3(v));
+        if (q != last_q) { /* and mostly one quadric */
+            Q = quadric_load(qs, q);
+            last_q = q;
+        }
+        pixel_lanes_set(&px, l, (float)t, q, prim, albedo, quadric_gradient(Q, p), convert_float3(v));
     }
     pixel_lanes_store(PIXEL_OUT, view, i * W + j0, lanes, &px);
 }
