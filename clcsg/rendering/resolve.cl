@@ -66,8 +66,8 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
     if ((l) < lanes) {                                                                              \
         ulong key = K.c;                                                                            \
         if (key != EMPTY_KEY) {                                                                     \
-            __global const sample_rec *sp = &samples[(uint)(key & 0xffffffffUL)];                  \
-            int qid = sp->quadric, prim = sp->splat_primitive;                                      \
+            int2 sid = sample_ids[(uint)(key & 0xffffffffUL)];                                     \
+            int qid = sid.x, prim = sid.y;                                                          \
             real depth = (real)as_float((uint)(key >> 32));                                         \
             if (prim < 0) {                                                                         \
                 real3 p;                                                                            \
@@ -129,7 +129,7 @@ __attribute__((always_inline)) inline void resolve_colours8(__global const view_
  * hits on one quadric and primitive, its coefficients and albedo read once), then
  * resolve_colours8 on the lanes as float8 vectors. */
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
-                      PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
+                      __global const int2 *sample_ids, PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
                       __global const float4 *albedo, int n_prims,
                       PIXEL_OUTPUTS)
 {
@@ -162,9 +162,10 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     int q0 = -1, p0 = -1;
     if (uniform) {
         uint8 sidx = convert_uint8(K & (ulong8)(0xffffffffUL));
-        q0 = samples[sidx.s0].quadric;
-        p0 = samples[sidx.s0].splat_primitive;
-#define RESOLVE_SAME(c) uniform &= samples[sidx.c].quadric == q0 && samples[sidx.c].splat_primitive == p0;
+        int2 s0 = sample_ids[sidx.s0];
+        q0 = s0.x;
+        p0 = s0.y;
+#define RESOLVE_SAME(c) uniform &= all(sample_ids[sidx.c] == s0);
         RESOLVE_SAME(s1) RESOLVE_SAME(s2) RESOLVE_SAME(s3) RESOLVE_SAME(s4) RESOLVE_SAME(s5) RESOLVE_SAME(s6)
         RESOLVE_SAME(s7)
 #undef RESOLVE_SAME

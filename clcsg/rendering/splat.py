@@ -118,7 +118,7 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     culling_note = None
     if culling and eye_inside(samples.tape, camera.eye):
         culling, culling_note = False, "off: the eye is inside the solid"
-    scene, sample_buf, clip_buf = samples.device_buffers(context, real)
+    scene, sample_buf, clip_buf, ids_buf = samples.device_buffers(context, real)
     W, H = camera.width, camera.height
     q = context.queue
     view_buf = upload(context, pack_view(camera, scene.packed.origin, real, shading))
@@ -154,7 +154,8 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
     n_prims = len(scene.packed.prims)
     albedo, table_events = _albedo_table(context, resolve_prg, scene, view_buf)
     ev_resolve = kernel(resolve_prg, "resolve")(
-        q, *pixel_range(-(-W // RESOLVE_LANES), H), scene.quadrics, sample_buf, *scene.colour_args(), view_buf, fb, albedo,
+        q, *pixel_range(-(-W // RESOLVE_LANES), H), scene.quadrics, sample_buf, ids_buf, *scene.colour_args(), view_buf,
+        fb, albedo,
         np.int32(n_prims), *outs, wait_for=events[-1:] + table_events)
     wanted = set(read) | {"ids", "rgba"}
     for name, a, b in zip(OUTPUTS, (depth, ids, prims, rgba), outs):

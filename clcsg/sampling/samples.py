@@ -89,14 +89,18 @@ class Samples:
         return rec
 
     def device_buffers(self, context, real=None):
-        """(SceneBuffers, sample buffer, clip buffer) on ``context`` in precision ``real``,
-        uploaded once."""
+        """(SceneBuffers, sample buffer, clip buffer, id buffer) on ``context`` in precision
+        ``real``, uploaded once.  The id buffer holds each sample's (quadric, splat_primitive)
+        as an int2: the resolve pass looks them up per pixel, and the whole records (80 bytes
+        each in double) would take a cache line or two per lookup."""
         real = np.dtype(self.packed.real if real is None else real)
         key = (id(context.ctx), real.str)
         if key not in self._device:
             packed = self.packed if real == np.dtype(self.packed.real) else pack(self.tape, real, self.packed.origin)
-            self._device[key] = (SceneBuffers(context, packed), upload(context, self.records(real)),
-                                 upload(context, tape_rows(self.clip_ops)))
+            rec = self.records(real)
+            ids = np.stack([rec["quadric"], rec["splat_primitive"]], axis=1).astype(np.int32)
+            self._device[key] = (SceneBuffers(context, packed), upload(context, rec),
+                                 upload(context, tape_rows(self.clip_ops)), upload(context, ids))
         return self._device[key]
 
     def with_default_color(self, color) -> int:
