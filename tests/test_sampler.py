@@ -393,8 +393,10 @@ def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed, collide,
     from clcsg.sampling import sampler
     from clcsg.sampling.sampler import dedupe_programs
 
-    if collide:  # every program one key: the byte check must catch it and group by bytes
+    if collide:  # every program one key: the row checks must catch it and group by bytes
         monkeypatch.setattr(sampler, "program_keys", lambda words: np.zeros(len(words), dtype=np.uint64))
+        monkeypatch.setattr(sampler, "program_keys_flat",
+                            lambda words, pos, starts: np.zeros(len(starts), dtype=np.uint64))
     rng = np.random.default_rng(seed)
     n = 300
     count = rng.integers(0, 6, n).astype(np.int32)
