@@ -15,7 +15,8 @@
  * recomputed from the winning sample's quadric, solved near the sample as in splat.cl
  * (o = e + ((s - e).v) v, Q(o + tau v) = 0, eqs. 5, 6) in `real` precision, taking the root
  * whose depth (s - e).v + tau is nearest the stored depth, for the colour rule at the exact
- * point.  EMPTY_KEY comes from clcsg/cl/constants.py. */
+ * point.  The winning sample's quadric and splat_primitive are read from sample_ids, an int2 per
+ * sample, not from its whole record.  EMPTY_KEY comes from clcsg/cl/constants.py. */
 #include "pixel.h"
 #if RESOLVE_LANES != 8
 #error "the resolve pass shades RESOLVE_LANES pixels as one float8"
@@ -129,8 +130,8 @@ __attribute__((always_inline)) inline void resolve_colours8(__global const view_
  * hits on one quadric and primitive, its coefficients and albedo read once), then
  * resolve_colours8 on the lanes as float8 vectors. */
 __kernel void resolve(__global const quadric_rec *quadrics, __global const sample_rec *samples,
-                      __global const int2 *sample_ids, PRIMITIVE_TABLE, __global const view_rec *view, __global const ulong *framebuffer,
-                      __global const float4 *albedo, int n_prims,
+                      __global const int2 *sample_ids, PRIMITIVE_TABLE, __global const view_rec *view,
+                      __global const ulong *framebuffer, __global const float4 *albedo, int n_prims,
                       PIXEL_OUTPUTS)
 {
     int i = get_global_id(1), j0 = get_global_id(0) * RESOLVE_LANES;
