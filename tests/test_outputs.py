@@ -175,6 +175,25 @@ def test_saved_samples_round_trip_and_render_the_same_image(part_samples, tmp_pa
     assert np.array_equal(np.asarray(PILImage.open(png)), view.rgba)
 
 
+def test_saved_samples_of_unbounded_primitives_load(cl_context, tmp_path):
+    """Half-spaces and infinite cylinders have instance boxes with infinite sides: the file
+    keeps them and loads (it was refused as a bad box), and renders the same image."""
+    gear = os.path.join(ROOT, "examples", "zoo", "gear.json")
+    s = clcsg.sample(gear, 0.05, device=cl_context, progress=False)
+    boxes = [i.box for i in s.tape.instances if i.box is not None]
+    assert any(not np.isfinite(np.asarray(b)).all() for b in boxes)
+    path = tmp_path / "gear.npz"
+    clcsg.write_samples(s, path)
+    t = load_samples(path)
+    for x, y in zip(s.tape.instances, t.tape.instances, strict=True):
+        assert (x.box is None) == (y.box is None)
+        if x.box is not None:
+            assert np.array_equal(x.box[0], y.box[0]) and np.array_equal(x.box[1], y.box[1])
+    cam = clcsg.Camera.fit(s, 64, 48)
+    one, two = clcsg.render(s, cam, device=cl_context), clcsg.render(t, cam, device=cl_context)
+    assert one.mask.sum() > 500 and np.array_equal(one.rgba, two.rgba) and np.array_equal(one.depth, two.depth)
+
+
 def test_saved_samples_keep_the_colour_rule(cl_context, tmp_path):
     """The instance program is saved with the samples: a flush inlay loaded from ``.npz``
     still shows its own colour (the first boundary that holds a point would show the plate's),

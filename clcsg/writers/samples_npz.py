@@ -186,8 +186,11 @@ def _check_instances(chk, n_quadrics: int) -> list:
     mats = chk.finite("instance_matrices", chk.get("instance_matrices", "float", (n, 4, 4)))
     boxes = chk.get("instance_boxes", "float", (n, 2, 3))
     nan = np.isnan(boxes).reshape(n, -1)
-    if not (nan.all(axis=1) | np.isfinite(boxes).reshape(n, -1).all(axis=1)).all():
-        chk.fail("instance_boxes", "each box is all NaN (none) or finite")
+    # an unbounded primitive (a half-space, an infinite cylinder) has infinite sides
+    ordered = (boxes[:, 0] <= boxes[:, 1]).all(axis=1) & (boxes[:, 0] < np.inf).all(axis=1) \
+        & (boxes[:, 1] > -np.inf).all(axis=1)
+    if not (nan.all(axis=1) | (~nan.any(axis=1) & ordered)).all():
+        chk.fail("instance_boxes", "each box is all NaN (none), or lo <= hi without NaN (infinite sides allowed)")
     starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     return [(mats[k].astype(np.float64), [(int(q), int(s)) for q, s in lits[starts[k]:starts[k + 1]]],
              tuple(float(c) for c in colors[k]), None if nan[k].all() else (boxes[k, 0].astype(np.float64),
