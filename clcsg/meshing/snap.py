@@ -178,7 +178,7 @@ def _neighbour_candidates(x, kept, triangles, matrices, tol):
     within ``tol`` of it (first order), nearest first."""
     e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     e = np.concatenate([e, e[:, ::-1]])
-    v = np.repeat(e[:, 0], 3)
+    v = np.repeat(e[:, 0], kept.shape[1])  # a vertex's set has kept.shape[1] slots (-1 padded)
     q = kept[e[:, 1]].reshape(-1)
     keep = (q >= 0) & ~(kept[v] == q[:, None]).any(axis=1)
     pairs = _unique_pairs(v[keep], q[keep])
@@ -195,9 +195,12 @@ def repair_off_surface(x, kept, triangles, matrices, tol, contains):
     """Vertices solved onto a curve beyond the corner where a third quadric cuts it off (the
     faceted cutter is inscribed, so its facets meet the curve short of the exact corner): such
     a vertex, off the solid's surface by the straddle test, is solved again with a neighbour's
-    quadric added (the corner; of a vertex on three, with each pair of them) or in place of one
-    of its own (a point of a curve that is not on the surface at all), the nearest candidate
-    first, and takes the first solution within :data:`MAX_MOVE` tolerances that straddles.  In place; returns (the vertices found off the surface, those moved onto it)."""
+    quadric added (the corner; of a vertex on three, with each pair of them), in place of one
+    of its own (a point of a curve that is not on the surface at all), or in place of all of
+    them (a point of a surface hidden inside the solid: where a hull's sphere meets its
+    cylinder tangentially, the faceted sphere pokes out of the inscribed cylinder), the nearest
+    candidate first, and takes the first solution within :data:`MAX_MOVE` tolerances that
+    straddles.  In place; returns (the vertices found off the surface, those moved onto it)."""
     pairs, _ = _neighbour_candidates(x, kept, triangles, matrices, tol)
     if not len(pairs):
         return 0, 0
@@ -218,7 +221,7 @@ def repair_off_surface(x, kept, triangles, matrices, tol, contains):
     # the candidate in place of one of them (a curve point of the wrong curve: the chamfer
     # cone's circle on the top face, inside the bore, belongs on the bore's rim)
     tries = [((0, 1), n_own == 2), ((0, 1), n_own >= 3), ((0, 2), n_own >= 3), ((1, 2), n_own >= 3),
-             ((0,), n_own == 1), ((0,), n_own >= 2), ((1,), n_own >= 2), ((2,), n_own >= 3)]
+             ((0,), n_own == 1), ((0,), n_own >= 2), ((1,), n_own >= 2), ((2,), n_own >= 3), ((), n_own >= 1)]
     for k, (cols, which) in enumerate(tries):
         sel = np.flatnonzero(which)
         if len(sel):
