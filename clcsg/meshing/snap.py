@@ -191,6 +191,25 @@ def _neighbour_candidates(x, kept, triangles, matrices, tol):
     return pairs[order], d[order]
 
 
+def _nearby_candidates(x, kept, rows, matrices, tol, chunk=1 << 17):
+    """(vertex, quadric) pairs for the vertices ``rows``: every quadric, not the vertex's own,
+    within ``tol`` of it (first order), nearest first (for a vertex off the surface whose
+    neighbours are all on its own quadrics)."""
+    nq = len(matrices)
+    out_v, out_q, out_d = [], [], []
+    per = max(1, chunk // max(nq, 1))
+    for s in range(0, len(rows), per):
+        r = rows[s:s + per]
+        v = np.repeat(r, nq)
+        q = np.tile(np.arange(nq), len(r))
+        d = first_order_distance(matrices[q][:, None], x[v])
+        keep = (d <= tol) & ~(kept[v] == q[:, None]).any(axis=1)
+        out_v.append(v[keep]), out_q.append(q[keep]), out_d.append(d[keep])
+    v, q, d = np.concatenate(out_v), np.concatenate(out_q), np.concatenate(out_d)
+    order = np.lexsort((d, v))
+    return np.stack([v[order], q[order]], 1)
+
+
 def repair_off_surface(x, kept, triangles, matrices, tol, contains):
     """Vertices solved onto a curve beyond the corner where a third quadric cuts it off (the
     faceted cutter is inscribed, so its facets meet the curve short of the exact corner): such
@@ -202,15 +221,25 @@ def repair_off_surface(x, kept, triangles, matrices, tol, contains):
     candidate first, and takes the first solution within :data:`MAX_MOVE` tolerances that
     straddles.  In place; returns (the vertices found off the surface, those moved onto it)."""
     pairs, _ = _neighbour_candidates(x, kept, triangles, matrices, tol)
-    if not len(pairs):
-        return 0, 0
     scale = max(1.0, float(np.abs(x).max()))
     eps = STRADDLE * scale
-    rows = np.unique(pairs[:, 0])
+    # tested: the vertices with a neighbour on another quadric, and those on one plane alone (a
+    # flat face needs no inner vertex: one there is a corner of a faceted surface hidden by the
+    # exact one, as a hub's inscribed polygon on the face round it)
+    flat = np.all(matrices[:, :3, :3] == 0, axis=(1, 2))
+    alone = (kept[:, 0] >= 0) & flat[np.maximum(kept[:, 0], 0)]
+    if kept.shape[1] > 1:
+        alone &= kept[:, 1] < 0
+    rows = np.union1d(pairs[:, 0], np.flatnonzero(alone))
     off = rows[~straddles(x[rows], contains, eps)]
     if not len(off):
         return 0, 0
+    lacking = off[~np.isin(off, pairs[:, 0])]  # off, with no neighbour on another quadric
+    if len(lacking):
+        pairs = np.concatenate([pairs, _nearby_candidates(x, kept, lacking, matrices, tol)])
     cand = pairs[np.isin(pairs[:, 0], off)]
+    if not len(cand):
+        return len(off), 0
     v, c = cand[:, 0], cand[:, 1]
     own = kept[v]  # (P, W) -1 padded, the quadrics first
     n_own = (own >= 0).sum(axis=1)
