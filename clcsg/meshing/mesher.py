@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -39,9 +40,10 @@ from .collapse import collapse_coincident
 from .decimate import decimate
 from .owners import triangle_owners
 from .octree import surface_cells
-from .exact_facets import facetable, mesh_by_facets, timed
+from .exact_facets import contains_near, facetable, mesh_by_facets, timed
 from .facets import KINDS as FACETED_KINDS
 from .operand_booleans import mesh_by_booleans, needs_booleans
+from .snap import repair_off_surface
 
 #: default tolerance: 0.1% of the bound's diagonal
 DEFAULT_TOLERANCE = "0.1%"
@@ -127,6 +129,10 @@ def mesh(scene, tolerance=DEFAULT_TOLERANCE, cells: int = DEFAULT_CELLS, bound=N
     timed(stats, "collapse", collapse_coincident, m, stats)
     timed(stats, "decimate", decimate, m, tol, stats)
     timed(stats, "planar", planar.coarsen, m, stats)
+    # curve points solved beyond a corner, off the solid: onto the corner (as the facets do)
+    off, fixed = timed(stats, "repair", repair_off_surface, m.vertices, m.sets, m.triangles, tape.quadrics, tol,
+                       partial(contains_near, tape))
+    stats.update(off_surface=off, off_surface_repaired=fixed)
     quad, prim, colors = timed(stats, "owners", triangle_owners, tape, m, tol)
     stats["spanning_triangles"] = int(refine.spanning(m.sets, m.triangles).sum())  # of the final mesh
     stats.update(triangles=int(len(m.triangles)), vertices=int(len(m.vertices)),
