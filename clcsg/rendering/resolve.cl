@@ -7,14 +7,15 @@
  * shade_light): the same shading as the ray tracer, whose normals are double where the device
  * has fp64 (the normal's float rounding is far below the 8-bit output's).
  *
- * Where the sample's splat_primitive is set (the colour rule gives one primitive over its whole
- * ball), the depth is the stored float z and the shaded point e + z v: the splat pass computed
- * z as (float)(t |d|) from the same ray, so this is its own depth output, and the
- * point is within half a float ulp of depth of the root, which the 8-bit shading does not
- * resolve.  Elsewhere the hit is
+ * The word's depth is the root's parameter t on the ray e + t d of the pixel, d = d00 + j dx
+ * + i dy not normalized (splat.cl), rounded to float; the depth output is t |d| (resolve_depth8,
+ * in `real`: within a float ulp of the root's distance).  Where the sample's splat_primitive is
+ * set (the colour rule gives one primitive over its whole ball), the shaded point is e + t d,
+ * within half a float ulp of t of the root, which the 8-bit shading does not resolve.
+ * Elsewhere the hit is
  * recomputed from the winning sample's quadric, solved near the sample as in splat.cl
  * (o = e + ((s - e).v) v, Q(o + tau v) = 0, eqs. 5, 6) in `real` precision, taking the root
- * whose depth (s - e).v + tau is nearest the stored depth, for the colour rule at the exact
+ * whose depth (s - e).v + tau is nearest the stored t |d|, for the colour rule at the exact
  * point.  The winning sample's quadric and splat_primitive are read from sample_ids, an int2 per
  * sample, not from its whole record.  EMPTY_KEY comes from clcsg/cl/constants.py. */
 #include "pixel.h"
@@ -29,39 +30,41 @@ __kernel void albedo(__global const prim_rec *prims, int n, __global const view_
     if (k <= n) out[k] = shade_albedo(view, pixel_color(prims, k < n ? k : -1));
 }
 
-/* The hit of framebuffer word key (not EMPTY_KEY) on the view ray e + t v: its depth, point p,
- * quadric and primitive (see the file's comment). */
+/* The hit of framebuffer word key (not EMPTY_KEY) on the view ray e + t d (d not normalized):
+ * its depth (along the unit ray), point p, quadric and primitive (see the file's comment). */
 inline int resolve_hit(__global const quadric_rec *quadrics, __global const sample_rec *samples, PRIMITIVE_TABLE,
-                       ulong key, real3 e, real3 v, real *depth, real3 *p, int *qid)
+                       ulong key, real3 e, real3 d, real *depth, real3 *p, int *qid)
 {
     uint idx = (uint)(key & 0xffffffffUL);
-    real stored = (real)as_float((uint)(key >> 32));
+    real t = (real)as_float((uint)(key >> 32)), len = length(d);
+    real3 v = d / len;
+    real stored = t * len;
     __global const sample_rec *sp = &samples[idx];
     int prim = sp->splat_primitive;
     *qid = sp->quadric;
     *depth = stored;
-    *p = e + stored * v;
+    *p = e + t * d;
     if (prim < 0) { /* the colour rule at the exact root */
         quadric q = quadric_load(quadrics, sp->quadric);
         real tc = dot(vload3(0, sp->pos) - e, v);
         real3 o;
         real tau[2];
         int nr = quadric_intersect_near(q, e, v, tc, &o, &tau[0], &tau[1]);
-        real t = stored - tc; /* fallback: the stored depth (the roots vanished in rounding) */
+        real u = stored - tc; /* fallback: the stored depth (the roots vanished in rounding) */
         if (nr > 0) {
-            t = tau[0];
-            if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) t = tau[1];
+            u = tau[0];
+            if (nr > 1 && fabs(tc + tau[1] - stored) < fabs(tc + tau[0] - stored)) u = tau[1];
         }
-        *p = o + t * v;
-        *depth = tc + t;
+        *p = o + u * v;
+        *depth = tc + u;
         prim = primitive_at(PRIMITIVE_TABLE_ARGS, quadrics, sp->quadric, *p);
     }
     return prim;
 }
 
 /* Lane l (vector component c) of the resolve pass's gather: the framebuffer word and, unless
- * it is a miss, the winning sample's depth, quadric and primitive, coefficients and albedo (and,
- * where the colour rule needs the exact root, resolve_hit's point).  A macro over constant
+ * it is a miss, the winning sample's t, quadric and primitive, coefficients and albedo (and,
+ * where the colour rule needs the exact root, resolve_hit's point and depth).  A macro over constant
  * components keeps the vectors in registers (OpenCL has no dynamic component index). */
 #define RESOLVE_GATHER(l, c)                                                                        \
     if ((l) < lanes) {                                                                              \
@@ -69,27 +72,39 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
         if (key != EMPTY_KEY) {                                                                     \
             int2 sid = sample_ids[(uint)(key & 0xffffffffUL)];                                     \
             int qid = sid.x, prim = sid.y;                                                          \
-            real depth = (real)as_float((uint)(key >> 32));                                         \
             if (prim < 0) {                                                                         \
                 real3 p;                                                                            \
+                real depth;                                                                         \
                 prim = resolve_hit(quadrics, samples, PRIMITIVE_TABLE_ARGS, key, e,                 \
-                                   view_ray(view, i, j0 + (l)), &depth, &p, &qid);                  \
+                                   view_dir(view, i, j0 + (l)), &depth, &p, &qid);                  \
                 PX.c = p.x; PY.c = p.y; PZ.c = p.z;                                                 \
+                DEPTH.c = (float)depth;                                                             \
                 exact |= 1 << (l);                                                                  \
             }                                                                                       \
-            Z.c = depth;                                                                            \
+            Z.c = as_float((uint)(key >> 32));                                                      \
             __global const real *q = quadrics[qid].coef;                                            \
             XX.c = q[0]; XY.c = q[1]; XZ.c = q[2]; BX.c = q[3];                                     \
             YY.c = q[4]; YZ.c = q[5]; BY.c = q[6]; ZZ.c = q[7]; BZ.c = q[8];                        \
-            DEPTH.c = (float)depth; QID.c = qid; PRIM.c = prim;                                     \
+            QID.c = qid; PRIM.c = prim;                                                             \
             float4 alb = albedo[prim >= 0 ? prim : n_prims];                                        \
             AX.c = alb.x; AY.c = alb.y; AZ.c = alb.z; AW.c = alb.w;                                 \
             hits |= 1 << (l);                                                                       \
         }                                                                                           \
     }
 
+/* The depth outputs t |d| of the eight pixels j0 ... j0 + 7 of row i, from their words' t
+ * (the splat pass's rays d = d00 + j dx + i dy, as view_dir), in `real`. */
+inline float8 resolve_depth8(__global const view_rec *view, int i, int j0, float8 t)
+{
+    real8 jj = (real)j0 + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+    real8 dX = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
+    real8 dY = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
+    real8 dZ = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
+    return convert_float8(convert_real8(t) * sqrt(dX * dX + dY * dY + dZ * dZ));
+}
+
 /* The colours of the lanes in `hits` (the others keep the background), in float (shading
- * needs no more): the view rays of the lanes (view_ray), the points e + z v or, in the lanes
+ * needs no more): the view rays of the lanes (view_ray), the points e + t d or, in the lanes
  * of `exact`, (PX, PY, PZ), the normals grad Q / |grad Q| (eq. 4), the lighting (shade_light8)
  * and the encoding (shade_encode8).  Inlined twice: for eight hits on one quadric and
  * primitive the coefficients and albedo are broadcast scalars, which leaves the vector
@@ -109,9 +124,9 @@ __attribute__((always_inline)) inline void resolve_colours8(__global const view_
     float8 il = 1.0f / sqrt(dX * dX + dY * dY + dZ * dZ);
     float8 vX = dX * il, vY = dY * il, vZ = dZ * il;
     int8 use = (((int8)(exact) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
-    float8 pX = select((float)e.x + Z * vX, PX, use);
-    float8 pY = select((float)e.y + Z * vY, PY, use);
-    float8 pZ = select((float)e.z + Z * vZ, PZ, use);
+    float8 pX = select((float)e.x + Z * dX, PX, use);
+    float8 pY = select((float)e.y + Z * dY, PY, use);
+    float8 pZ = select((float)e.z + Z * dZ, PZ, use);
     /* grad Q / 2 = A p - b (layout.h: the w column holds -b) */
     float8 gX = XX * pX + XY * pY + XZ * pZ + BX;
     float8 gY = XY * pX + YY * pY + YZ * pZ + BY;
@@ -181,7 +196,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
                          (float8)((float)q[2]), (float8)((float)q[3]), (float8)((float)q[4]), (float8)((float)q[5]),
                          (float8)((float)q[6]), (float8)((float)q[7]), (float8)((float)q[8]), (float8)(alb.x),
                          (float8)(alb.y), (float8)(alb.z), (float8)(alb.w), &rx, &ry, &rz, &ra);
-        vstore8(Z, 0, out.depth + pix);
+        vstore8(resolve_depth8(view, i, j0, Z), 0, out.depth + pix);
         vstore8((int8)(q0), 0, out.quadric + pix);
         vstore8((int8)(p0), 0, out.primitive + pix);
         shade_store_rgba8((__global uchar *)(out.rgba + pix), rx, ry, rz, ra);
@@ -191,6 +206,8 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     RESOLVE_GATHER(4, s4) RESOLVE_GATHER(5, s5) RESOLVE_GATHER(6, s6) RESOLVE_GATHER(7, s7)
     resolve_colours8(view, i, j0, e, Z, PX, PY, PZ, exact, hits, XX, XY, XZ, BX, YY, YZ, BY, ZZ, BZ, AX, AY, AZ, AW,
                      &rx, &ry, &rz, &ra);
+    int8 from_t = (((int8)(hits & ~exact) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & 1) != 0;
+    if (hits & ~exact) DEPTH = select(DEPTH, resolve_depth8(view, i, j0, Z), from_t);
     /* the row's eight pixels at once, or the lanes one by one at the row's end */
     if (lanes == RESOLVE_LANES) {
         vstore8(DEPTH, 0, out.depth + pix);

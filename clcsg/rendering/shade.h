@@ -42,12 +42,14 @@ typedef struct {
 
 inline real3 view_eye(__global const view_rec *vw) { return vload3(0, vw->eye); }
 
-/* Unit direction of the view ray of pixel (i, j). */
-inline real3 view_ray(__global const view_rec *vw, int i, int j)
+/* Direction d of the view ray of pixel (i, j), not normalized (the camera contract). */
+inline real3 view_dir(__global const view_rec *vw, int i, int j)
 {
-    real3 d = vload3(0, vw->d00) + (real)j * vload3(0, vw->dx) + (real)i * vload3(0, vw->dy);
-    return normalize(d);
+    return vload3(0, vw->d00) + (real)j * vload3(0, vw->dx) + (real)i * vload3(0, vw->dy);
 }
+
+/* Unit direction of the view ray of pixel (i, j). */
+inline real3 view_ray(__global const view_rec *vw, int i, int j) { return normalize(view_dir(vw, i, j)); }
 
 /* x^y for x >= 0 as exp2(y log2 x), for the colours of the primitives (once per view) and a
  * highlight exponent that is not a whole number (shade_powi): x = 0 gives 0 for y > 0. */

@@ -10,17 +10,19 @@
  *    rays at a time, as vectors: skip rays that miss the ball; solve Q(e + t d) = 0 (eqs. 5, 6)
  *    with d not normalized, whose coefficients are polynomials in the pixel's column (the
  *    paper solves near the sample to keep float's precision; in double the roots from the
- *    eye are far more precise than the float depth of the key), depth = t |d|.  All tests are
- *    scaled by |d|^2, so a ray costs one square root for |d| and the roots' square root
- *    and divisions.  The root nearer the eye is tried
- *    first, the other one if it fails: |p - s| <= r, depth > 0, and the clip program: C is the
+ *    eye are far more precise than the float of the key).  The depth of the key is t itself,
+ *    not the distance t |d|: on one pixel's ray |d| is a constant, so both order the fragments
+ *    alike, and the resolve pass multiplies by |d| once per pixel.  All tests are scaled by
+ *    |d|^2, so a ray costs no square root for |d|, only the roots' square root and divisions.
+ *    The root nearer the eye is tried
+ *    first, the other one if it fails: |p - s| <= r, t > 0, and the clip program: C is the
  *    sample's tape pruned over B(s, r) with Q substituted, and p (on Q) is on the CSG surface
  *    iff C's membership differs between Q's two sides (tape_member8).  This is exact from any
  *    eye position, inside the solid included.  An empty C means the whole ball is surface on
  *    Q: no clipping.  A ray whose chord through the ball starts behind the pixel's stored
- *    depth is dropped (splat_occluded8), and before the clip program a root whose key already
+ *    t is dropped (splat_occluded8), and before the clip program a root whose key already
  *    loses to the stored one ends the pixel (early depth rejection: no fragment there can win);
- * 3. depth test: atom_min of ((ulong)as_uint((float)depth) << 32 | sample index) into the
+ * 3. depth test: atom_min of ((ulong)as_uint((float)t) << 32 | sample index) into the
  *    64-bit framebuffer (positive floats order like their bit patterns), only for keys below
  *    the word read before the solve (a plain read: atomics that cannot win are skipped).
  *
@@ -67,15 +69,34 @@ inline rect rect_meet(rect a, rect b)
     return (rect){max(a.x0, b.x0), max(a.y0, b.y0), min(a.x1, b.x1), min(a.y1, b.y1)};
 }
 
+/* floor(x) and ceil(x) as ints, for |x| < 2^30: the int conversion truncates towards zero,
+ * then one step where it rounded the wrong way (the library's floor() and ceil() are a
+ * software routine of dozens of instructions on PoCL's CPU devices). */
+inline int floor_int(real x)
+{
+    int t = (int)x;
+    return t - (x < (real)t);
+}
+
+inline int ceil_int(real x)
+{
+    int t = (int)x;
+    return t + (x > (real)t);
+}
+
+/* x clamped to [-lim, lim], a NaN to -lim (a lower end) or lim (an upper end): fmin and fmax
+ * return the number of a number and a NaN, so a bound that went NaN widens the range. */
+inline real clamp_low(real x, real lim) { return fmin(fmax(x, -lim), lim); }
+inline real clamp_high(real x, real lim) { return fmax(fmin(x, lim), -lim); }
+
 /* Pixels whose center ray may pass through continuous image range [xmin, xmax] x [ymin, ymax]:
  * centers are at j + 0.5, so j in [xmin - 0.5, xmax - 0.5]; one extra pixel each side absorbs
  * rounding (the per-pixel tests are exact, so slack costs only time). */
 inline rect rect_from_range(__global const view_rec *vw, real xmin, real xmax, real ymin, real ymax)
 {
     real lim = 4 * (real)max(vw->width, vw->height) + 4; /* keeps the int conversion sane */
-    xmin = clamp(xmin, -lim, lim); xmax = clamp(xmax, -lim, lim);
-    ymin = clamp(ymin, -lim, lim); ymax = clamp(ymax, -lim, lim);
-    rect r = {(int)floor(xmin - 0.5f) , (int)floor(ymin - 0.5f), (int)ceil(xmax - 0.5f), (int)ceil(ymax - 0.5f)};
+    rect r = {floor_int(clamp_low(xmin, lim) - (real)0.5), floor_int(clamp_low(ymin, lim) - (real)0.5),
+              ceil_int(clamp_high(xmax, lim) - (real)0.5), ceil_int(clamp_high(ymax, lim) - (real)0.5)};
     return rect_meet(r, rect_full(vw));
 }
 
@@ -245,24 +266,24 @@ inline ulong8 splat_peek8(__global const ulong *row)
     return vload8(0, row);
 }
 
-/* Early depth rejection on eight rays e + t d (a lane mask), |d| = len: can no fragment of
- * depth >= zc - m (zc = (s - e).d / len, m = sqrt(m2): the ball's chord starts there) beat the
- * pixel's word?  float rounding is monotone, so such a fragment's key is at least
- * as_uint((float)(zc - m)) << 32, above the word if zc - m exceeds the next float z after the
- * stored depth.  Scaled by len, without a square root or a division: zc - m > z  <=>
- * u = zl - z len > 0 and u^2 > M, with zl = zc len and M = m2 len^2.  An empty word
- * (EMPTY_KEY) never occludes. */
-inline int8 splat_occluded8(real8 zl, real8 len, real8 M, ulong8 word)
+/* Early depth rejection on eight rays e + t d (a lane mask): can no fragment of parameter
+ * t >= tc - m (tc = (s - e).d / |d|^2, m = sqrt(M) / |d|^2: the ball's chord starts there) beat
+ * the pixel's word?  float rounding is monotone, so such a fragment's key is at least
+ * as_uint((float)(tc - m)) << 32, above the word if tc - m exceeds the next float z after the
+ * stored parameter.  Scaled by |d|^2, without a square root or a division: tc - m > z  <=>
+ * u = ad - z dd > 0 and u^2 > M (ad = (s - e).d, lowered by the rounding's slack; dd = |d|^2).
+ * An empty word (EMPTY_KEY) never occludes. */
+inline int8 splat_occluded8(real8 ad, real8 dd, real8 M, ulong8 word)
 {
     uint8 hi = convert_uint8(word >> 32);
-    real8 u = zl - convert_real8(as_float8(hi + 1)) * len;
+    real8 u = ad - convert_real8(as_float8(hi + 1)) * dd;
     return (hi < 0x7f800000u) & convert_int8(u > 0) & convert_int8(u * u > M);
 }
 
-/* The 64-bit keys (float depth bits << 32 | idx) of eight depths. */
-inline ulong8 splat_keys8(real8 depth, int idx)
+/* The 64-bit keys (float bits << 32 | idx) of eight ray parameters t (splat_roots8's te). */
+inline ulong8 splat_keys8(real8 t, int idx)
 {
-    return (convert_ulong8(as_uint8(convert_float8(depth))) << 32) | (ulong8)((ulong)(uint)idx);
+    return (convert_ulong8(as_uint8(convert_float8(t))) << 32) | (ulong8)((ulong)(uint)idx);
 }
 
 /* The lanes of a mask (-1 / 0 per lane) as the bits of an int. */
@@ -275,7 +296,7 @@ inline int splat_lane_bits(int8 m)
 }
 
 /* The roots of Q on eight rays e + t d of a row (d not normalized) and what the tests need of
- * them.  Root k: depth[k] = t |d|, the point b + u[k] d on the ray, rad[k] <= 0 iff
+ * them.  Root k: te[k] = t, its parameter from the eye (the key's value), the point b + u[k] d on the ray, rad[k] <= 0 iff
  * |p - s| <= r, slope[k] = grad Q(p).d / 2 (the outward normal's component along the ray is
  * sign slope).  With fp64 the roots are solved from the eye: Q(e + t d) = qa t^2 + 2 qh t + qe
  * has coefficients that are polynomials in the column x (qa = a0 + 2 a1 x + a2 x^2,
@@ -285,12 +306,12 @@ inline int splat_lane_bits(int8 m)
  * the ray's point nearest s (tc = a.d / |d|^2), Q(o + u d) = qa u^2 + 2 h u + Q(o), and the radius
  * test is u^2 |d|^2 <= r^2 - |o - s|^2. */
 typedef struct {
-    real8 depth[2], u[2], rad[2], slope[2];
+    real8 te[2], u[2], rad[2], slope[2];
     real8 bX, bY, bZ;
 } splat_roots;
 
 inline int8 splat_roots8(quadric q, bool plane, real3 e, real3 a, real r, real k, real qe, real8 xs, real8 dX,
-                         real8 dY, real8 dZ, real8 dd, real8 ad, real8 len, real a0, real a1, real a2, real b0,
+                         real8 dY, real8 dZ, real8 dd, real8 ad, real a0, real a1, real a2, real b0,
                          real b1, splat_roots *R)
 {
     real8 qa = a0 + xs * (2 * a1 + xs * a2), t[2];
@@ -327,8 +348,8 @@ inline int8 splat_roots8(quadric q, bool plane, real3 e, real3 a, real r, real k
         t[j] += tc;
     }
 #endif
-    R->depth[0] = t[0] * len;
-    R->depth[1] = t[1] * len;
+    R->te[0] = t[0];
+    R->te[1] = t[1];
     return nr;
 }
 
@@ -345,8 +366,8 @@ inline real8 splat_clip8(int qid, __global const tape_op *clip, int nc, __global
 }
 
 /* Step 2 on eight rays of a splat (lanes `live`) with nr roots R (splat_roots8): per lane the
- * depth of the splat's fragment, 0 if none.  Root k (the nearer first) is a candidate if it
- * passes the radius and depth tests; a candidate whose key (with sample index idx) is not below
+ * parameter t of the splat's fragment from the eye (the key's depth), 0 if none.  Root k (the
+ * nearer first) is a candidate if it passes the radius and t > 0 tests; a candidate whose key (with sample index idx) is not below
  * the pixel's word as read loses, and the nearer one losing ends the lane (the farther root
  * cannot win either); a candidate wins if it is on the CSG surface (the clip program at the
  * point, splat_clip8; without one it is, on side sign) and faces the eye.  The farther root is
@@ -356,48 +377,55 @@ __attribute__((always_inline)) inline real8 splat_fragment8(int sign, int qid, _
                                                             real8 dX, real8 dY, real8 dZ, int8 nr, bool one_root,
                                                             ulong8 word, int idx, int8 live, ulong *cnt)
 {
-    int8 ok0 = live & convert_int8(R->rad[0] <= 0) & convert_int8(R->depth[0] > 0);
-    int8 loses0 = convert_int8(splat_keys8(R->depth[0], idx) >= word);
+    int8 ok0 = live & convert_int8(R->rad[0] <= 0) & convert_int8(R->te[0] > 0);
+    int8 loses0 = convert_int8(splat_keys8(R->te[0], idx) >= word);
     int8 wins0 = ok0 & ~loses0;
     real8 side0 = (real8)(sign), side1 = side0;
     if (nc > 0 && any(wins0)) side0 = splat_clip8(qid, clip, nc, quadrics, R, dX, dY, dZ, R->u[0], &wins0, cnt);
 #if BACKFACE_CULLING
     wins0 &= convert_int8(side0 * R->slope[0] <= 0);
 #endif
-    if (one_root) return select((real8)(0), R->depth[0], convert_realmask8(wins0)); /* a plane */
-    int8 ok1 = live & (nr > 1) & convert_int8(R->rad[1] <= 0) & convert_int8(R->depth[1] > 0);
-    int8 wins1 = ok1 & convert_int8(splat_keys8(R->depth[1], idx) < word);
+    if (one_root) return select((real8)(0), R->te[0], convert_realmask8(wins0)); /* a plane */
+    int8 ok1 = live & (nr > 1) & convert_int8(R->rad[1] <= 0) & convert_int8(R->te[1] > 0);
+    int8 wins1 = ok1 & convert_int8(splat_keys8(R->te[1], idx) < word);
     wins1 &= ~ok0 | (~loses0 & ~wins0);
     if (nc > 0 && any(wins1)) side1 = splat_clip8(qid, clip, nc, quadrics, R, dX, dY, dZ, R->u[1], &wins1, cnt);
 #if BACKFACE_CULLING
     wins1 &= convert_int8(side1 * R->slope[1] <= 0);
 #endif
-    return select(select((real8)(0), R->depth[1], convert_realmask8(wins1)), R->depth[0], convert_realmask8(wins0));
+    return select(select((real8)(0), R->te[1], convert_realmask8(wins1)), R->te[0], convert_realmask8(wins0));
 }
 
 /* The span [*first, *last] of row y's pixels in the bound whose rays meet the ball grown to R
  * and, with a slab, whose chord through it meets the slab (see the kernel), eight pixels per step
  * as vectors; empty (first > last) if none.  dy: the row's ray at column 0, d = dy + x ddx;
- * cy, cx: a x dy, a x ddx; ndy, ndx: n x dy, n x ddx. */
+ * cy, cx: a x dy, a x ddx; ndy, ndx: n x dy, n x ddx.  Along the row every term of the tests is
+ * a polynomial in the column x of degree <= 2 (d, c = a x d and n x d are linear): |d|^2,
+ * E = R^2 |d|^2 - |c|^2, P = -c.(n x d) - mid |d|^2 and n.d, whose coefficients are set up once
+ * per row (the x^2 ones, rc.s0 ... rc.s3, once per splat: E2, P2, |ddx|^2, n.ddx), so a pixel
+ * costs a few multiply-adds.  The expansion's rounding, relative to |a|^2 |d|^2 and |a| |d|^2,
+ * is far below the margin R - r. */
 inline void splat_row_span(rect bound, real3 dy, real3 cy, real3 ndy, real3 ddx, real3 cx, real3 ndx, real3 n,
-                           real R, real mid, real width, bool has_slab, int *first_out, int *last_out)
+                           real R, real mid, real width, real4 rc, bool has_slab, int *first_out, int *last_out)
 {
+    real D0 = dot(dy, dy), D1 = dot(dy, ddx);
+    real E0 = R * R * D0 - dot(cy, cy), E1 = R * R * D1 - dot(cy, cx);
+    real P0 = -dot(cy, ndy) - mid * D0, P1 = -(dot(cy, ndx) + dot(cx, ndy)) - 2 * mid * D1;
+    real N0 = dot(n, dy);
     int first = bound.x1 + 1, last = bound.x0 - 1;
     for (int x = bound.x0; x <= bound.x1; x += 8) { /* eight pixels per step, as vectors */
-        int8 xi = x + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
         real8 xs = (real)x + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
-        real8 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
-        real8 cX = cy.x + xs * cx.x, cY = cy.y + xs * cx.y, cZ = cy.z + xs * cx.z; /* a x d */
-        real8 nX = ndy.x + xs * ndx.x, nY = ndy.y + xs * ndx.y, nZ = ndy.z + xs * ndx.z; /* n x d */
-        real8 dd = dX * dX + dY * dY + dZ * dZ, nd = n.x * dX + n.y * dY + n.z * dZ;
-        real8 E = R * R * dd - (cX * cX + cY * cY + cZ * cZ); /* |d|^2 m^2, the grown ball */
-        real8 Y = fabs(-(cX * nX + cY * nY + cZ * nZ) - mid * dd) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
-        int8 hit = convert_int8(E >= 0) & (xi <= bound.x1);
+        real8 dd = D0 + xs * (2 * D1 + xs * rc.s2);
+        real8 E = E0 + xs * (2 * E1 + xs * rc.s0); /* |d|^2 m^2, the grown ball */
+        real8 Y = fabs(P0 + xs * (P1 + xs * rc.s1)) - width * dd; /* |d|^2 (|n.w0 - mid| - width) */
+        real8 nd = N0 + xs * rc.s3;
+        int8 hit = convert_int8(E >= 0) & (x + (int8)(0, 1, 2, 3, 4, 5, 6, 7) <= bound.x1);
         if (has_slab) hit &= convert_int8((Y <= 0) | (Y * Y <= E * nd * nd));
-        int8 lo = select((int8)(INT_MAX), xi, hit), hi = select((int8)(INT_MIN), xi, hit);
-        int4 l4 = min(lo.lo, lo.hi), h4 = max(hi.lo, hi.hi);
-        first = min(first, min(min(l4.x, l4.y), min(l4.z, l4.w)));
-        last = max(last, max(max(h4.x, h4.y), max(h4.z, h4.w)));
+        int bits = splat_lane_bits(hit);
+        if (bits) {
+            first = min(first, x + popcount(~bits & (bits - 1))); /* the lowest set lane */
+            last = x + 31 - clz(bits);
+        }
     }
     *first_out = first;
     *last_out = last;
@@ -421,8 +449,8 @@ inline void splat_disc_span(rect bound, real3 dy, real3 n, real3 ap, real alpha,
     *last = bound.x0 - 1;
     if (disc >= 0) { /* the pixels within the roots, and 1e-3 of one: the rounding */
         real sq = sqrt(disc), lim = 2 + (real)W;
-        *first = max(bound.x0, (int)ceil(clamp((-pb - sq) / pa, -lim, lim) - 1e-3));
-        *last = min(bound.x1, (int)floor(clamp((-pb + sq) / pa, -lim, lim) + 1e-3));
+        *first = max(bound.x0, ceil_int(clamp_low((-pb - sq) / pa, lim) - (real)1e-3));
+        *last = min(bound.x1, floor_int(clamp_high((-pb + sq) / pa, lim) + (real)1e-3));
     }
 }
 
@@ -484,6 +512,9 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
     real3 n = has_slab ? slab.n : (real3)(0, 0, 1);
     real mid = has_slab ? 0.5 * (slab.h_lo + slab.h_hi) : 0, width = has_slab ? 0.5 * (slab.h_hi - slab.h_lo) + pad : 0;
     real3 cx = cross(a, ddx), ndx = cross(n, ddx);
+    /* splat_row_span's x^2 coefficients (E2, P2, |ddx|^2) and n.ddx */
+    real ddx2 = dot(ddx, ddx);
+    real4 rc = (real4)(R * R * ddx2 - dot(cx, cx), -dot(cx, ndx) - mid * ddx2, ddx2, dot(n, ddx));
     /* Q along the rays from the eye (splat_roots8): Q(e + t d) = (d^T A d) t^2 + 2 (g.d) t + Q(e)
      * with g = A e - b; d^T A d = a0 + 2 a1 x + a2 x^2 and g.d = b0 + b1 x along a row */
     real3 ge = quadric_Ap(q, e) + quadric_minus_b(q), Addx = quadric_Ap(q, ddx);
@@ -514,7 +545,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
         if (disc_span) {
             splat_disc_span(bound, dy, n, ap, alpha, u1, nu1, pa, R, W, &first, &last);
         } else {
-            splat_row_span(bound, dy, cy, ndy, ddx, cx, ndx, n, R, mid, width, has_slab, &first, &last);
+            splat_row_span(bound, dy, cy, ndy, ddx, cx, ndx, n, R, mid, width, rc, has_slab, &first, &last);
         }
         cnt[PC_BOUND_PIXELS] += bound.x1 - bound.x0 + 1;
         /* the span eight pixels per step: the rays, the ball test, the quadric's roots
@@ -523,14 +554,13 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
         for (int x = first; x <= last; x += 8) {
             real8 xs = (real)x + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
             real8 dX = dy.x + xs * ddx.x, dY = dy.y + xs * ddx.y, dZ = dy.z + xs * ddx.z;
-            /* the ray e + t d, d not normalized, depth = t |d|: it meets the ball iff
+            /* the ray e + t d, d not normalized (the key's depth is t): it meets the ball iff
              * M = |d|^2 (r^2 - |o - s|^2) = (a.d)^2 - |d|^2 k >= 0 (o: its point nearest s) */
             real8 dd = dX * dX + dY * dY + dZ * dZ;
             real8 ad = a.x * dX + a.y * dY + a.z * dZ;
             real8 M = ad * ad - dd * k;
             int8 meet = convert_int8(M >= 0) & (x + (int8)(0, 1, 2, 3, 4, 5, 6, 7) <= last);
             if (!any(meet)) continue; /* the rays miss the ball */
-            real8 len = sqrt(dd);
             __global ulong *row = &framebuffer[y * W + x];
             /* the pixels' words (a slot only decreases: a stale word costs an extra solve) */
             ulong8 word = (ulong8)(EMPTY_KEY);
@@ -542,7 +572,7 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
                 SPLAT_PEEK(4, s4) SPLAT_PEEK(5, s5) SPLAT_PEEK(6, s6) SPLAT_PEEK(7, s7)
             }
 #undef SPLAT_PEEK
-            int8 occluded = meet & splat_occluded8(ad - 16 * SLACK * (fabs(ad) + r * len), len, M, word);
+            int8 occluded = meet & splat_occluded8(ad - 16 * SLACK * (fabs(ad) + r * (real)0.5 * (1 + dd)), dd, M, word);
             int8 live = meet & ~occluded;
 #if CLCSG_STATS
             cnt[PC_FRAGMENTS] += popcount((uint)splat_lane_bits(meet));
@@ -550,15 +580,15 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
 #endif
             if (!any(live)) continue;
             splat_roots R;
-            int8 nr = splat_roots8(q, plane, e, a, r, k, qe, xs, dX, dY, dZ, dd, ad, len, a0, a1, a2, b0, b1, &R);
+            int8 nr = splat_roots8(q, plane, e, a, r, k, qe, xs, dX, dY, dZ, dd, ad, a0, a1, a2, b0, b1, &R);
             live &= nr > 0;
             if (!any(live)) continue;
-            real8 depth = splat_fragment8(sign, qid, cp, nc, quadrics, &R, dX, dY, dZ, nr, plane, word, idx, live, cnt);
-            int8 pass = live & convert_int8(depth > 0);
+            real8 te = splat_fragment8(sign, qid, cp, nc, quadrics, &R, dX, dY, dZ, nr, plane, word, idx, live, cnt);
+            int8 pass = live & convert_int8(te > 0);
 #if CLCSG_STATS
             cnt[PC_FRAGMENTS_PASSED] += popcount((uint)splat_lane_bits(pass));
 #endif
-            ulong8 key = splat_keys8(depth, idx);
+            ulong8 key = splat_keys8(te, idx);
 #define SPLAT_TEST(l, c) if (pass.c) splat_depth_test(row + (l), key.c, cnt);
             SPLAT_TEST(0, s0) SPLAT_TEST(1, s1) SPLAT_TEST(2, s2) SPLAT_TEST(3, s3)
             SPLAT_TEST(4, s4) SPLAT_TEST(5, s5) SPLAT_TEST(6, s6) SPLAT_TEST(7, s7)
