@@ -204,9 +204,10 @@ OCLGRIND_UNOPTIMIZED = {"rendering/splat.cl": ["-cl-opt-disable"]}
 
 def _device_options(context, path: str) -> list[str]:
     """Build options of program ``path`` on ``context``'s device beyond the shared ones
-    (:data:`OCLGRIND_UNOPTIMIZED`; ``CLCSG_PREFETCH=1`` on PoCL's CPU devices, where the
+    (:data:`OCLGRIND_UNOPTIMIZED`; on PoCL's CPU devices ``CLCSG_PREFETCH=1``, where the
     kernels ask for memory ahead with clang's ``__builtin_prefetch``: OpenCL's ``prefetch()``
-    does nothing there)."""
+    does nothing there, and ``CLCSG_STREAM_STORES=1``, where the image outputs are written with
+    clang's ``__builtin_nontemporal_store``)."""
     import pyopencl as cl
 
     devices = context.ctx.devices
@@ -214,7 +215,7 @@ def _device_options(context, path: str) -> list[str]:
         return list(OCLGRIND_UNOPTIMIZED.get(path, []))
     if all("portable computing language" in d.platform.name.lower() and d.type & cl.device_type.CPU
            for d in devices):
-        return ["-DCLCSG_PREFETCH=1"]
+        return ["-DCLCSG_PREFETCH=1", "-DCLCSG_STREAM_STORES=1"]
     return []
 
 

@@ -149,8 +149,10 @@ SHADE_LIGHT_BODY(float)
 #undef SHADE_POW_T
 
 #define SHADE_POW_T shade_powi8
-inline void shade_light8(__global const view_rec *vw, float8 ax, float8 ay, float8 az, float8 nx, float8 ny,
-                         float8 nz, float8 vx, float8 vy, float8 vz, float8 *cx, float8 *cy, float8 *cz)
+/* inlined: ten float8 arguments passed to a call go through memory */
+__attribute__((always_inline)) inline void shade_light8(__global const view_rec *vw, float8 ax, float8 ay, float8 az,
+                                                        float8 nx, float8 ny, float8 nz, float8 vx, float8 vy,
+                                                        float8 vz, float8 *cx, float8 *cy, float8 *cz)
 SHADE_LIGHT_BODY(float8)
 #undef SHADE_POW_T
 

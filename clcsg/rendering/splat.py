@@ -6,8 +6,8 @@ Statistics (``Image.stats``; counters only with ``stats=True``):
 
 =====================  ===========================================================================
 splats_drawn           samples whose screen bound is not empty
-splats_culled          samples skipped by the per-splat back-face test
-splats_offscreen       samples whose bound misses the screen (or is behind the eye)
+splats_culled          samples skipped by the per-splat back-face test (asked first)
+splats_offscreen       samples not culled whose bound misses the screen (or is behind the eye)
 bound_pixels           pixels visited in the splats' screen bounds
 fragments              rays of a row's span (the rays meeting the ball and slab, grown by a
                        margin) that meet the ball
