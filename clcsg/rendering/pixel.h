@@ -21,35 +21,31 @@ typedef struct {
 #define PIXEL_OUT ((pixel_out){depth_out, id_out, prim_out, rgba_out})
 
 /* Eight pixels pix ... pix + 7 of a row written: depth, quadric and primitive ids, and the
- * channel bytes interleaved as RGBA.  With CLCSG_STREAM_STORES (set by the host on PoCL's CPU
- * devices, whose compiler is clang) and all four rows 32-byte aligned (a row width that is a
- * multiple of 8), as non-temporal stores: the outputs are written once and read by the host,
- * so they need not pass through the cache, nor be read into it before the write. */
+ * colours as RGBA words (shade_pack_rgba8).  With CLCSG_STREAM_STORES (set by the host on
+ * PoCL's CPU devices, whose compiler is clang) and all four rows 32-byte aligned (a row width
+ * that is a multiple of 8), as non-temporal stores: the outputs are written once and read by
+ * the host, so they need not pass through the cache, nor be read into it before the write. */
 #if CLCSG_STREAM_STORES
 #define PIXEL_STREAM(v, p) __builtin_nontemporal_store((v), (p))
 #else
 #define PIXEL_STREAM(v, p) (*(p) = (v))
 #endif
-inline void pixel_store8(pixel_out out, int pix, float8 depth, int8 qid, int8 prim, uchar8 r, uchar8 g, uchar8 b,
-                         uchar8 a)
+inline void pixel_store8(pixel_out out, int pix, float8 depth, int8 qid, int8 prim, uint8 rgba)
 {
     __global float *pd = out.depth + pix;
     __global int *pq = out.quadric + pix, *pp = out.primitive + pix;
-    __global uchar4 *pc = out.rgba + pix;
+    __global uint *pc = (__global uint *)(out.rgba + pix);
     if ((((size_t)pd | (size_t)pq | (size_t)pp | (size_t)pc) & 31) == 0) {
         PIXEL_STREAM(depth, (__global float8 *)pd);
         PIXEL_STREAM(qid, (__global int8 *)pq);
         PIXEL_STREAM(prim, (__global int8 *)pp);
-        PIXEL_STREAM(((uchar16)(r.s0, g.s0, b.s0, a.s0, r.s1, g.s1, b.s1, a.s1, r.s2, g.s2, b.s2, a.s2, r.s3, g.s3,
-                                b.s3, a.s3)), (__global uchar16 *)pc);
-        PIXEL_STREAM(((uchar16)(r.s4, g.s4, b.s4, a.s4, r.s5, g.s5, b.s5, a.s5, r.s6, g.s6, b.s6, a.s6, r.s7, g.s7,
-                                b.s7, a.s7)), (__global uchar16 *)pc + 1);
+        PIXEL_STREAM(rgba, (__global uint8 *)pc);
         return;
     }
     vstore8(depth, 0, pd);
     vstore8(qid, 0, pq);
     vstore8(prim, 0, pp);
-    shade_store_rgba8((__global uchar *)pc, r, g, b, a);
+    vstore8(rgba, 0, pc);
 }
 #undef PIXEL_STREAM
 
@@ -91,8 +87,7 @@ inline void pixel_store_background(pixel_out out, __global const view_rec *view,
 {
     uchar4 bg = shade_background(view);
     if (lanes == 8) {
-        pixel_store8(out, pix, (float8)(INFINITY), (int8)(-1), (int8)(-1), (uchar8)(bg.x), (uchar8)(bg.y),
-                     (uchar8)(bg.z), (uchar8)(bg.w));
+        pixel_store8(out, pix, (float8)(INFINITY), (int8)(-1), (int8)(-1), (uint8)(as_uint(bg)));
         return;
     }
     for (int l = 0; l < lanes; ++l) {
@@ -162,7 +157,8 @@ inline void pixel_lanes_store(pixel_out out, __global const view_rec *view, int 
         ra = select(ra, convert_uchar8_sat(vload8(0, px->aw) * 255.0f + 0.5f), hit);
     }
     if (lanes == 8) {
-        pixel_store8(out, pix, vload8(0, px->depth), qid, vload8(0, px->primitive), rx, ry, rz, ra);
+        pixel_store8(out, pix, vload8(0, px->depth), qid, vload8(0, px->primitive),
+                     shade_pack_rgba8(rx, ry, rz, ra));
         return;
     }
     uchar r[8], g[8], b[8], a[8];

@@ -685,8 +685,6 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     if (i >= view->height || j0 >= W) return;
     int lanes = min(RAY_LANES, W - j0);
     int tile = (i / TILE) * ((W + TILE - 1) / TILE) + j0 / TILE;
-    real3 e = view_eye(view), forward = vload3(0, view->forward);
-    real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
     /* a tile whose slabs hold no tape has no surface: its pixels are background (most of a
      * frame round a compact model), without the rays' set-up */
     int listed = 0;
@@ -695,6 +693,8 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
         pixel_store_background(PIXEL_OUT, view, i * W + j0, lanes);
         return;
     }
+    real3 e = view_eye(view), forward = vload3(0, view->forward);
+    real slack = ROUNDING_ULPS * REAL_EPS * (length(blo) + length(bhi) + length(e));
     pixel_lanes px;
     pixel_lanes_clear(&px);
     int last_prim = -2;

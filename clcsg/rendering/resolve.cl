@@ -196,7 +196,8 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
                          (float8)((float)q[2]), (float8)((float)q[3]), (float8)((float)q[4]), (float8)((float)q[5]),
                          (float8)((float)q[6]), (float8)((float)q[7]), (float8)((float)q[8]), (float8)(alb.x),
                          (float8)(alb.y), (float8)(alb.z), (float8)(alb.w), &rx, &ry, &rz, &ra);
-        pixel_store8(out, pix, resolve_depth8(view, i, j0, Z), (int8)(q0), (int8)(p0), rx, ry, rz, ra);
+        pixel_store8(out, pix, resolve_depth8(view, i, j0, Z), (int8)(q0), (int8)(p0),
+                     shade_pack_rgba8(rx, ry, rz, ra));
         return;
     }
     RESOLVE_GATHER(0, s0) RESOLVE_GATHER(1, s1) RESOLVE_GATHER(2, s2) RESOLVE_GATHER(3, s3)
@@ -207,7 +208,7 @@ __kernel void resolve(__global const quadric_rec *quadrics, __global const sampl
     if (hits & ~exact) DEPTH = select(DEPTH, resolve_depth8(view, i, j0, Z), from_t);
     /* the row's eight pixels at once, or the lanes one by one at the row's end */
     if (lanes == RESOLVE_LANES) {
-        pixel_store8(out, pix, DEPTH, QID, PRIM, rx, ry, rz, ra);
+        pixel_store8(out, pix, DEPTH, QID, PRIM, shade_pack_rgba8(rx, ry, rz, ra));
         return;
     }
 #define RESOLVE_STORE(l, c)                                                                         \

@@ -162,13 +162,11 @@ inline uchar8 shade_encode8(__global const view_rec *vw, float8 c)
     return convert_uchar8_sat(shade_pow_encode8(c, 1.0f / vw->gamma) * 255.0f + 0.5f);
 }
 
-/* Eight pixels' channel bytes written as RGBA, interleaved, to rgba[0 .. 32). */
-inline void shade_store_rgba8(__global uchar *rgba, uchar8 r, uchar8 g, uchar8 b, uchar8 a)
+/* Eight pixels' channel bytes as the words of their uchar4 RGBA (r in the lowest byte: the
+ * first in memory on the little-endian devices OpenCL runs on). */
+inline uint8 shade_pack_rgba8(uchar8 r, uchar8 g, uchar8 b, uchar8 a)
 {
-    vstore16((uchar16)(r.s0, g.s0, b.s0, a.s0, r.s1, g.s1, b.s1, a.s1,
-                       r.s2, g.s2, b.s2, a.s2, r.s3, g.s3, b.s3, a.s3), 0, rgba);
-    vstore16((uchar16)(r.s4, g.s4, b.s4, a.s4, r.s5, g.s5, b.s5, a.s5,
-                       r.s6, g.s6, b.s6, a.s6, r.s7, g.s7, b.s7, a.s7), 0, rgba + 16);
+    return convert_uint8(r) | (convert_uint8(g) << 8) | (convert_uint8(b) << 16) | (convert_uint8(a) << 24);
 }
 
 /* shade_light1 on vectors: the lit colour of one pixel (n: the unit normal, v: the unit view ray). */

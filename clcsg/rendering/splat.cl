@@ -572,7 +572,8 @@ __kernel void splat(__global const quadric_rec *quadrics, __global const sample_
                 SPLAT_PEEK(4, s4) SPLAT_PEEK(5, s5) SPLAT_PEEK(6, s6) SPLAT_PEEK(7, s7)
             }
 #undef SPLAT_PEEK
-            int8 occluded = meet & splat_occluded8(ad - 16 * SLACK * (fabs(ad) + r * (real)0.5 * (1 + dd)), dd, M, word);
+            real8 ad_low = ad - 16 * SLACK * (fabs(ad) + r * (real)0.5 * (1 + dd)); /* |d| <= (1 + |d|^2) / 2 */
+            int8 occluded = meet & splat_occluded8(ad_low, dd, M, word);
             int8 live = meet & ~occluded;
 #if CLCSG_STATS
             cnt[PC_FRAGMENTS] += popcount((uint)splat_lane_bits(meet));
