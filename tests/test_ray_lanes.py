@@ -47,14 +47,14 @@ __kernel void classify_both(__global const quadric_rec *qs, __global const real 
         real3 d = vload3(8 * g + l, v);
         real r1, r2;
         int kind = ray_classify(q, e, d, &r1, &r2);
-        real2 t = ray_box_inv(e, 1 / d, lo, hi);
+        real2 t = ray_box_inv(e, clamp(1 / d, (real3)(-0.5 * REAL_MAX), (real3)(0.5 * REAL_MAX)), lo, hi);
         vstore4((real4)(r1, r2, kind, t.x), k * n + 8 * g + l, one);
         one[4 * n * get_global_size(1) + k * n + 8 * g + l] = t.y;
         x[l] = d.x; y[l] = d.y; z[l] = d.z;
     }
     real8 X = vload8(0, x), Y = vload8(0, y), Z = vload8(0, z), r1, r2, t0, t1;
     int8 kind = ray_classify8(q, e, X, Y, Z, &r1, &r2);
-    ray_box8(e, 1 / X, 1 / Y, 1 / Z, lo, hi, &t0, &t1);
+    ray_box8(e, ray_inverse8(X), ray_inverse8(Y), ray_inverse8(Z), lo, hi, &t0, &t1);
     real a[8], b[8], c[8], d[8], f[8];
     vstore8(r1, 0, a); vstore8(r2, 0, b); vstore8(convert_real8(kind), 0, c); vstore8(t0, 0, d);
     vstore8(t1, 0, f);
@@ -189,7 +189,10 @@ def _quadrics(rng, real):
                                         ((0.0, 0.5, 0.0), {0, 1, 2, 3}), ((3.0, 1.0, -2.0), {0, 1, 2})])
 def test_ray_classify8_and_ray_box8_are_the_per_ray_functions_bit_for_bit(cl_context, eye, kinds):
     """(0, 0, 0): the eye at the cone's apex; (0, 0.5, 0): on the cylinder about x, so the ray
-    along x lies in it (kind 3).  ``kinds``: the sign patterns the rays must reach (bits 0-1)."""
+    along x lies in it (kind 3).  ``kinds``: the sign patterns the rays must reach (bits 0-1).
+    The boxes take ray_inverse8's clamped inverses on both sides (rays along the axes and
+    parallel to faces have zero components); the box intervals are checked against float64
+    below."""
     real = _real(cl_context)
     rng = np.random.default_rng(5)
     coef = _quadrics(rng, real)
@@ -211,6 +214,21 @@ def test_ray_classify8_and_ray_box8_are_the_per_ray_functions_bit_for_bit(cl_con
     assert np.array_equal(_bits(one), _bits(lanes))
     seen = set(one[: 4 * n * nq].reshape(-1, 4)[:, 2].astype(int) % 4)
     assert kinds <= seen
+    # the interval holds every t where the ray is in the closed box, and only such t (float64
+    # at points along the ray): rays parallel to a face plane included
+    t0 = lanes[: 4 * n * nq].reshape(nq, n, 4)[:, :, 3].astype(np.float64)
+    t1 = lanes[4 * n * nq :].reshape(nq, n).astype(np.float64)
+    ts = np.linspace(-6, 6, 241)
+    e = np.asarray(eye, dtype=np.float64)
+    tol = 1e-9 if real == np.float64 else 1e-4
+    for k in range(nq):
+        p = e + ts[None, :, None] * v.astype(np.float64)[:, None, :]
+        inside = np.all((p >= box[k, 0] - tol) & (p <= box[k, 1] + tol), axis=2)
+        strictly = np.all((p > box[k, 0] + tol) & (p < box[k, 1] - tol), axis=2)
+        loose = (ts[None, :] >= t0[k][:, None] - tol) & (ts[None, :] <= t1[k][:, None] + tol)
+        tight = (ts[None, :] >= t0[k][:, None] + tol) & (ts[None, :] <= t1[k][:, None] - tol)
+        assert not (strictly & ~loose).any(), f"box {k}: a point inside the box outside [t0, t1]"
+        assert not (tight & ~inside).any(), f"box {k}: a point of [t0, t1] outside the box"
 
 
 def _random_slab_tape(rng, nq):

@@ -288,7 +288,7 @@ inline int ray_prune(__global const tape_op *t, int n, const ray_roots *rr, real
 }
 
 /* [t0, t1] of the ray e + t v inside the box [lo, hi] (t0 > t1: it misses), inv = 1 / v (+-inf
- * for zero components: the slab test still works) */
+ * for zero components, or ray_inverse8's huge finite ends: the slab test still works) */
 inline real2 ray_box_inv(real3 e, real3 inv, real3 lo, real3 hi)
 {
     real3 a = (lo - e) * inv, b = (hi - e) * inv;
@@ -297,13 +297,27 @@ inline real2 ray_box_inv(real3 e, real3 inv, real3 lo, real3 hi)
 }
 
 
-/* ray_box_inv on the eight lanes' rays (inverse directions ix, iy, iz): [t0, t1] per lane. */
+/* 1 / v on eight lanes, clamped to +-REAL_MAX / 2 where a component of v is zero: finite and
+ * not zero, so ray_box8's products are never 0 * inf (NaN).  A ray parallel to a slab then
+ * gets huge (or infinite) ends of the sign the infinite inverse gives: the same intervals,
+ * and one that lies in a face plane of the box counts as inside (conservative). */
+inline real8 ray_inverse8(real8 v)
+{
+    return clamp(1 / v, (real8)(-0.5 * REAL_MAX), (real8)(0.5 * REAL_MAX));
+}
+
+/* a < b ? a : b and a > b ? a : b, one instruction each on CPUs (fmin and fmax also order NaNs) */
+inline real8 ray_min8(real8 a, real8 b) { return select(b, a, a < b); }
+inline real8 ray_max8(real8 a, real8 b) { return select(b, a, a > b); }
+
+/* ray_box_inv on the eight lanes' rays (inverse directions ix, iy, iz from ray_inverse8, so no
+ * product is NaN and plain minima and maxima do): [t0, t1] per lane. */
 inline void ray_box8(real3 e, real8 ix, real8 iy, real8 iz, real3 lo, real3 hi, real8 *t0, real8 *t1)
 {
     real3 a = lo - e, b = hi - e;
     real8 ax = a.x * ix, ay = a.y * iy, az = a.z * iz, bx = b.x * ix, by = b.y * iy, bz = b.z * iz;
-    *t0 = fmax(fmax(fmin(ax, bx), fmin(ay, by)), fmin(az, bz));
-    *t1 = fmin(fmin(fmax(ax, bx), fmax(ay, by)), fmax(az, bz));
+    *t0 = ray_max8(ray_max8(ray_min8(ax, bx), ray_min8(ay, by)), ray_min8(az, bz));
+    *t1 = ray_min8(ray_min8(ray_max8(ax, bx), ray_max8(ay, by)), ray_max8(az, bz));
 }
 
 /* The lanes where mask m (a real8 comparison) holds, as bits. */
@@ -558,7 +572,7 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
 {
     /* per lane as in a ray of its own: c = v.forward, inv = 1 / v, the stretch in the bound */
     real8 c8 = ray_dot8(vx8, vy8, vz8, (real8)forward.x, (real8)forward.y, (real8)forward.z);
-    real8 ix8 = 1 / vx8, iy8 = 1 / vy8, iz8 = 1 / vz8;
+    real8 ix8 = ray_inverse8(vx8), iy8 = ray_inverse8(vy8), iz8 = ray_inverse8(vz8);
     real8 s0, s1;
     ray_box8(e, ix8, iy8, iz8, blo - slack, bhi + slack, &s0, &s1);
     s0 = fmax(s0, (real8)0);
@@ -673,6 +687,44 @@ __attribute__((noinline)) int lanes_primitive(PRIMITIVE_TABLE, __global const qu
     return primitive_at(PRIMITIVE_TABLE_ARGS, qs, q, p);
 }
 
+/* The common case of a work-item's lanes, shaded and stored as vectors: all eight hit one
+ * quadric that bounds one primitive only (its owner: no primitive_at), so the points
+ * e + t v, the gradients (quadric_gradient's arithmetic on real8) and the albedo are computed
+ * once for the eight; false (nothing written) otherwise. */
+inline bool trace_uniform_store(pixel_out out, __global const quadric_rec *qs, __global const owner_rec *owners,
+                                __global const int *owner_list, __global const prim_rec *prims,
+                                __global const view_rec *view, real3 e, const int *qid, const real *depth, real8 vx,
+                                real8 vy, real8 vz, int pix)
+{
+    int q = qid[0];
+    if (q < 0) return false;
+    for (int l = 1; l < RAY_LANES; ++l)
+        if (qid[l] != q) return false;
+    owner_rec o = owners[q];
+    if (o.count != 1) return false;
+    int prim = owner_list[o.first];
+    float4 albedo = shade_albedo(view, pixel_color(prims, prim));
+    quadric Q = quadric_load(qs, q);
+    real8 t = vload8(0, depth);
+    real8 px = e.x + t * vx, py = e.y + t * vy, pz = e.z + t * vz;
+    pixel_lanes L;
+    vstore8(2 * ((Q.xx * px + Q.xy * py + Q.xz * pz) + Q.xw), 0, L.gx);
+    vstore8(2 * ((Q.xy * px + Q.yy * py + Q.yz * pz) + Q.yw), 0, L.gy);
+    vstore8(2 * ((Q.xz * px + Q.yz * py + Q.zz * pz) + Q.zw), 0, L.gz);
+    vstore8(convert_float8(t), 0, L.depth);
+    vstore8(convert_float8(vx), 0, L.vx);
+    vstore8(convert_float8(vy), 0, L.vy);
+    vstore8(convert_float8(vz), 0, L.vz);
+    vstore8((float8)(albedo.x), 0, L.ax);
+    vstore8((float8)(albedo.y), 0, L.ay);
+    vstore8((float8)(albedo.z), 0, L.az);
+    vstore8((float8)(albedo.w), 0, L.aw);
+    vstore8((int8)(q), 0, L.quadric);
+    vstore8((int8)(prim), 0, L.primitive);
+    pixel_lanes_store(out, view, pix, RAY_LANES, &L);
+    return true;
+}
+
 /* One work-item per RAY_LANES pixels of a row (all in one tile: TILE is a multiple of RAY_LANES):
  * the lanes' rays are traced (trace_lanes), then their hits are shaded as float8 vectors
  * (pixel_lanes_store: shade_light8 and shade_encode8, the resolve pass's lighting and encoding). */
@@ -713,6 +765,9 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     int qid[8];
     real depth[8];
     trace_lanes(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, forward, slack, lanes, dx, dy, dz, qid, depth);
+    if (lanes == RAY_LANES && trace_uniform_store(PIXEL_OUT, qs, owners, owner_list, prims, view, e, qid,
+                                                  depth, dx, dy, dz, i * W + j0))
+        return;
     real vx[8], vy[8], vz[8];
     vstore8(dx, 0, vx); vstore8(dy, 0, vy); vstore8(dz, 0, vz);
     int prim_of[8] = {PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN, PRIMITIVE_UNKNOWN,
