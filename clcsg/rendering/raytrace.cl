@@ -306,6 +306,21 @@ inline real8 ray_inverse8(real8 v)
     return clamp(1 / v, (real8)(-0.5 * REAL_MAX), (real8)(0.5 * REAL_MAX));
 }
 
+/* The least and the greatest of eight numbers (none NaN). */
+inline real min_of8(real8 a)
+{
+    real4 m = fmin(a.lo, a.hi);
+    real2 k = fmin(m.lo, m.hi);
+    return fmin(k.x, k.y);
+}
+
+inline real max_of8(real8 a)
+{
+    real4 m = fmax(a.lo, a.hi);
+    real2 k = fmax(m.lo, m.hi);
+    return fmax(k.x, k.y);
+}
+
 /* a < b ? a : b and a > b ? a : b, one instruction each on CPUs (fmin and fmax also order NaNs) */
 inline real8 ray_min8(real8 a, real8 b) { return select(b, a, a < b); }
 inline real8 ray_max8(real8 a, real8 b) { return select(b, a, a > b); }
@@ -688,11 +703,11 @@ __attribute__((noinline)) int lanes_primitive(PRIMITIVE_TABLE, __global const qu
 }
 
 /* The common case of a work-item's lanes, shaded and stored as vectors: all eight hit one
- * quadric that bounds one primitive only (its owner: no primitive_at), so the points
- * e + t v, the gradients (quadric_gradient's arithmetic on real8) and the albedo are computed
- * once for the eight; false (nothing written) otherwise. */
-inline bool trace_uniform_store(pixel_out out, __global const quadric_rec *qs, __global const owner_rec *owners,
-                                __global const int *owner_list, __global const prim_rec *prims,
+ * quadric, and one primitive holds over their hits: the quadric's only owner, or (several
+ * owners) primitive_over_box's answer for the box of the eight hits, as lanes_primitive finds
+ * it.  The points e + t v, the gradients (quadric_gradient's arithmetic on real8) and the
+ * albedo are computed once for the eight; false (nothing written) otherwise. */
+inline bool trace_uniform_store(pixel_out out, __global const quadric_rec *qs, PRIMITIVE_TABLE,
                                 __global const view_rec *view, real3 e, const int *qid, const real *depth, real8 vx,
                                 real8 vy, real8 vz, int pix)
 {
@@ -701,12 +716,19 @@ inline bool trace_uniform_store(pixel_out out, __global const quadric_rec *qs, _
     for (int l = 1; l < RAY_LANES; ++l)
         if (qid[l] != q) return false;
     owner_rec o = owners[q];
-    if (o.count != 1) return false;
-    int prim = owner_list[o.first];
-    float4 albedo = shade_albedo(view, pixel_color(prims, prim));
-    quadric Q = quadric_load(qs, q);
     real8 t = vload8(0, depth);
     real8 px = e.x + t * vx, py = e.y + t * vy, pz = e.z + t * vz;
+    int prim;
+    if (o.count == 1) {
+        prim = owner_list[o.first];
+    } else {
+        real3 lo = (real3)(min_of8(px), min_of8(py), min_of8(pz));
+        real3 hi = (real3)(max_of8(px), max_of8(py), max_of8(pz));
+        prim = primitive_over_box(PRIMITIVE_TABLE_ARGS, qs, q, lo, hi);
+        if (prim == PRIMITIVE_VARIES) return false;
+    }
+    float4 albedo = shade_albedo(view, pixel_color(prims, prim));
+    quadric Q = quadric_load(qs, q);
     pixel_lanes L;
     vstore8(2 * ((Q.xx * px + Q.xy * py + Q.xz * pz) + Q.xw), 0, L.gx);
     vstore8(2 * ((Q.xy * px + Q.yy * py + Q.yz * pz) + Q.yw), 0, L.gy);
@@ -765,7 +787,7 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     int qid[8];
     real depth[8];
     trace_lanes(qs, arena, qlist, cull, blo, bhi, tile_z, slabs, tile, e, forward, slack, lanes, dx, dy, dz, qid, depth);
-    if (lanes == RAY_LANES && trace_uniform_store(PIXEL_OUT, qs, owners, owner_list, prims, view, e, qid,
+    if (lanes == RAY_LANES && trace_uniform_store(PIXEL_OUT, qs, PRIMITIVE_TABLE_ARGS, view, e, qid,
                                                   depth, dx, dy, dz, i * W + j0))
         return;
     real vx[8], vy[8], vz[8];
