@@ -42,7 +42,7 @@ RESOLVE_LANES = 8
 #: branch-free arithmetic runs as real8 vectors, their shading as one float8 (pixel.h's pixel_lanes)
 RAY_LANES = 8
 
-#: the framebuffer word of a pixel no fragment reached (depth bits << 32 | index)
+#: the framebuffer word of a pixel no fragment reached (float bits of t << 32 | index; splat.cl)
 EMPTY_KEY = 0xFFFFFFFFFFFFFFFF
 
 

@@ -1,5 +1,5 @@
 /* Resolve pass of the splat renderer, one work-item per RESOLVE_LANES pixels of a row.  The framebuffer word holds
- * (float depth bits << 32 | sample index) of the nearest accepted fragment (splat.cl).  Outputs
+ * (float bits of the ray parameter t << 32 | sample index) of the nearest accepted fragment (splat.cl).  Outputs
  * the depth (distance along the unit view ray), the quadric and primitive ids and the colour of
  * the primitive whose boundary holds the hit (primitives.h), shaded with shade.h (the
  * primitives' albedos computed once per view by the albedo kernel; the view rays, normals,
