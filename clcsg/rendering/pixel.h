@@ -137,8 +137,10 @@ inline void pixel_lanes_set(pixel_lanes *px, int l, float depth, int qid, int pr
 }
 
 /* The lanes shaded (shade_light8 with the unit normals g / |g| in float, shade_encode8;
- * misses: shade_background) and written to pixels pix ... pix + lanes - 1. */
-inline void pixel_lanes_store(pixel_out out, __global const view_rec *view, int pix, int lanes, pixel_lanes *px)
+ * misses: shade_background) and written to pixels pix ... pix + lanes - 1.  Inlined, so that
+ * a caller that fills px with vectors (trace_uniform_store) keeps them in registers. */
+__attribute__((always_inline)) inline void pixel_lanes_store(pixel_out out, __global const view_rec *view, int pix,
+                                                             int lanes, pixel_lanes *px)
 {
     int8 qid = vload8(0, px->quadric);
     char8 hit = convert_char8(qid >= 0);

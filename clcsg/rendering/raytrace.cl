@@ -624,7 +624,7 @@ inline void trace_lanes(__global const quadric_rec *qs, __global const tape_op *
                 if (lo.w != 0) {
                     real8 b0, b1;
                     ray_box8(e, ix8, iy8, iz8, lo.xyz - slack, hi.xyz + slack, &b0, &b1);
-                    missed = !(fmax(b0, ta8) <= fmin(b1, tb8));
+                    missed = !(ray_max8(b0, ta8) <= ray_min8(b1, tb8));
                 }
                 real8 r1 = INFINITY, r2 = INFINITY;
                 int8 k = lo.w < 0 ? 4 : 0;
@@ -762,7 +762,14 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     /* a tile whose slabs hold no tape has no surface: its pixels are background (most of a
      * frame round a compact model), without the rays' set-up */
     int listed = 0;
+#if SLABS == 8 /* the eight int4 records as two int16 loads: their .y are components 1, 5, 9, 13 */
+    int16 sa = vload16(0, (__global const int *)(slabs + tile * SLABS)),
+          sb = vload16(1, (__global const int *)(slabs + tile * SLABS));
+    int16 so = sa | sb;
+    listed = so.s1 | so.s5 | so.s9 | so.sd;
+#else
     for (int s = 0; s < SLABS; ++s) listed |= slabs[tile * SLABS + s].y;
+#endif
     if (!listed) {
         pixel_store_background(PIXEL_OUT, view, i * W + j0, lanes);
         return;
