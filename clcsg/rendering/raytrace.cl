@@ -782,10 +782,8 @@ __kernel void raytrace(__global const quadric_rec *qs, __global const tape_op *a
     float4 albedo = 0;
     /* the lanes' view rays: view_ray's arithmetic (d00 + j dx + i dy, then normalize) on real8;
      * lanes past the row's end get +z */
-    real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
-    real8 dx = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
-    real8 dy = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
-    real8 dz = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
+    real8 dx, dy, dz;
+    view_dirs8(view, i, j0, &dx, &dy, &dz);
     realmask8 shown = convert_realmask8((int8)(0, 1, 2, 3, 4, 5, 6, 7) < (int8)(lanes));
     dx = select((real8)0, dx, shown);
     dy = select((real8)0, dy, shown);

@@ -93,13 +93,11 @@ inline int resolve_hit(__global const quadric_rec *quadrics, __global const samp
     }
 
 /* The depth outputs t |d| of the eight pixels j0 ... j0 + 7 of row i, from their words' t
- * (the splat pass's rays d = d00 + j dx + i dy, as view_dir), in `real`. */
+ * (the splat pass's rays d = d00 + j dx + i dy, view_dirs8), in `real`. */
 inline float8 resolve_depth8(__global const view_rec *view, int i, int j0, float8 t)
 {
-    real8 jj = (real)j0 + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
-    real8 dX = view->d00[0] + jj * view->dx[0] + (real)i * view->dy[0];
-    real8 dY = view->d00[1] + jj * view->dx[1] + (real)i * view->dy[1];
-    real8 dZ = view->d00[2] + jj * view->dx[2] + (real)i * view->dy[2];
+    real8 dX, dY, dZ;
+    view_dirs8(view, i, j0, &dX, &dY, &dZ);
     return convert_float8(convert_real8(t) * sqrt(dX * dX + dY * dY + dZ * dZ));
 }
 

@@ -48,6 +48,15 @@ inline real3 view_dir(__global const view_rec *vw, int i, int j)
     return vload3(0, vw->d00) + (real)j * vload3(0, vw->dx) + (real)i * vload3(0, vw->dy);
 }
 
+/* view_dir of the eight pixels (i, j0) ... (i, j0 + 7), as real8 components. */
+inline void view_dirs8(__global const view_rec *vw, int i, int j0, real8 *dx, real8 *dy, real8 *dz)
+{
+    real8 jj = (real8)(j0) + (real8)(0, 1, 2, 3, 4, 5, 6, 7);
+    *dx = vw->d00[0] + jj * vw->dx[0] + (real)i * vw->dy[0];
+    *dy = vw->d00[1] + jj * vw->dx[1] + (real)i * vw->dy[1];
+    *dz = vw->d00[2] + jj * vw->dx[2] + (real)i * vw->dy[2];
+}
+
 /* Unit direction of the view ray of pixel (i, j). */
 inline real3 view_ray(__global const view_rec *vw, int i, int j) { return normalize(view_dir(vw, i, j)); }
 
