@@ -31,11 +31,6 @@ inline void emit_sample(__global raw_sample_rec *out, uint slot, uint cap, real3
     out[slot].pad = 0;
 }
 
-/* cos and sin of k pi / 32, k = 1..15: the aspect angles fill_block tries (a table, not
- * cos / sin per row: rows are many and short near trimming curves) */
-__constant real FILL_COS[15] = {0.9951847266721969, 0.9807852804032304, 0.9569403357322088, 0.9238795325112867, 0.881921264348355, 0.8314696123025452, 0.773010453362737, 0.7071067811865476, 0.6343932841636455, 0.5555702330196023, 0.4713967368259978, 0.38268343236508984, 0.29028467725446233, 0.19509032201612833, 0.09801714032956077};
-__constant real FILL_SIN[15] = {0.0980171403295606, 0.19509032201612825, 0.29028467725446233, 0.3826834323650898, 0.47139673682599764, 0.5555702330196022, 0.6343932841636455, 0.7071067811865475, 0.773010453362737, 0.8314696123025452, 0.8819212643483549, 0.9238795325112867, 0.9569403357322089, 0.9807852804032304, 0.9951847266721968};
-
 /* Cover a block [x0,x1] x [y0,y1] known to lie on the CSG surface with samples at the
  * centers of sub-rectangles of half-sizes (a, b).  Anisotropic bound (beyond the paper's
  * isotropic distortion): for two points of a sub-rectangle, p2 - p1 = (dx, dy, t2 - t1) and
@@ -55,22 +50,14 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
     while (y < y1) {
         hy = fmin(y1 - y, 2 * hy);
         real3 m = rect_slopes(pf, x0, x1, y, y + hy);
-        /* best aspect for these slopes: a few angles suffice (the area is flat at its max).
-         * The area rho^2 cs sn with rho = r / sqrt(1 + e^2) is compared as the fraction
-         * cs sn / (1 + e^2), crosswise: no square root or division per angle (they were
-         * most of this function's time on rows near trimming curves, which are many) */
-        real best_num = 0, best_den = 1, best_sn = 0;
-        for (int k = 0; k < 15; ++k) {
-            real cs = FILL_COS[k], sn = FILL_SIN[k];
-            real e = m.x * cs + m.y * sn;
-            real num = cs * sn, den = 1 + e * e;
-            if (num * best_den > best_num * den) {
-                best_num = num;
-                best_den = den;
-                best_sn = sn;
-            }
-        }
-        real best_b = radius / sqrt(best_den) * best_sn;
+        /* the best aspect for these slopes: with t = tan(angle) the area rho^2 cs sn,
+         * rho = r / sqrt(1 + e^2), e = mx cs + my sn, is r^2 t / (A + 2 mx my t + C t^2) with
+         * A = 1 + mx^2, C = 1 + my^2, whose maximum is at A = C t^2: cs = sqrt(C / (A + C)),
+         * sn = sqrt(A / (A + C)) */
+        real A = 1 + m.x * m.x, C = 1 + m.y * m.y;
+        real cs = sqrt(C / (A + C)), sn = sqrt(A / (A + C));
+        real e_best = m.x * cs + m.y * sn;
+        real best_b = fmax(radius * sn / sqrt(1 + e_best * e_best), (real)0);
         if (hy > 2 * best_b) {
             hy = 2 * best_b;
             m = rect_slopes(pf, x0, x1, y, y + hy);

@@ -13,17 +13,19 @@
 #include "tape.h"
 #include "primitives.h"
 
-__kernel void finish(__global const quadric_rec *qs, __global const frame_rec *frames,
-                     __global const task_rec *tasks, __global const raw_sample_rec *raw, int n,
-                     int first_sample, __global const tape_op *arena, __global tape_op *clip, uint cap_clip,
-                     __global volatile uint *counters,
-                     PRIMITIVE_TABLE,
-                     __global real *normals, __global int *signs, __global int *primitives,
-                     __global int *clip_first, __global int *clip_count)
+#ifndef WORK_GROUP
+#error "WORK_GROUP: the work-group size comes from the driver (sampler.py)"
+#endif
+
+/* The clip program, sign, normal and primitive of sample o (see above); returns the prune
+ * evaluations it took. */
+inline uint finish_sample(__global const quadric_rec *qs, __global const frame_rec *frames,
+                          __global const task_rec *tasks, __global const raw_sample_rec *raw, int o,
+                          __global const tape_op *arena, __global tape_op *clip, uint cap_clip,
+                          __global volatile uint *counters, PRIMITIVE_TABLE,
+                          __global real *normals, __global int *signs, __global int *primitives,
+                          __global int *clip_first, __global int *clip_count)
 {
-    int gid = get_global_id(0);
-    if (gid >= n) return;
-    int o = first_sample + gid;
     raw_sample_rec s = raw[o];
     task_rec t = tasks[s.task];
     real3 p = (real3)(s.pos[0], s.pos[1], s.pos[2]);
@@ -52,7 +54,6 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
     }
     clip_first[o] = first;
     clip_count[o] = count;
-    atomic_add(&counters[1], evals);
     int sign = (bits & 1) ? 1 : -1;
     real3 g = sign * quadric_gradient(quadric_load(qs, t.quadric), p);
     real gl = length(g);
@@ -68,4 +69,29 @@ __kernel void finish(__global const quadric_rec *qs, __global const frame_rec *f
     normals[3 * o + 2] = g.z;
     signs[o] = sign;
     primitives[o] = primitive_at(PRIMITIVE_TABLE_ARGS, qs, t.quadric, p);
+    return evals;
+}
+
+/* One sample per work-item; the prune evaluations are summed over the work-group before one
+ * atomic (an atomic per sample contends between the compute units). */
+__kernel __attribute__((reqd_work_group_size(WORK_GROUP, 1, 1)))
+void finish(__global const quadric_rec *qs, __global const frame_rec *frames,
+            __global const task_rec *tasks, __global const raw_sample_rec *raw, int n,
+            int first_sample, __global const tape_op *arena, __global tape_op *clip, uint cap_clip,
+            __global volatile uint *counters,
+            PRIMITIVE_TABLE,
+            __global real *normals, __global int *signs, __global int *primitives,
+            __global int *clip_first, __global int *clip_count)
+{
+    __local uint evals[WORK_GROUP];
+    int gid = get_global_id(0), lid = get_local_id(0);
+    evals[lid] = gid < n ? finish_sample(qs, frames, tasks, raw, first_sample + gid, arena, clip, cap_clip, counters,
+                                         PRIMITIVE_TABLE_ARGS, normals, signs, primitives, clip_first, clip_count)
+                         : 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (lid == 0) {
+        uint t = 0;
+        for (int m = 0; m < WORK_GROUP; ++m) t += evals[m];
+        atomic_add(&counters[1], t);
+    }
 }

@@ -467,7 +467,7 @@ def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, 
                "SPLIT_AT_Y": SPLIT_AT_Y,
                "QUAD_SPLIT_DIAG": QUAD_SPLIT_DIAG, "WORK_GROUP": WORK_GROUP}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
-    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs}, real)
+    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs, "WORK_GROUP": WORK_GROUP}, real)
     scene_buf = SceneBuffers(ctx, packed)
     finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
     sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity, expected, progress,
