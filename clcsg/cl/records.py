@@ -62,7 +62,7 @@ def cell_dtype(real) -> np.dtype:
 def raw_sample_dtype(real) -> np.dtype:
     return np.dtype(
         [("pos", real, 3), ("radius", real), ("task", np.int32), ("tape_first", np.int32),
-         ("tape_count", np.int32), ("pad", np.int32)],
+         ("tape_count", np.int32), ("sides", np.int32)],
         align=True,
     )
 

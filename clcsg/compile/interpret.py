@@ -222,10 +222,11 @@ def leaf_over_region(matrix, sign: int, center, axes, rho: float) -> int:
     """State of the literal (matrix, sign) over the region: the oriented box
     center + sum_m u_m axes[m] (|u_m| <= 1) grown by a ball of radius rho.  Planes are tested
     exactly (a linear function's range over the box), other quadrics by the conservative
-    distance at the center against rho plus the box's half-diagonal."""
+    distance at the center against rho plus the box's half-diagonal.  The rounding slack's
+    scale takes 1-norms, as the kernels do (``prune_consts_of`` in tape.h)."""
     c = np.asarray(center, dtype=np.float64).reshape(3)
     ax = np.asarray(axes, dtype=np.float64).reshape(3, 3)
-    scale = abs(rho) + np.linalg.norm(c) + np.linalg.norm(ax, axis=1).sum()
+    scale = abs(rho) + np.abs(c).sum() + np.abs(ax).sum()
     slack = PRUNE_SLACK * scale
     m = np.asarray(matrix)
     if not np.any(m[:3, :3]):

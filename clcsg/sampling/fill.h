@@ -13,9 +13,10 @@
 #endif
 
 /* where a sample comes from: its task and the tape of its cell (valid over every splat ball
- * of radius <= r around the cell's patch) */
+ * of radius <= r around the cell's patch), and the sides where that tape is decided over them
+ * (raw_sample_rec) */
 typedef struct {
-    int task, tape_first, tape_count;
+    int task, tape_first, tape_count, sides;
 } sample_src;
 
 inline void emit_sample(__global raw_sample_rec *out, uint slot, uint cap, real3 p, real radius, sample_src src)
@@ -28,7 +29,7 @@ inline void emit_sample(__global raw_sample_rec *out, uint slot, uint cap, real3
     out[slot].task = src.task;
     out[slot].tape_first = src.tape_first;
     out[slot].tape_count = src.tape_count;
-    out[slot].pad = 0;
+    out[slot].sides = src.sides;
 }
 
 /* Cover a block [x0,x1] x [y0,y1] known to lie on the CSG surface with samples at the

@@ -7,8 +7,10 @@
  * sample's quadric substituted.  If both sides come out constant (and, s being on the surface,
  * different) the splat needs no clipping; otherwise the pruned tape is written to the clip
  * buffer (exactly the rows pruning keeps, reserved with an atomic add, written only below the
- * capacity; the host grows the buffer and re-runs on overflow).  The sign is +1 where the solid is on the quadric's
- * negative side at s (outward normal +grad Q), -1 otherwise.
+ * capacity; the host grows the buffer and re-runs on overflow).  A sample that comes with its
+ * sides (raw_sample_rec.sides: its filled cell's tape is decided over the cell's patch grown by
+ * the radius, which holds the ball) needs neither.  The sign is +1 where the solid is on the
+ * quadric's negative side at s (outward normal +grad Q), -1 otherwise.
  */
 #include "tape.h"
 #include "primitives.h"
@@ -16,6 +18,29 @@
 #ifndef WORK_GROUP
 #error "WORK_GROUP: the work-group size comes from the driver (sampler.py)"
 #endif
+
+/* The clip program of a sample at p on quadric q (its cell's tape pruned over the splat ball,
+ * written to the clip buffer unless both sides are decided) into *first, *count; returns the
+ * membership bits at p: from the decided root state, else from the (short) clip program,
+ * which equals the tape over the ball; the full tape only if the clip buffer is full this
+ * run. */
+inline uint clip_program(__global const tape_op *tape, int nt, __global const quadric_rec *qs, int q, real3 p,
+                         real radius, __global tape_op *clip, uint cap_clip, __global volatile uint *counters,
+                         int *first, int *count, uint *evals)
+{
+    prune_region ball = {p, (real3)(0), (real3)(0), (real3)(0), radius};
+    uchar state;
+    prune_memo memo; /* the count's leaf states, replayed by the write */
+    memo.mode = 1;
+    int rows = tape_prune_rows_memo(tape, nt, qs, &ball, q, &state, evals, &memo);
+    if (prune_decision(state) < 0) return prune_member_bits(state);
+    uint base = atomic_add(&counters[0], (uint)rows);
+    if (base + (uint)rows > cap_clip) return tape_member(tape, nt, qs, p, q);
+    memo.mode = 2;
+    tape_prune_write_memo(tape, nt, qs, &ball, q, state, clip + base, first, count, evals, &memo);
+    *first += (int)base;
+    return tape_member(clip + *first, *count, qs, p, q);
+}
 
 /* The clip program, sign, normal and primitive of sample o (see above); returns the prune
  * evaluations it took. */
@@ -31,27 +56,11 @@ inline uint finish_sample(__global const quadric_rec *qs, __global const frame_r
     real3 p = (real3)(s.pos[0], s.pos[1], s.pos[2]);
     __global const tape_op *tape = arena + s.tape_first;
     int nt = s.tape_count;
-    prune_region ball = {p, (real3)(0), (real3)(0), (real3)(0), s.radius};
-    uint evals = 0;
-    uchar state;
     int first = 0, count = 0;
-    prune_memo memo; /* the count's leaf states, replayed by the write */
-    memo.mode = 1;
-    int rows = tape_prune_rows_memo(tape, nt, qs, &ball, t.quadric, &state, &evals, &memo);
-    /* membership at s: from the decided root state, else from the (short) clip program, which
-     * equals the tape over the ball; the full tape only if the clip buffer is full this run */
-    uint bits = prune_member_bits(state);
-    if (prune_decision(state) >= 0) {
-        uint base = atomic_add(&counters[0], (uint)rows);
-        if (base + (uint)rows <= cap_clip) {
-            memo.mode = 2;
-            tape_prune_write_memo(tape, nt, qs, &ball, t.quadric, state, clip + base, &first, &count, &evals, &memo);
-            first += (int)base;
-            bits = tape_member(clip + first, count, qs, p, t.quadric);
-        } else {
-            bits = tape_member(tape, nt, qs, p, t.quadric);
-        }
-    }
+    uint evals = 0;
+    uint bits = s.sides & SIDES_KNOWN ? (uint)(s.sides & 3)
+                                      : clip_program(tape, nt, qs, t.quadric, p, s.radius, clip, cap_clip, counters,
+                                                     &first, &count, &evals);
     clip_first[o] = first;
     clip_count[o] = count;
     int sign = (bits & 1) ? 1 : -1;

@@ -127,14 +127,18 @@ typedef struct {
 } cell_rec;
 
 /* A sample as the subdivision emits it: position (device coordinates), splat radius, task, and
- * the tape of its cell (valid over the splat ball). */
+ * the tape of its cell (valid over the splat ball).  `sides` is 0, or SIDES_KNOWN with the
+ * membership bits (bit 0 side -, bit 1 side +) where the cell's tape is decided over every
+ * splat ball of the cell's samples: the finish pass then needs no pruning and the sample no
+ * clip program. */
+#define SIDES_KNOWN 4
 typedef struct {
     real pos[3];
     real radius;
     int task;
     int tape_first;
     int tape_count;
-    int pad;
+    int sides;
 } raw_sample_rec;
 
 #endif

@@ -190,20 +190,24 @@ inline uchar st_and6(uchar a, uchar b) { return ((a & b) & ST_CAN_T) | ((a | b) 
 inline uchar st_or6(uchar a, uchar b) { return ((a | b) & ST_CAN_T) | ((a & b) & ST_CAN_F); }
 
 /* What the leaf tests need of a region that does not depend on the leaf, computed once per
- * pruning pass (prune_forward) instead of once per leaf. */
+ * pruning pass (prune_forward) instead of once per leaf, and only when a leaf is tested.  The
+ * rounding scales take 1-norms, which bound the lengths from above: the slack only grows, and
+ * no square root is taken for them. */
 typedef struct {
     real slack;     /* rounding slack of the box and ball tests */
     real half_diag; /* |a0|^2 + |a1|^2 + |a2|^2, square-rooted */
-    real pl;        /* 1 + |pc| + |a0| + |a1| + |a2| (on_patch regions) */
+    real pl;        /* 1 + |pc| + |a0| + |a1| + |a2| (on_patch regions; 1-norms) */
 } prune_consts;
+
+inline real norm1(real3 v) { return fabs(v.x) + fabs(v.y) + fabs(v.z); }
 
 inline prune_consts prune_consts_of(const prune_region *g)
 {
     prune_consts k;
-    real scale = fabs(g->rho) + length(g->c) + length(g->a0) + length(g->a1) + length(g->a2);
-    k.slack = ROUNDING_ULPS * REAL_EPS * scale;
+    real axes = norm1(g->a0) + norm1(g->a1) + norm1(g->a2);
+    k.slack = ROUNDING_ULPS * REAL_EPS * (fabs(g->rho) + norm1(g->c) + axes);
     k.half_diag = sqrt(dot(g->a0, g->a0) + dot(g->a1, g->a1) + dot(g->a2, g->a2));
-    k.pl = g->on_patch ? 1 + length(g->pc) + length(g->a0) + length(g->a1) + length(g->a2) : 0;
+    k.pl = g->on_patch ? 1 + norm1(g->pc) + axes : 0;
     return k;
 }
 
@@ -294,7 +298,8 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
     if (memo_mode == 1)
         for (int w = 0; w < PRUNE_MEMO_ROWS / 16; ++w) memo->bits[w] = 0;
     int k_out = 0, lst = -1;
-    prune_consts pk = prune_consts_of(g);
+    prune_consts pk;
+    bool have_pk = false;
     for (int k = 0; k < n; ++k) {
         tape_op o = t[k];
         tape_op keep = o;
@@ -309,6 +314,10 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
                     s = (memo->bits[k >> 4] >> (2 * (k & 15))) & 3;
                 } else {
                     ++*evals;
+                    if (!have_pk) {
+                        pk = prune_consts_of(g);
+                        have_pk = true;
+                    }
                     s = leaf_over_region(qs, o.a, o.b, g, &pk);
                     if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g, &pk);
                     if (memo_mode == 1 && k < PRUNE_MEMO_ROWS) memo->bits[k >> 4] |= (uint)s << (2 * (k & 15));
