@@ -191,7 +191,7 @@ def time_sampling(scene, radius, ctx, repeats=3, budget=20.0, normal_form="tree"
         runs += 1
         if best is None or wall < best["seconds"]:
             best = {"seconds": wall, "cpu_s": cpu, "classify_kernel_s": kernel_seconds(log, "classify"),
-                    "finish_kernel_s": kernel_seconds(log, "finish"), "samples": s}
+                    "samples": s}
         spent += wall
         if spent > budget:
             break
@@ -218,7 +218,6 @@ def sampling_record(ts: dict, cu: int) -> dict:
         "subdivide_s": st.get("subdivide_s"),
         "finish_s": st.get("finish_s"),
         "classify_kernel_s": ts["classify_kernel_s"],
-        "finish_kernel_s": ts["finish_kernel_s"],
         "distance_queries": q,
         "leaf_distances": st.get("leaf_distances"),
         "leaf_distances_per_query": st.get("leaf_distances_per_query"),

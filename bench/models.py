@@ -236,7 +236,7 @@ def table(payload) -> str:
             f"{tm(t) if t else '-'} | {dskip if dskip else (tm(d) if d else '-')} | "
             f"{fmt(t.get('unresolved'), ',.0f')} / {dv('unresolved', ',.0f')} |")
     lines += ["", "Where the time goes (tree shape; ms): compile (Python), subdivide (level loop), of it the "
-              "classify kernel, finish", "",
+              "classify kernel, finish (reading the samples back, clip programs deduplicated)", "",
               "| model | size | total | compile | subdivide | classify kernel | finish | levels | queries | "
               "CPU time / wall |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:

@@ -3,8 +3,8 @@
 A fresh buffer costs more than its allocation: on a CPU device its memory is new to the
 process, and each page is faulted in and cleared the first time a kernel writes it (about a
 tenth of the level-3 Menger sponge's sampling time went to that, inside the kernels).  The
-sampler asks its per-call buffers (cells, tape arenas, raw samples, the finish pass's outputs
-and clip rows) of :func:`take` and hands them back with :func:`give` when the call is done;
+sampler asks its per-call buffers (cells, tape arenas, sample records and clip rows) of
+:func:`take` and hands them back with :func:`give` when the call is done;
 the next call of about the same size gets the same memory, already mapped.
 
 Sizes are rounded up to classes a quarter-octave apart (at most 25% more than asked), so

@@ -17,7 +17,7 @@ OP_NAMES = ("LEAF", "AND", "OR", "COPY", "CONST")
 SAMPLER_COUNTERS = (
     "cells", "samples", "distance_queries", "leaf_distances", "unresolved", "discarded", "filled",
     "single", "split", "prune_evaluations", "pruned_decided", "tape_rows", "tape_max", "tapes_written",
-    "arena",
+    "arena", "clip_rows", "finish_prune_evaluations",
 )
 
 #: counters of the splat kernel, in slot order

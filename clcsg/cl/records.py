@@ -61,8 +61,8 @@ def cell_dtype(real) -> np.dtype:
 
 def raw_sample_dtype(real) -> np.dtype:
     return np.dtype(
-        [("pos", real, 3), ("radius", real), ("task", np.int32), ("tape_first", np.int32),
-         ("tape_count", np.int32), ("sides", np.int32)],
+        [("pos", real, 3), ("normal", real, 3), ("radius", real), ("task", np.int32), ("sign", np.int32),
+         ("primitive", np.int32), ("clip_first", np.int32), ("clip_count", np.int32), ("pad", np.int32)],
         align=True,
     )
 

@@ -7,30 +7,11 @@
 #ifndef CLCSG_FILL_H
 #define CLCSG_FILL_H
 #include "heightfield.h"
+#include "finish.h"
 
 #ifndef FILL_DELTA_RATIO
 #define FILL_DELTA_RATIO 1.1
 #endif
-
-/* where a sample comes from: its task and the tape of its cell (valid over every splat ball
- * of radius <= r around the cell's patch), and the sides where that tape is decided over them
- * (raw_sample_rec) */
-typedef struct {
-    int task, tape_first, tape_count, sides;
-} sample_src;
-
-inline void emit_sample(__global raw_sample_rec *out, uint slot, uint cap, real3 p, real radius, sample_src src)
-{
-    if (slot >= cap) return;
-    out[slot].pos[0] = p.x;
-    out[slot].pos[1] = p.y;
-    out[slot].pos[2] = p.z;
-    out[slot].radius = radius;
-    out[slot].task = src.task;
-    out[slot].tape_first = src.tape_first;
-    out[slot].tape_count = src.tape_count;
-    out[slot].sides = src.sides;
-}
 
 /* Cover a block [x0,x1] x [y0,y1] known to lie on the CSG surface with samples at the
  * centers of sub-rectangles of half-sizes (a, b).  Anisotropic bound (beyond the paper's
@@ -42,7 +23,7 @@ inline void emit_sample(__global raw_sample_rec *out, uint slot, uint cap, real3
  * maximize the area a b on the constraint.  Sub-rectangles that plane k owns nowhere are
  * left to the other planes; a row owned everywhere reserves its output with one atomic. */
 void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real radius, sample_src src,
-                __global volatile uint *counters, __global raw_sample_rec *samples, uint cap_samples)
+                sample_sink *out)
 {
     real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
     real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
@@ -73,19 +54,17 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
         real ha = 0.5 * sx, hb = 0.5 * (yb - y), e = m.x * ha + m.y * hb;
         real need = fmin(radius, sqrt(ha * ha + hb * hb + e * e) * (1 + (real)1e-6));
         if (ni.y <= m.z && nj.y <= m.z) { /* owned everywhere */
-            uint base = atomic_add(&counters[SC_SAMPLES], (uint)nx);
+            uint base = atomic_add(&out->counters[SC_SAMPLES], (uint)nx);
             for (int a = 0; a < nx; ++a) {
                 real cx = x0 + (a + (real)0.5) * sx;
-                emit_sample(samples, base + a, cap_samples,
-                            plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, src);
+                emit_sample(out, base + a, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, src);
             }
         } else {
             for (int a = 0; a < nx; ++a) {
                 real xa = x0 + a * sx;
                 if (!sub_rect_owned(pf, xa, xa + sx, y, yb)) continue;
                 real cx = xa + (real)0.5 * sx;
-                uint slot = atomic_inc(&counters[SC_SAMPLES]);
-                emit_sample(samples, slot, cap_samples,
+                emit_sample(out, atomic_inc(&out->counters[SC_SAMPLES]),
                             plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, src);
             }
         }
@@ -95,8 +74,7 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
 
 /* Cover a cell that lies on the CSG surface: split it (no distance queries needed) into
  * blocks over which the distortion varies little, and fill each block. */
-void fill_cell(const plane_frame *pf, cell_rec c, real radius, sample_src src, __global volatile uint *counters,
-               __global raw_sample_rec *samples, uint cap_samples)
+void fill_cell(const plane_frame *pf, cell_rec c, real radius, sample_src src, sample_sink *out)
 {
     real4 stack[40];
     int top = 0;
@@ -120,7 +98,7 @@ void fill_cell(const plane_frame *pf, cell_rec c, real radius, sample_src src, _
             }
             continue;
         }
-        fill_block(pf, b.x, b.y, b.z, b.w, radius, src, counters, samples, cap_samples);
+        fill_block(pf, b.x, b.y, b.z, b.w, radius, src, out);
     }
 }
 

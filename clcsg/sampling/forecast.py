@@ -34,7 +34,7 @@ The cells of the last level are dropped, not split: they cost FLOOR_COST of a ce
 level (as many again as the last level emitted), at most the expected count left.
 
 **Seconds.**  A level costs a + b (cells + SAMPLE_COST samples emitted): a the cheapest level
-seen (launches, the counter read, the finish pass's fixed part), SAMPLE_COST the cost of
+seen (the launch and the counter read), SAMPLE_COST the cost of
 emitting and finishing a sample against classifying a cell (0.25-0.35 on PoCL CPU; one
 parameter, since the early levels, with few cells and many samples, cannot separate the two),
 and b fitted to the levels seen, weighted DECAY^age so it follows the cost per cell as the

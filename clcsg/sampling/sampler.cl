@@ -8,9 +8,11 @@
  * single sample, or split (the children get the tape pruned over the patch grown by the
  * radius, written once, with exactly the rows pruning keeps, into the level's output arena).
  * Arenas ping-pong: a level reads its cells' tapes from `arena_in` and writes its children's
- * into `arena_out`, so an arena holds the tapes of one level's live cells only.  Children,
- * samples and tapes are appended with atomics and written only below the capacity; the
- * counters keep counting, so the host sees an overflow, grows the buffer and re-runs the level.
+ * into `arena_out`, so an arena holds the tapes of one level's live cells only.  A sample is
+ * finished as it is emitted (finish.h: its clip program from the cell's tape, sign, normal,
+ * primitive).  Children, samples, tapes and clip programs are appended with atomics and
+ * written only below the capacity; the counters keep counting, so the host sees an overflow,
+ * grows the buffer and re-runs the level.
  *
  * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, SPLIT_AT(_Y), MAX_FILL (largest
  * grid a cell may emit at once; larger cells are split instead).  Counter slots SC_* come from
@@ -198,8 +200,7 @@ inline int corner_cover(const cell_geom *g, const real d[4])
  * box twice as large, at the cost of one query).  The splat radius shrinks to what is needed. */
 inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
                        __global const tape_op *tape, int n, __global const quadric_rec *qs, int q, real radius,
-                       sample_src src, __global volatile uint *counters, __global raw_sample_rec *samples,
-                       uint cap_samples, cell_work *w)
+                       sample_src src, sample_sink *out, cell_work *w)
 {
     real cx[4] = {c.x0, c.x1, c.x0, c.x1};
     real cy[4] = {c.y0, c.y0, c.y1, c.y1};
@@ -219,8 +220,7 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
         }
     }
     if (best >= 0 && best_r <= radius) {
-        emit_sample(samples, atomic_inc(&counters[SC_SAMPLES]), cap_samples,
-                    plane_point(&g->pf, cx[best], cy[best], best_h),
+        emit_sample(out, atomic_inc(&out->counters[SC_SAMPLES]), plane_point(&g->pf, cx[best], cy[best], best_h),
                     fmax(best_r, radius * (real)1e-3), src);
         return true;
     }
@@ -232,7 +232,7 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
     if (r > radius) return false;
     real3 pc = plane_point(&g->pf, mx, my, h);
     if (!(query(tape, n, qs, q, pc, w) < 0)) return false;
-    emit_sample(samples, atomic_inc(&counters[SC_SAMPLES]), cap_samples, pc, fmax(r, radius * (real)1e-3), src);
+    emit_sample(out, atomic_inc(&out->counters[SC_SAMPLES]), pc, fmax(r, radius * (real)1e-3), src);
     return true;
 }
 
@@ -342,33 +342,48 @@ inline bool no_surface_in_cases(const cell_geom *g, cell_rec c, const prune_regi
     return cases == 0 || (cases & task_possible_cases(qs, self_q, live, k, patch)) == 0;
 }
 
-/* The sides every sample of a filled cell has (SIDES_KNOWN | membership bits) where the tape
- * pruned over the patch grown by the radius, which holds every splat ball of the cell's
- * samples, is decided there; else 0 (the finish pass prunes per sample).  One pruning pass per
- * cell instead of one per sample. */
-inline int fill_sides(const cell_geom *g, cell_rec c, __global const tape_op *tape, int n,
-                      __global const quadric_rec *qs, int q, real radius, cell_work *w)
+/* The source of a filled cell's samples: its tape pruned over the patch grown by the radius,
+ * which holds every splat ball of the cell's samples (finish.h).  Decided there, the samples
+ * get their sides (SIDES_KNOWN | membership bits) and no pruning; otherwise the pruned tape is
+ * written to the clip buffer as the samples' tape (left as it was if the buffer is full: the
+ * level runs again).  One pruning pass per cell, and per sample only the leaves still live. */
+inline sample_src fill_source(const cell_geom *g, cell_rec c, sample_src src, real radius, sample_sink *out,
+                              cell_work *w)
 {
     prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
     uchar state;
-    tape_prune_rows(tape, n, qs, &grown, q, &state, &w->evals);
-    return prune_decision(state) < 0 ? SIDES_KNOWN | (int)prune_member_bits(state) : 0;
+    prune_memo memo; /* the count's leaf states, replayed by the write */
+    memo.mode = 1;
+    int rows = tape_prune_rows_memo(src.tape, src.tape_count, out->qs, &grown, src.quadric, &state, &w->evals, &memo);
+    if (prune_decision(state) < 0) {
+        src.sides = SIDES_KNOWN | (int)prune_member_bits(state);
+        return src;
+    }
+    uint base = atomic_add(&out->counters[SC_CLIP_ROWS], (uint)rows);
+    if (base + (uint)rows > out->cap_clip) return src;
+    int first, count;
+    memo.mode = 2;
+    tape_prune_write_memo(src.tape, src.tape_count, out->qs, &grown, src.quadric, state, out->clip + base, &first,
+                          &count, &w->evals, &memo);
+    src.clip_at = (int)base + first;
+    src.tape = out->clip + src.clip_at;
+    src.tape_count = count;
+    return src;
 }
 
 /* One cell: geometry, the pruned tape's decision, the corner discs, single sample, fill,
  * floor, split (in that order; see the module docstring of sampler.py for the guarantee). */
 int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const frame_rec *frames,
                   __global const task_rec *tasks, __global cell_rec *cells_out, uint cap_cells,
-                  __global raw_sample_rec *samples, uint cap_samples, __global const tape_op *arena_in,
-                  __global tape_op *arena_out, uint cap_arena, __global volatile uint *counters, real radius,
-                  real floor_size, cell_work *w)
+                  __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
+                  __global volatile uint *counters, real radius, real floor_size, sample_sink *out, cell_work *w)
 {
     task_rec t = tasks[c.task];
     cell_geom g;
     if (!cell_geometry(&t, frames, c, radius, &g)) return OUT_DISCARDED;
     __global const tape_op *tape = arena_in + c.tape_first;
     int n = c.tape_count;
-    sample_src src = {c.task, c.tape_first, c.tape_count, 0};
+    sample_src src = {c.task, t.quadric, t.plane, t.sheet, tape, n, 0, -1};
     /* the discs of the corners the cell has from its parent first (a split gives both
      * children all four corners; NaN, unknown, gives no disc): where they prove the patch off
      * the surface, pruning it would only say the same */
@@ -385,8 +400,7 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     int decided = prune_decision(state);
     if (decided > 0 || !(state & ST_SELF)) return OUT_DECIDED_DISCARD;
     if (decided < 0 && g.fill_fits) {
-        src.sides = fill_sides(&g, c, tape, n, qs, t.quadric, radius, w);
-        fill_cell(&g.pf, c, radius, src, counters, samples, cap_samples);
+        fill_cell(&g.pf, c, radius, fill_source(&g, c, src, radius, out, w), out);
         return OUT_DECIDED_FILL;
     }
     real d[4];
@@ -395,14 +409,13 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     if (cover > 0) return OUT_DISCARDED;
     if (!(d[0] < 0 || d[1] < 0 || d[2] < 0 || d[3] < 0) && no_surface_in_cases(&g, c, &patch, tape, n, qs, t.quadric, &leaves))
         return OUT_DECIDED_DISCARD;
-    if (try_single(&g, c, d, tape, n, qs, t.quadric, radius, src, counters, samples, cap_samples, w))
+    if (try_single(&g, c, d, tape, n, qs, t.quadric, radius, src, out, w))
         return OUT_SINGLE;
     /* fill: the corner discs of negative distance cover the cell and the heightfield is
      * defined everywhere: a grid with spacing s <= sqrt 2 r / delta puts every point of the
      * cell within r / delta (2-D), hence within r (3-D), of a sample */
     if (cover < 0 && g.fill_fits) {
-        src.sides = fill_sides(&g, c, tape, n, qs, t.quadric, radius, w);
-        fill_cell(&g.pf, c, radius, src, counters, samples, cap_samples);
+        fill_cell(&g.pf, c, radius, fill_source(&g, c, src, radius, out, w), out);
         return OUT_FILLED;
     }
     if (sqrt(g.wx * g.wx + g.wy * g.wy + g.et * g.et) < floor_size) return OUT_UNRESOLVED;
@@ -416,18 +429,21 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
 
 /* the per-cell statistics summed over a work-group before one atomic per counter (an atomic
  * per cell and counter contends between the compute units) */
-#define WG_SUMS 11
+#define WG_SUMS 12
 constant int WG_SLOT[WG_SUMS] = {SC_DISCARDED, SC_FILLED, SC_SINGLE, SC_SPLIT, SC_UNRESOLVED, SC_PRUNED_DECIDED,
                                  SC_DISTANCE_QUERIES, SC_LEAF_DISTANCES, SC_PRUNE_EVALUATIONS, SC_TAPES_WRITTEN,
-                                 SC_TAPE_ROWS};
+                                 SC_TAPE_ROWS, SC_FINISH_PRUNE_EVALUATIONS};
 
+/* One cell per work-item (classify_cell); its samples are finished as they are emitted
+ * (finish.h), into the per-sample outputs, while its tape is at hand. */
 __kernel __attribute__((reqd_work_group_size(WORK_GROUP, 1, 1)))
 void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
               __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
               __global cell_rec *cells_out, uint cap_cells,
               __global raw_sample_rec *samples, uint cap_samples,
               __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
-              __global volatile uint *counters, real radius, real floor_size)
+              __global volatile uint *counters, real radius, real floor_size,
+              __global tape_op *clip, uint cap_clip, PRIMITIVE_TABLE)
 {
     __local uint sums[WG_SUMS][WORK_GROUP];
     __local uint tape_max[WORK_GROUP];
@@ -436,19 +452,21 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
     tape_max[lid] = 0;
     if (gid < n_cells) {
         cell_work w = {0, 0, 0, 0};
+        sample_sink out = {samples, cap_samples, counters, clip, cap_clip, qs, frames, PRIMITIVE_TABLE_ARGS, 0};
         cell_rec c = cells_in[gid];
-        int out = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, samples, cap_samples, arena_in,
-                                arena_out, cap_arena, counters, radius, floor_size, &w);
-        int k = out == OUT_DISCARDED || out == OUT_DECIDED_DISCARD ? 0
-              : out == OUT_FILLED || out == OUT_DECIDED_FILL ? 1
-              : out == OUT_SINGLE ? 2 : out == OUT_SPLIT ? 3 : 4;
+        int o = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, arena_in, arena_out, cap_arena, counters,
+                              radius, floor_size, &out, &w);
+        int k = o == OUT_DISCARDED || o == OUT_DECIDED_DISCARD ? 0
+              : o == OUT_FILLED || o == OUT_DECIDED_FILL ? 1
+              : o == OUT_SINGLE ? 2 : o == OUT_SPLIT ? 3 : 4;
         sums[k][lid] = 1;
-        sums[5][lid] = out == OUT_DECIDED_DISCARD || out == OUT_DECIDED_FILL;
+        sums[5][lid] = o == OUT_DECIDED_DISCARD || o == OUT_DECIDED_FILL;
         sums[6][lid] = w.queries;
         sums[7][lid] = w.leaves;
         sums[8][lid] = w.evals;
         sums[9][lid] = w.tapes_written;
         sums[10][lid] = (uint)c.tape_count;
+        sums[11][lid] = out.evals;
         tape_max[lid] = (uint)c.tape_count;
     }
     barrier(CLK_LOCAL_MEM_FENCE);

@@ -1,4 +1,4 @@
-"""Driver of the adaptive subdivision sampler (``sampler.cl``, ``finish.cl``); paper sections 3-5
+"""Driver of the adaptive subdivision sampler (``sampler.cl``, ``finish.h``); paper sections 3-5
 on the CSG tape.
 
 Decomposition
@@ -61,8 +61,8 @@ The substitution is per quadric, not per leaf, so coincident faces of different 
 surfaces shared by several parts of the tree and shared sub-graphs need no special rule.
 
 Nothing is lost: each level runs with buffers sized from an estimate; the kernel counts past
-the capacity without writing, the host sees it, grows the buffer (cells, samples, tape arena)
-and re-runs the level; the finish pass does the same with the clip buffer.
+the capacity without writing, the host sees it, grows the buffer (cells, samples, tape arena,
+clip programs) and re-runs the level.
 
 Scale
 -----
@@ -70,8 +70,8 @@ A split counts the rows its children's pruned tape keeps (the forward pass of pr
 writing) and reserves exactly that many in the level's output arena, never the parent's
 length.  Arenas ping-pong (:class:`_Subdivision`): a level reads its cells' tapes from one and
 writes its children's into the other, whose counter starts at zero, so an arena holds the
-tapes of one level's live cells.  A sample's clip program is made from its cell's tape right
-after the level that emitted it (:class:`_Finisher`), while that tape is still there.
+tapes of one level's live cells.  A sample's clip program, sign, normal and primitive are
+made as it is emitted (``finish.h``), from its cell's tape, into its record.
 """
 
 from __future__ import annotations
@@ -100,11 +100,11 @@ from .forecast import Forecast, level_bounds
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
-WORK_GROUP = 64  # > the 12 statistics classify sums per work-group (sampler.cl)
+WORK_GROUP = 64  # > the 13 statistics classify sums per work-group (sampler.cl)
 
 #: counters summed over levels into the stats (the others are per-level positions)
 SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
-           "prune_evaluations", "pruned_decided", "tapes_written")
+           "prune_evaluations", "pruned_decided", "tapes_written", "finish_prune_evaluations")
 _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
 
 
@@ -406,15 +406,14 @@ def sample(
         return _empty(radius, tape, packed, stats)
 
     stats["expected_samples"] = guard.expected_samples(tape, est)
-    sub, finisher = _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity,
-                               stats["expected_samples"], progress, max_levels, root_rows)
+    sub = _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity,
+                     stats["expected_samples"], progress, max_levels, root_rows)
     t_sub = time.perf_counter()
     sub.run()
     t2 = time.perf_counter()
     timings["subdivide_s"] = t2 - t_sub
-    samples = finisher.samples(sub, tape, radius)
+    samples = sub.collect(tape, radius)
     sub.release()
-    finisher.release()
     timings["finish_s"] = time.perf_counter() - t2
     timings["total_s"] = time.perf_counter() - t0
     if len(samples) == 0:
@@ -462,18 +461,15 @@ def _root_tasks(tape, packed, frames, radius):
 
 def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, floor, capacity, expected,
                progress, max_levels, root_rows=None):
-    """The programs, buffers and drivers of one run: (:class:`_Subdivision`, :class:`_Finisher`)."""
+    """The program, buffers and driver of one run (:class:`_Subdivision`)."""
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT,
                "SPLIT_AT_Y": SPLIT_AT_Y,
                "QUAD_SPLIT_DIAG": QUAD_SPLIT_DIAG, "WORK_GROUP": WORK_GROUP}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
-    fin = build(ctx, "sampling/finish.cl", {"TAPE_REGS": packed.n_regs, "WORK_GROUP": WORK_GROUP}, real)
-    scene_buf = SceneBuffers(ctx, packed)
-    finisher = _Finisher(ctx, fin, scene_buf, frames_rec, tasks, packed, capacity)
-    sub = _Subdivision(ctx, prg, scene_buf, frames_rec, tasks, roots, radius, floor, capacity, expected, progress,
-                       max_levels, finisher, root_rows)
+    sub = _Subdivision(ctx, prg, SceneBuffers(ctx, packed), frames_rec, tasks, roots, radius, floor, capacity,
+                       expected, progress, max_levels, root_rows)
     sub.task_quadrics = tasks["quadric"]
-    return sub, finisher
+    return sub
 
 
 def checked_radius(radius, floor) -> tuple:
@@ -552,8 +548,9 @@ class _Subdivision:
     Tape arenas ping-pong: level L reads its cells' tapes from one arena and writes its
     children's tapes (exactly the rows pruning keeps) into the other, whose counter starts at
     zero, so an arena holds the tapes of one level's live cells and never the tapes of cells
-    already done.  A sample's clip program is made from its cell's tape by the finish pass
-    right after the level that emitted it (:class:`_Finisher`), while that tape is still there.
+    already done.  A sample is finished as it is emitted (``finish.h``): its clip program goes
+    to the clip buffer, whose rows are kept across levels and deduplicated at the end
+    (:func:`dedupe_programs`).
 
     Buffers are sized before a level to what it can write at most, so a level runs once: a
     cell has at most :data:`MAX_CHILDREN` children, and a split writes its children's tape
@@ -562,11 +559,12 @@ class _Subdivision:
     rows; the rows of a level's cells are at most twice the rows the level before wrote (two
     cells to a tape).  A bound past :data:`ARENA_BUDGET` of the
     device, and every buffer whose size the caller forces (``capacity``), is left to the
-    overflow protocol (run, see the counters past the capacity, grow, run the level again).
+    overflow protocol (run, see the counters past the capacity, grow, run the level again);
+    so are the samples and the clip programs, whose counts a level does not bound.
     """
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
-                 max_levels, finisher, root_rows=None):
+                 max_levels, root_rows=None):
         self.ctx, self.prg, self.scene = ctx, prg, scene
         self.real = np.dtype(scene.packed.real)
         self.radius, self.floor = radius, floor
@@ -578,19 +576,20 @@ class _Subdivision:
         self.root_rows = scene.packed.tape if root_rows is None else root_rows
         self.cdt = cell_dtype(self.real)
         self.sdt = raw_sample_dtype(self.real)
-        self.finisher = finisher
         tape = scene.packed.tape
         cap = tuple(capacity or ())
-        self.sized = {"cells": len(cap) < 1, "arena": len(cap) < 3}
+        self.sized = {"cells": len(cap) < 1, "arena": len(cap) < 3, "clip": len(cap) < 4}
         self.cap_cells = max(2, int(cap[0])) if len(cap) > 0 else max(2 * len(roots), 4096)
         self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(int(2 * estimate), 4096)
         self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
+        self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else max(int(estimate), 1 << 14)
+        self.clip_used = self.clip_level = 0
         self.arena_budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem)
         self.zeroed = "oclgrind" in ctx.info.platform.lower()
         self.progress = _Progress(progress, estimate, roots, radius, max_levels, floor)
         self.levels = []
         self.totals = {k: 0 for k in _SUMMED}
-        self.grown = {"cells": 0, "samples": 0, "arena": 0}
+        self.grown = {"cells": 0, "samples": 0, "arena": 0, "clip": 0}
         self.arena_peak = 0
 
     def _buffer(self, nbytes, what):
@@ -625,24 +624,65 @@ class _Subdivision:
 
     def _size_for(self, n_in, arena_bound):
         """Grow the output buffers to what a level of ``n_in`` cells can write at most (see
-        the class docstring), where that is allowed."""
+        the class docstring), where that is allowed; the clip buffer, which nothing bounds, to
+        four times the rows the last level wrote (a level run again costs more than memory)."""
+        rows = self.scene.packed.tape.itemsize
+        need = self.clip_used + 4 * self.clip_level
+        if self.sized["clip"] and need > self.cap_clip:
+            new_cap = max(need, 2 * self.cap_clip)
+            self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
+            self.cap_clip = new_cap
         if self.sized["cells"] and MAX_CHILDREN * n_in > self.cap_cells:
             self.cap_cells = max(MAX_CHILDREN * n_in, self.cap_cells + self.cap_cells // 2)
             self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
-        rows = self.scene.packed.tape.itemsize
         if self.sized["arena"] and self.cap_out < arena_bound <= self.arena_budget / rows:
             self.cap_out = int(min(max(arena_bound, self.cap_out + self.cap_out // 2), self.arena_budget // rows))
             self.arena_out = self._replace(self.arena_out, self.cap_out * rows, "tape arena")
+
+    def _overflows(self, counters, n_samples) -> bool:
+        """Grow every buffer the level's ``counters`` show it overran (keeping what earlier
+        levels wrote: ``n_samples`` sample records, ``self.clip_used`` clip rows); True if
+        any was."""
+        rows = self.scene.packed.tape.itemsize
+        n_cells_out = int(counters[_SLOT["cells"]])
+        n_samples_out = int(counters[_SLOT["samples"]])
+        arena_out = int(counters[_SLOT["arena"]])
+        clip_out = int(counters[_SLOT["clip_rows"]])
+        over = False
+        if n_cells_out > self.cap_cells:
+            self.cap_cells = _grow(self.cap_cells, n_cells_out)
+            self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
+            self.grown["cells"] += 1
+            over = True
+        if n_samples_out > self.cap_samples:
+            new_cap = _grow(self.cap_samples, n_samples_out)
+            self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
+                                            new_cap * self.sdt.itemsize, "sample")
+            self.cap_samples = new_cap
+            self.grown["samples"] += 1
+            over = True
+        if arena_out > self.cap_out:
+            self.cap_out = _grow(self.cap_out, arena_out)
+            self.arena_out = self._replace(self.arena_out, self.cap_out * rows, "tape arena")
+            self.grown["arena"] += 1
+            over = True
+        if clip_out > self.cap_clip:
+            new_cap = _grow(self.cap_clip, clip_out)
+            self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
+            self.cap_clip = new_cap
+            self.grown["clip"] += 1
+            over = True
+        return over
 
     def _level(self, kernel, cells_in, n_in, n_samples):
         """Run one level until it fits (the overflow protocol); returns its counters."""
         import pyopencl as cl
 
         counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
-        rows = self.scene.packed.tape.itemsize
         while True:
             counters[:] = 0
             counters[_SLOT["samples"]] = n_samples
+            counters[_SLOT["clip_rows"]] = self.clip_used
             # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
             # checker does not see host writes into an existing buffer)
             counters_buf = upload(self.ctx, counters, writable=True)
@@ -650,36 +690,18 @@ class _Subdivision:
                    self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
                    self.cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
                    self.arena_in, self.arena_out, np.uint32(self.cap_out), counters_buf,
-                   self.real.type(self.radius), self.real.type(self.floor))
+                   self.real.type(self.radius), self.real.type(self.floor), self.clip, np.uint32(self.cap_clip),
+                   *self.scene.colour_args())
             cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
-            n_cells_out = int(counters[_SLOT["cells"]])
-            n_samples_out = int(counters[_SLOT["samples"]])
-            arena_out = int(counters[_SLOT["arena"]])
-            ok = True
-            if n_cells_out > self.cap_cells:
-                self.cap_cells = _grow(self.cap_cells, n_cells_out)
-                self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
-                self.grown["cells"] += 1
-                ok = False
-            if n_samples_out > self.cap_samples:
-                new_cap = _grow(self.cap_samples, n_samples_out)
-                self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
-                                                new_cap * self.sdt.itemsize, "sample")
-                self.cap_samples = new_cap
-                self.grown["samples"] += 1
-                ok = False
-            if arena_out > self.cap_out:
-                self.cap_out = _grow(self.cap_out, arena_out)
-                self.arena_out = self._replace(self.arena_out, self.cap_out * rows, "tape arena")
-                self.grown["arena"] += 1
-                ok = False
-            if ok:
+            if not self._overflows(counters, n_samples):
+                self.clip_level = int(counters[_SLOT["clip_rows"]]) - self.clip_used
+                self.clip_used += self.clip_level
                 return counters
 
     def _start(self):
         """The first level's buffers: the root cells, the arena with the root tapes (exactly
         them when the arenas are sized per level: this arena takes level 1's output and is
-        grown for it then), the other arena, cells and samples."""
+        grown for it then), the other arena, cells, samples and clip rows."""
         tape = self.scene.packed.tape
         n_first = len(self.root_rows) if self.sized["arena"] else max(self.cap_arena, len(self.root_rows))
         first = np.zeros(max(n_first, 1), dtype=tape.dtype)
@@ -693,6 +715,7 @@ class _Subdivision:
         self.cap_cells = max(self.cap_cells, MAX_CHILDREN * len(self.roots)) if self.sized["cells"] else self.cap_cells
         self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
         self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
+        self.clip = self._buffer(self.cap_clip * tape.itemsize, "clip")
         return upload(self.ctx, self.roots, writable=True), bound
 
     def run(self):
@@ -717,8 +740,6 @@ class _Subdivision:
                 "arena_rows": arena_rows,
             })
             self.arena_peak = max(self.arena_peak, arena_rows)
-            self.finisher.run(self.samples, n_samples, n_samples_out - n_samples, self.arena_in,
-                              int(counters[_SLOT["tape_max"]]), self.cap_samples)
             n_samples = n_samples_out
             self.progress.level(level, n_in, n_samples, n_cells_out)
             cells_in, self.cells_out = self.cells_out, cells_in
@@ -733,186 +754,54 @@ class _Subdivision:
         self.progress.done()
         self.cells_in_last = cells_in
         self.n_samples = n_samples
+        # both reads are waited for at once (each blocking read is a round trip to the
+        # device's threads)
         self.raw = np.zeros(n_samples, dtype=self.sdt)
-        if n_samples:  # not waited for: the finisher's reads wait for it (an in-order queue)
+        self.clip_rows = np.zeros(self.clip_used, dtype=self.scene.packed.tape.dtype)
+        if n_samples:
             cl.enqueue_copy(self.ctx.queue, self.raw, self.samples, is_blocking=False)
-        self.totals["buffer_growths"] = dict(self.grown)
+        if self.clip_used:
+            cl.enqueue_copy(self.ctx.queue, self.clip_rows, self.clip, is_blocking=False)
+        self.ctx.queue.finish()
+        self.totals["buffer_growths"] = {k: v for k, v in self.grown.items() if k != "clip"}
         self.totals["arena_rows"] = self.arena_peak
 
-    def release(self) -> None:
-        """Hand the working buffers to the context's pool (all commands on them are done)."""
-        if not self.zeroed:
-            pool_of(self.ctx).give(self.cells_in_last, self.cells_out, self.arena_in, self.arena_out, self.samples)
-
-
-#: the share of the device's largest allocation (or global memory, if smaller) that a tape
-#: arena or the clip buffer may take when it is sized to its bound ahead of a pass; a larger
-#: bound falls back to the overflow protocol
-ARENA_BUDGET = 1 / 8
-
-#: the finish pass's outputs per sample: (name, dtype, values per sample)
-_FINISH_OUTPUTS = (("normals", "real", 3), ("signs", np.int32, 1), ("primitives", np.int32, 1),
-                   ("clip_first", np.int32, 1), ("clip_count", np.int32, 1))
-
-
-class _Finisher:
-    """The finish pass (``finish.cl``), run after each level on the samples it emitted: clip
-    programs, signs, normals and primitives, written into device buffers indexed by sample and
-    read once at the end, where equal clip programs are deduplicated (:func:`dedupe_programs`).
-
-    A pass is enqueued without waiting for it when the clip buffer has room for its bound (a
-    sample's clip program has at most its cell's rows + 1, so a level's at most (samples) x
-    (its largest tape + 1)); the rows used are read with the next level's counters.  Otherwise
-    (a bound past :data:`ARENA_BUDGET`, or a clip capacity the caller forces) the pass is
-    checked at once: the rows used are read, and on an overflow the buffer grows and the pass
-    runs again (the level's tapes are still in the arena)."""
-
-    def __init__(self, ctx, prg, scene, frames_rec, tasks, packed, capacity):
-        self.ctx, self.scene, self.packed = ctx, scene, packed
-        self.real = np.dtype(packed.real)
-        self.kernel = program_kernel(prg, "finish")
-        self.frames, self.tasks = upload(ctx, frames_rec), upload(ctx, tasks)
-        cap = tuple(capacity or ())
-        self.checked = len(cap) > 3
-        self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else 1 << 14
-        self.row_bytes = packed.tape.itemsize
-        self.budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem) / self.row_bytes
-        self.pooled = "oclgrind" not in ctx.info.platform.lower()
-        self.clip_buf = self._buffer(self.cap_clip * self.row_bytes, "clip")
-        self.counters = upload(ctx, np.zeros(2, dtype=np.uint32), writable=True)
-        self.used = 0  # clip rows known to be used
-        self.reserved = 0  # upper bound of the clip rows used after the passes enqueued
-        self.cap_out = 0
-        self.out = {}
-        self.done = 0
-        self.grown = 0
-
-    def _buffer(self, nbytes, what):
-        """A working buffer: from the context's pool (on Oclgrind a fresh one, as before)."""
-        return pool_of(self.ctx).take(nbytes, what) if self.pooled else device_buffer(self.ctx, nbytes, what)
-
-    def release(self) -> None:
-        """Hand the clip and output buffers to the context's pool (all commands on them are done)."""
-        if self.pooled:
-            pool_of(self.ctx).give(self.clip_buf, *self.out.values())
-
-    def _outputs(self, need, cap_samples):
-        """Output buffers for at least ``need`` samples (grown to ``cap_samples``, keeping the
-        ``self.done`` samples finished so far)."""
-        import pyopencl as cl
-
-        if need <= self.cap_out:
-            return
-        new = {}
-        for name, dtype, k in _FINISH_OUTPUTS:
-            item = (self.real if dtype == "real" else np.dtype(dtype)).itemsize * k
-            new[name] = self._buffer(cap_samples * item, "sample output")
-            if self.done and name in self.out:
-                cl.enqueue_copy(self.ctx.queue, new[name], self.out[name], byte_count=self.done * item)
-        if self.pooled:
-            pool_of(self.ctx).give(*self.out.values())
-        self.out, self.cap_out = new, cap_samples
-
-    def _read_used(self, checked_pass=False):
-        """The counters [clip rows used, prune evaluations]; past the capacity only after a
-        checked pass (which then runs again), never after unchecked ones."""
-        import pyopencl as cl
-
-        c = np.zeros(2, dtype=np.uint32)
-        cl.enqueue_copy(self.ctx.queue, c, self.counters)
-        self.used = self.reserved = int(c[0])
-        if not checked_pass and self.used > self.cap_clip:
-            # an unchecked pass wrote past its bound: some clip programs were not stored
-            raise RuntimeError(f"finish pass: {self.used} clip rows past the capacity of {self.cap_clip} "
-                               "in a pass enqueued without a check (its bound was wrong)")
-        return c
-
-    def _grow_clip(self, rows):
-        """A clip buffer of ``rows`` rows holding the rows used so far (the kernel reads only
-        rows it wrote in the same pass, so a device copy is enough)."""
-        import pyopencl as cl
-
-        buf = self._buffer(rows * self.row_bytes, "clip")
-        if self.used:
-            cl.enqueue_copy(self.ctx.queue, buf, self.clip_buf, byte_count=self.used * self.row_bytes)
-        if self.pooled:
-            pool_of(self.ctx).give(self.clip_buf)
-        self.clip_buf, self.cap_clip = buf, rows
-        self.grown += 1
-
-    def _launch(self, samples, first, n, arena):
-        launch(self.kernel, self.ctx.queue, launch_size(n), (WORK_GROUP,), self.scene.quadrics, self.frames,
-               self.tasks, samples, np.int32(n), np.int32(first), arena, self.clip_buf, np.uint32(self.cap_clip),
-               self.counters, *self.scene.colour_args(), *(self.out[name] for name, _, _ in _FINISH_OUTPUTS))
-
-    def run(self, samples, first, n, arena, tape_max, cap_samples):
-        """Finish raw samples [first, first + n) whose cells' tapes (at most ``tape_max`` rows)
-        are in ``arena``."""
-        if n == 0:
-            return
-        self._outputs(first + n, cap_samples)
-        bound = n * (tape_max + 1)
-        if not self.checked and self.reserved + bound > self.cap_clip:
-            self._read_used()
-            if self.used + bound > self.cap_clip and self.used + bound <= self.budget:
-                self._grow_clip(int(min(max(self.used + bound, 2 * self.cap_clip), self.budget)))
-        if not self.checked and self.reserved + bound <= self.cap_clip:
-            self._launch(samples, first, n, arena)
-            self.reserved += bound
-            self.done = first + n
-            return
-        before = self._read_used()
-        while True:
-            self._launch(samples, first, n, arena)
-            c = self._read_used(checked_pass=True)
-            if int(c[0]) <= self.cap_clip:
-                break
-            # run again from the counts before: a fresh counter buffer from host memory
-            # (Oclgrind does not see host writes into an existing buffer)
-            self.used = self.reserved = int(before[0])
-            self._grow_clip(_grow(self.cap_clip, int(c[0])))
-            self.counters = upload(self.ctx, before, writable=True)
-        self.done = first + n
-
-    def samples(self, sub, tape, radius) -> Samples:
-        """All finished samples as :class:`Samples` (positions from the raw buffer)."""
-        import pyopencl as cl
-
-        packed = self.packed
-        n = sub.n_samples
-        if not n:
+    def collect(self, tape, radius) -> Samples:
+        """The samples of the run as :class:`Samples` (equal clip programs stored once)."""
+        packed = self.scene.packed
+        raw = self.raw
+        if not len(raw):
             return Samples.empty(radius, tape, packed, {})
-        c = self._read_used()
-        # the reads are waited for once (each blocking read is a round trip to the device's
-        # threads)
-        cat = {}
-        for name, dtype, k in _FINISH_OUTPUTS:
-            a = np.zeros((n, k) if k > 1 else n, dtype=self.real if dtype == "real" else dtype)
-            cl.enqueue_copy(self.ctx.queue, a, self.out[name], is_blocking=False)
-            cat[name] = a
-        clip = np.zeros(self.used, dtype=packed.tape.dtype)
-        if self.used:
-            cl.enqueue_copy(self.ctx.queue, clip, self.clip_buf, is_blocking=False)
-        self.ctx.queue.finish()
-        clip_ops = np.asarray(clip.view(np.int32).reshape(-1, 4))
-        first, count, ops = dedupe_programs(clip_ops, cat["clip_first"], cat["clip_count"])
-        raw = sub.raw
+        clip_ops = self.clip_rows.view(np.int32).reshape(-1, 4)
+        first, count, ops = dedupe_programs(clip_ops, raw["clip_first"], raw["clip_count"])
         return Samples(
             positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
-            normals=np.asarray(cat["normals"], dtype=np.float64),
+            normals=np.array(raw["normal"], dtype=np.float64),
             radii=np.array(raw["radius"], dtype=np.float64),
-            quadrics=sub.task_quadrics[raw["task"]].astype(np.int32),
-            signs=cat["signs"],
-            primitives=cat["primitives"],
+            quadrics=self.task_quadrics[raw["task"]].astype(np.int32),
+            signs=np.array(raw["sign"], dtype=np.int32),
+            primitives=np.array(raw["primitive"], dtype=np.int32),
             clip_first=first,
             clip_count=count,
             clip_ops=ops,
             radius=radius,
             tape=tape,
             packed=packed,
-            stats={"finish_prune_evaluations": int(c[1]), "clip_buffer_growths": self.grown},
+            stats={"finish_prune_evaluations": self.totals["finish_prune_evaluations"],
+                   "clip_buffer_growths": self.grown["clip"]},
         )
 
+    def release(self) -> None:
+        """Hand the working buffers to the context's pool (all commands on them are done)."""
+        if not self.zeroed:
+            pool_of(self.ctx).give(self.cells_in_last, self.cells_out, self.arena_in, self.arena_out, self.samples,
+                                   self.clip)
+
+
+#: the share of the device's largest allocation (or global memory, if smaller) that a tape
+#: arena may take when it is sized to its bound ahead of a level; a larger bound falls back to
+#: the overflow protocol
+ARENA_BUDGET = 1 / 8
 
 #: the odd multipliers of :func:`program_keys`, one per 64-bit word of a program (grown on demand)
 _KEY_MULTIPLIERS = np.zeros(0, dtype=np.uint64)
@@ -946,8 +835,9 @@ def dedupe_programs(rows, first, count):
 
     Every program's rows are gathered as whole rows in one pass (a row's 16 bytes as one array
     element, which ``np.take`` copies three times faster than fancy indexing over columns),
-    keyed (:func:`program_keys_flat`), sorted by (length, key) and checked row for row against
-    the first program of their group; each group's rows are stored once.  If a key is shared by
+    keyed (:func:`program_keys_flat`, the length folded in, 32 bits: :func:`_key32`), grouped
+    by key and checked row for row (and for length) against the first program of their group;
+    each group's rows are stored once.  If a key is shared by
     programs that differ, the programs are grouped length by length instead
     (:func:`dedupe_by_length`, which falls back to their bytes).  One pass over all lengths: the
     loop over lengths cost the gear 2.7 ms a call (21 lengths)."""
@@ -964,21 +854,32 @@ def dedupe_programs(rows, first, count):
     pos = np.arange(int(c.sum())) - np.repeat(starts, c)
     gathered = np.take(as_elements, np.repeat(f, c) + pos)
     words = gathered.view(np.uint64).reshape(-1, 2)
-    keys = program_keys_flat(words, pos, starts)
-    order = np.lexsort((keys, c))
-    new_group = np.concatenate([[True], (c[order][1:] != c[order][:-1]) | (keys[order][1:] != keys[order][:-1])])
+    k32 = _key32(program_keys_flat(words, pos, starts), c)
+    # two stable sorts of 16-bit halves (numpy sorts those by radix: a tenth of a sort of
+    # random 64-bit keys)
+    order = np.argsort(k32.astype(np.uint16), kind="stable")
+    order = order[np.argsort((k32[order] >> 16).astype(np.uint16), kind="stable")]
+    ranked = k32[order]
+    new_group = np.concatenate([[True], ranked[1:] != ranked[:-1]])
     group = np.empty(len(live), dtype=np.int64)
     group[order] = np.cumsum(new_group) - 1
     rep = order[new_group]
     rep_rows = np.take(as_elements, np.repeat(f[rep[group]], c) + pos)
-    if not np.array_equal(rep_rows.view(np.uint64), words.ravel()):  # a key collision
-        return dedupe_by_length(rows, first, count)
+    if not (np.array_equal(c[rep[group]], c) and np.array_equal(rep_rows.view(np.uint64), words.ravel())):
+        return dedupe_by_length(rows, first, count)  # a key collision
     rc = c[rep]
     out_starts = np.cumsum(rc) - rc
     out = np.take(as_elements, np.repeat(f[rep], rc) + np.arange(int(rc.sum())) - np.repeat(out_starts, rc))
     new_first = np.zeros(len(first), dtype=np.int32)
     new_first[live] = out_starts[group]
     return new_first, count.astype(np.int32), out.view(np.int32).reshape(-1, 4)
+
+
+def _key32(keys: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """32-bit keys from 64-bit program keys and the programs' lengths (equal programs, equal
+    keys; programs that share a key but differ are found by the check after grouping)."""
+    k = keys ^ (lengths.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15))
+    return (k >> np.uint64(32)).astype(np.uint32) ^ k.astype(np.uint32)
 
 
 def _multipliers(k: int) -> None:

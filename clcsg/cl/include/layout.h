@@ -126,19 +126,20 @@ typedef struct {
     int tape_count;
 } cell_rec;
 
-/* A sample as the subdivision emits it: position (device coordinates), splat radius, task, and
- * the tape of its cell (valid over the splat ball).  `sides` is 0, or SIDES_KNOWN with the
- * membership bits (bit 0 side -, bit 1 side +) where the cell's tape is decided over every
- * splat ball of the cell's samples: the finish pass then needs no pruning and the sample no
- * clip program. */
-#define SIDES_KNOWN 4
+/* A sample as the subdivision emits it (clcsg/sampling/finish.h): position (device
+ * coordinates), outward unit normal, splat radius, task, the side the solid is on (+1: the
+ * quadric's negative side), primitive, and its clip program (rows of the clip buffer; count 0:
+ * none). */
 typedef struct {
     real pos[3];
+    real normal[3];
     real radius;
     int task;
-    int tape_first;
-    int tape_count;
-    int sides;
+    int sign;
+    int primitive;
+    int clip_first;
+    int clip_count;
+    int pad;
 } raw_sample_rec;
 
 #endif

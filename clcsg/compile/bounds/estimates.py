@@ -45,8 +45,8 @@ their length, bounded by the box edges) and the third for the few single samples
 calibrated on the test scenes (tests/test_robustness.py checks that the estimate is never
 below a quarter of the real count and not absurdly above it).
 
-Memory.  Per sample the device holds the raw sample buffer (grown by 1.5x and copied, so up to
-twice its size while growing), the finish pass outputs (normal, term, clip mask), and the
+Memory.  Per sample the device holds its record (position, normal, radius, sign, primitive,
+clip program; grown by 1.5x and copied, so up to twice its size while growing), and the
 cells of a level (bounded by a few per sample); the host holds the Samples arrays.  The byte
 counts per sample are in :data:`DEVICE_BYTES_PER_SAMPLE` / :data:`HOST_BYTES_PER_SAMPLE`.
 """
@@ -95,10 +95,10 @@ AREA_FACTOR = 1.0
 EDGE_FACTOR = 0.5
 TASK_SAMPLES = 4
 
-#: bytes per sample: device buffers of the sampler (raw samples twice while growing, normals,
-#: terms, clip masks, cells) and host arrays (raw copy, Samples arrays, PLY record)
-DEVICE_BYTES_PER_SAMPLE = {8: 2 * 40 + 24 + 4 + 8 + 108, 4: 2 * 24 + 12 + 4 + 8 + 60}
-HOST_BYTES_PER_SAMPLE = 40 + 24 + 24 + 24 + 8 + 5 * 4 + 8 + 32
+#: bytes per sample: device buffers of the sampler (sample records, ``raw_sample_rec``, twice
+#: while growing; cells) and host arrays (the records' copy, Samples arrays, PLY record)
+DEVICE_BYTES_PER_SAMPLE = {8: 2 * 80 + 108, 4: 2 * 52 + 60}
+HOST_BYTES_PER_SAMPLE = 80 + 24 + 24 + 24 + 8 + 5 * 4 + 8 + 32
 
 SQRT3 = math.sqrt(3.0)
 

@@ -1,0 +1,133 @@
+/* A sample as it is emitted (sampler.cl): its record (raw_sample_rec) holds its position,
+ * splat radius and task, and what the renderer needs of it besides: its clip program, the side
+ * the solid is on, its outward normal and its primitive, all written by the emitting work-item
+ * while its cell's tape is at hand.
+ *
+ * The clip program is the cell's tape pruned over the splat ball (s, r) with the sample's
+ * quadric substituted.  If both sides come out constant (and, s being on the surface,
+ * different) the splat needs no clipping; otherwise the pruned tape is written to the clip
+ * buffer (exactly the rows pruning keeps, reserved with an atomic add on SC_CLIP_ROWS, written
+ * only below the capacity: the level's counters show the host an overflow, and it grows the
+ * buffer and runs the level again).  A filled cell prunes its tape over its patch grown by
+ * the radius, which holds every ball of its samples: where that decides both sides, its
+ * samples get their sides at once (sample_src.sides), with no pruning per sample; otherwise
+ * the pruned tape is written as a clip program, which its samples prune over their balls
+ * (fewer leaves to test) and take as it is where that keeps all of it.  The sign is +1 where the solid is on the
+ * quadric's negative side at s (outward normal +grad Q), -1 otherwise.
+ */
+#ifndef CLCSG_FINISH_H
+#define CLCSG_FINISH_H
+#include "tape.h"
+#include "primitives.h"
+
+/* sample_src.sides: 0, or SIDES_KNOWN with the membership bits (bit 0 side -, bit 1 side +) */
+#define SIDES_KNOWN 4
+
+/* where a sample comes from: its task (quadric, plane, sheet), the tape of its cell (valid
+ * over every splat ball of radius <= r around the cell's patch), the sides where that tape is
+ * decided over them, and where the tape lies in the clip buffer if it was written there as a
+ * clip program (clip_at >= 0; -1: it is the cell's tape in the arena) */
+typedef struct {
+    int task, quadric, plane, sheet;
+    __global const tape_op *tape;
+    int tape_count, sides, clip_at;
+} sample_src;
+
+/* Where a level's samples go: their records, the clip buffer, and what the finish reads.
+ * `evals` counts the prune evaluations of the work-item's clip programs. */
+typedef struct {
+    __global raw_sample_rec *raw;
+    uint cap;
+    __global volatile uint *counters;
+    __global tape_op *clip;
+    uint cap_clip;
+    __global const quadric_rec *qs;
+    __global const frame_rec *frames;
+    __global const owner_rec *owners;
+    __global const int *owner_list;
+    __global const prim_rec *prims;
+    __global const int2 *prim_lits;
+    __global const real4 *prim_box;
+    __global const tape_op *inst_tape;
+    int inst_rows;
+    uint evals;
+} sample_sink;
+
+/* The clip program of a sample at p on quadric q (the tape pruned over the splat ball,
+ * written to the clip buffer unless both sides are decided) into *first, *count; returns the
+ * membership bits at p: from the decided root state, else from the (short) clip program,
+ * which equals the tape over the ball; the full tape only if the clip buffer is full this
+ * run (the level runs again).  Where the tape is a clip program already (clip_at >= 0) and
+ * pruning keeps all its rows (then it keeps them unchanged: an operation is only rewritten
+ * where a leaf became constant), the sample takes it as it is. */
+inline uint clip_program(sample_sink *k, __global const tape_op *tape, int nt, int clip_at, int q, real3 p,
+                         real radius, int *first, int *count)
+{
+    prune_region ball = {p, (real3)(0), (real3)(0), (real3)(0), radius};
+    uchar state;
+    prune_memo memo; /* the count's leaf states, replayed by the write */
+    memo.mode = 1;
+    int rows = tape_prune_rows_memo(tape, nt, k->qs, &ball, q, &state, &k->evals, &memo);
+    if (prune_decision(state) < 0) return prune_member_bits(state);
+    if (clip_at >= 0 && rows == nt) {
+        *first = clip_at;
+        *count = nt;
+        return tape_member(tape, nt, k->qs, p, q);
+    }
+    uint base = atomic_add(&k->counters[SC_CLIP_ROWS], (uint)rows);
+    if (base + (uint)rows > k->cap_clip) return tape_member(tape, nt, k->qs, p, q);
+    memo.mode = 2;
+    tape_prune_write_memo(tape, nt, k->qs, &ball, q, state, k->clip + base, first, count, &k->evals, &memo);
+    *first += (int)base;
+    return tape_member(k->clip + *first, *count, k->qs, p, q);
+}
+
+/* The clip program, sign, normal and primitive of sample *out at p (see above). */
+inline void finish_sample(sample_sink *k, __global raw_sample_rec *out, real3 p, real radius, sample_src src)
+{
+    __global const owner_rec *owners = k->owners;
+    __global const int *owner_list = k->owner_list;
+    __global const prim_rec *prims = k->prims;
+    __global const int2 *prim_lits = k->prim_lits;
+    __global const real4 *prim_box = k->prim_box;
+    __global const tape_op *inst_tape = k->inst_tape;
+    int inst_rows = k->inst_rows;
+    int first = 0, count = 0;
+    uint bits = src.sides & SIDES_KNOWN ? (uint)(src.sides & 3)
+                                        : clip_program(k, src.tape, src.tape_count, src.clip_at, src.quadric, p,
+                                                       radius, &first, &count);
+    out->clip_first = first;
+    out->clip_count = count;
+    int sign = (bits & 1) ? 1 : -1;
+    real3 g = sign * quadric_gradient(quadric_load(k->qs, src.quadric), p);
+    real gl = length(g);
+    if (gl > 0) {
+        g = g / gl;
+    } else { /* a singular point (cone apex): the sampling direction stands in */
+        __global const frame_rec *f = k->frames + src.quadric;
+        real sh = src.sheet != 0 ? (real)src.sheet : (real)1;
+        g = sh * (real3)(f->U[src.plane], f->U[3 + src.plane], f->U[6 + src.plane]);
+    }
+    out->normal[0] = g.x;
+    out->normal[1] = g.y;
+    out->normal[2] = g.z;
+    out->sign = sign;
+    out->primitive = primitive_at(PRIMITIVE_TABLE_ARGS, k->qs, src.quadric, p);
+}
+
+/* Sample `slot` at p with splat radius `radius`: its record, finished (nothing past the
+ * capacity: the level runs again). */
+inline void emit_sample(sample_sink *k, uint slot, real3 p, real radius, sample_src src)
+{
+    if (slot >= k->cap) return;
+    __global raw_sample_rec *out = k->raw + slot;
+    out->pos[0] = p.x;
+    out->pos[1] = p.y;
+    out->pos[2] = p.z;
+    out->radius = radius;
+    out->task = src.task;
+    out->pad = 0;
+    finish_sample(k, out, p, radius, src);
+}
+
+#endif
