@@ -275,15 +275,16 @@ def test_the_forecast_is_within_2x_over_the_second_half_of_synthetic_runs(shape)
     half of the run its seconds left are within 2x of the seconds actually left, and the
     fraction elapsed / (elapsed + forecast), held at its largest, never goes back."""
     from clcsg.sampling.forecast import Forecast, level_bounds
-    from clcsg.sampling.sampler import QUAD_SPLIT_DIAG, SPLIT_LARGER
+    from clcsg.sampling.sampler import SPLIT_LARGER
 
     cells, samples = {"tail": tail_run, "collapse": collapse_run, "dip": dip_run}[shape]()
     run = synthetic_run(cells, samples)
     # a root cell whose four-way levels end at level 6, surface resolved at 12 and floor at 20
-    radius = 1.0
-    diag = QUAD_SPLIT_DIAG * radius / SPLIT_LARGER ** 6 * 0.999
+    # (four-way splits down to 8 radii: the geometry these histories were drawn for)
+    radius, quad_split_diag = 1.0, 8.0
+    diag = quad_split_diag * radius / SPLIT_LARGER ** 6 * 0.999
     floor = diag * SPLIT_LARGER ** 6 / SPLIT_LARGER ** -7
-    quad, peak, last = level_bounds(diag, radius, floor, SPLIT_LARGER, QUAD_SPLIT_DIAG)
+    quad, peak, last = level_bounds(diag, radius, floor, SPLIT_LARGER, quad_split_diag)
     assert quad == 6 and last > peak > quad
     fc = Forecast(int(1.2 * samples[-1]), quad, peak, max(last, len(cells) - 1))
     ends = np.cumsum([s for _, _, s in run])

@@ -252,7 +252,8 @@ inline real query_at(const cell_geom *g, real x, real y, __global const tape_op 
  * this tape pruned over the patch grown by the radius (so it stays valid over every splat ball their samples get),
  * counted first and written with exactly that many rows into arena_out (the write replays the
  * count's leaf states).  The new corners, shared by the children, are evaluated here once
- * with the parent's tape (valid over the whole patch). */
+ * with the children's tape, just written: exact over the whole patch as the cell's tape is,
+ * and shorter. */
 inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
                        __global const quadric_rec *qs, int q, real radius, __global cell_rec *cells_out,
                        uint cap_cells, __global tape_op *arena_out, uint cap_arena,
@@ -278,6 +279,8 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     a.level = c.level + 1;
     a.tape_first = (int)base + first;
     a.tape_count = count;
+    tape = arena_out + a.tape_first;
+    n = count;
     if (quad) {
         for (int m = 0; m < count; ++m) arena_out[base + rows + first + m] = arena_out[base + first + m];
         /* corners (x0|xm|x1) x (y0|ym|y1), row-major: e[3 * j + i] */
