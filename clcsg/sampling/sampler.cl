@@ -393,18 +393,25 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     if (corner_cover(&g, c.d) > 0) return OUT_DISCARDED;
 
     /* the tape over the patch: both sides constant decides the whole patch; a value that no
-     * longer depends on the task's quadric is the same on both sides: no surface */
+     * longer depends on the task's quadric is the same on both sides: no surface.  Not where
+     * the inherited corners straddle the surface (one with d_q < 0, on it, one with d_q > 0,
+     * off it): pruning cannot decide such a patch, and its leaf states are only needed where
+     * no corner is on the surface */
     prune_region patch = patch_region(&g.pf, c, g.t_lo, g.t_hi, 0);
     patch_on_surface(&g, c, &patch);
-    uchar state;
     prune_memo leaves; /* the leaves' states over the patch, for surface_cases */
-    leaves.mode = 1;
-    tape_prune_rows_memo(tape, n, qs, &patch, t.quadric, &state, &w->evals, &leaves);
-    int decided = prune_decision(state);
-    if (decided > 0 || !(state & ST_SELF)) return OUT_DECIDED_DISCARD;
-    if (decided < 0 && g.fill_fits) {
-        fill_cell(&g.pf, c, radius, fill_source(&g, c, src, radius, out, w), out);
-        return OUT_DECIDED_FILL;
+    bool straddles = (c.d[0] < 0 || c.d[1] < 0 || c.d[2] < 0 || c.d[3] < 0)
+                  && (c.d[0] > 0 || c.d[1] > 0 || c.d[2] > 0 || c.d[3] > 0);
+    if (!straddles) {
+        uchar state;
+        leaves.mode = 1;
+        tape_prune_rows_memo(tape, n, qs, &patch, t.quadric, &state, &w->evals, &leaves);
+        int decided = prune_decision(state);
+        if (decided > 0 || !(state & ST_SELF)) return OUT_DECIDED_DISCARD;
+        if (decided < 0 && g.fill_fits) {
+            fill_cell(&g.pf, c, radius, fill_source(&g, c, src, radius, out, w), out);
+            return OUT_DECIDED_FILL;
+        }
     }
     real d[4];
     corner_distances(&g, c, tape, n, qs, t.quadric, d, w);
