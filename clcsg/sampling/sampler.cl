@@ -397,12 +397,13 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
      * the inherited corners straddle the surface (one with d_q < 0, on it, one with d_q > 0,
      * off it): pruning cannot decide such a patch, and its leaf states are only needed where
      * no corner is on the surface */
-    prune_region patch = patch_region(&g.pf, c, g.t_lo, g.t_hi, 0);
-    patch_on_surface(&g, c, &patch);
+    prune_region patch;
     prune_memo leaves; /* the leaves' states over the patch, for surface_cases */
     bool straddles = (c.d[0] < 0 || c.d[1] < 0 || c.d[2] < 0 || c.d[3] < 0)
                   && (c.d[0] > 0 || c.d[1] > 0 || c.d[2] > 0 || c.d[3] > 0);
     if (!straddles) {
+        patch = patch_region(&g.pf, c, g.t_lo, g.t_hi, 0);
+        patch_on_surface(&g, c, &patch);
         uchar state;
         leaves.mode = 1;
         tape_prune_rows_memo(tape, n, qs, &patch, t.quadric, &state, &w->evals, &leaves);

@@ -295,8 +295,8 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
     uchar st[TAPE_REGS];
     bool write = out != 0;
     int memo_mode = memo ? memo->mode : 0;
-    if (memo_mode == 1)
-        for (int w = 0; w < PRUNE_MEMO_ROWS / 16; ++w) memo->bits[w] = 0;
+    if (memo_mode == 1) /* the words of the rows there are: the states of no others are read */
+        for (int w = 0; w < (min(n, PRUNE_MEMO_ROWS) + 15) >> 4; ++w) memo->bits[w] = 0;
     int k_out = 0, lst = -1;
     prune_consts pk;
     bool have_pk = false;
