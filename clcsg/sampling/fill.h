@@ -13,6 +13,42 @@
 #define FILL_DELTA_RATIO 1.1
 #endif
 
+/* The local box [x0,x1] x [y0,y1] x [t_lo,t_hi] of a plane, grown by `grow`, as a prune region. */
+inline prune_region box_region(const plane_frame *pf, real x0, real x1, real y0, real y1, real t_lo, real t_hi,
+                               real grow)
+{
+    prune_region g;
+    g.c = plane_point(pf, 0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (t_lo + t_hi));
+    g.a0 = (real)(0.5 * (x1 - x0)) * plane_axis(pf, pf->i);
+    g.a1 = (real)(0.5 * (y1 - y0)) * plane_axis(pf, pf->j);
+    g.a2 = (real)(0.5 * (t_hi - t_lo)) * plane_axis(pf, pf->k);
+    g.rho = grow;
+    g.on_patch = 0;
+    return g;
+}
+
+/* samples a row of a fill decides at once: the cell's tape is pruned over the box of up to
+ * this many of them grown by their splat radius (which holds all their balls) */
+#define FILL_CHUNK 8
+
+/* The source of a row's samples in [xa, xb] x [y, yb] with splat radius `need`: with their
+ * sides where the tape is decided over the chunk's box grown by `need`, so that none of them
+ * prunes alone (a large filled cell is rarely decided as a whole, its chunks mostly are). */
+inline sample_src chunk_source(const plane_frame *pf, real xa, real xb, real y, real yb, real need, sample_src src,
+                               sample_sink *out)
+{
+    if (src.sides & SIDES_KNOWN) return src;
+    real2 Px = quad_range(pf->li, pf->bi, xa, xb), Sy = quad_range(pf->lj, pf->bj, y, yb);
+    real2 t;
+    bool whole;
+    if (!rect_heights(pf, (real2)(Px.x + Sy.x + pf->gamma, Px.y + Sy.y + pf->gamma), &t, &whole)) return src;
+    prune_region g = box_region(pf, xa, xb, y, yb, t.x, t.y, need);
+    uchar state;
+    tape_prune_rows(src.tape, src.tape_count, out->qs, &g, src.quadric, &state, &out->evals);
+    if (prune_decision(state) < 0) src.sides = SIDES_KNOWN | (int)prune_member_bits(state);
+    return src;
+}
+
 /* Cover a block [x0,x1] x [y0,y1] known to lie on the CSG surface with samples at the
  * centers of sub-rectangles of half-sizes (a, b).  Anisotropic bound (beyond the paper's
  * isotropic distortion): for two points of a sub-rectangle, p2 - p1 = (dx, dy, t2 - t1) and
@@ -55,9 +91,13 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
         real need = fmin(radius, sqrt(ha * ha + hb * hb + e * e) * (1 + (real)1e-6));
         if (ni.y <= m.z && nj.y <= m.z) { /* owned everywhere */
             uint base = atomic_add(&out->counters[SC_SAMPLES], (uint)nx);
-            for (int a = 0; a < nx; ++a) {
-                real cx = x0 + (a + (real)0.5) * sx;
-                emit_sample(out, base + a, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, src);
+            for (int a0 = 0; a0 < nx; a0 += FILL_CHUNK) {
+                int a1 = min(nx, a0 + FILL_CHUNK);
+                sample_src cs = a1 - a0 > 1 ? chunk_source(pf, x0 + a0 * sx, x0 + a1 * sx, y, yb, need, src, out) : src;
+                for (int a = a0; a < a1; ++a) {
+                    real cx = x0 + (a + (real)0.5) * sx;
+                    emit_sample(out, base + a, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, cs);
+                }
             }
         } else {
             for (int a = 0; a < nx; ++a) {

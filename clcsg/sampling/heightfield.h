@@ -123,6 +123,26 @@ inline rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real 
     return b;
 }
 
+/* The height range (t_lo, t_hi) of the task's sheet over a rectangle whose R range is R (from
+ * quad_range or rect_bounds_of); false where the heightfield is defined nowhere on it, and
+ * *whole: defined everywhere on it.  Two sheets: lam_k t^2 = -R, so t^2 lies in the range of
+ * -R / lam_k cut at 0; one sheet: t = -R / (2 beta_k). */
+inline bool rect_heights(const plane_frame *pf, real2 R, real2 *t, bool *whole)
+{
+    *whole = true;
+    if (pf->lk != 0) {
+        real Hlo = -(pf->lk > 0 ? R.y : R.x) / pf->lk;
+        real Hhi = -(pf->lk > 0 ? R.x : R.y) / pf->lk;
+        if (Hhi < 0) return false;
+        *whole = Hlo >= 0;
+        real a = sqrt(fmax(Hlo, (real)0)), b = sqrt(Hhi);
+        *t = pf->sheet > 0 ? (real2)(a, b) : (real2)(-b, -a);
+    } else {
+        *t = (real2)(fmin(-R.y / (2 * pf->bk), -R.x / (2 * pf->bk)), fmax(-R.y / (2 * pf->bk), -R.x / (2 * pf->bk)));
+    }
+    return true;
+}
+
 /* Can plane k own a point of the rectangle?  (no: an in-plane normal component exceeds |n_k|
  * everywhere there) */
 inline bool rect_may_be_owned(rect_bounds b) { return !(b.ni.x > b.nk.y || b.nj.x > b.nk.y); }

@@ -56,14 +56,7 @@ inline real query(__global const tape_op *tape, int n, __global const quadric_re
 /* The patch over the cell (local box [x0,x1] x [y0,y1] x [t_lo,t_hi]) as a prune region. */
 inline prune_region patch_region(const plane_frame *pf, cell_rec c, real t_lo, real t_hi, real grow)
 {
-    prune_region g;
-    g.c = plane_point(pf, 0.5 * (c.x0 + c.x1), 0.5 * (c.y0 + c.y1), 0.5 * (t_lo + t_hi));
-    g.a0 = (real)(0.5 * (c.x1 - c.x0)) * plane_axis(pf, pf->i);
-    g.a1 = (real)(0.5 * (c.y1 - c.y0)) * plane_axis(pf, pf->j);
-    g.a2 = (real)(0.5 * (t_hi - t_lo)) * plane_axis(pf, pf->k);
-    g.rho = grow;
-    g.on_patch = 0;
-    return g;
+    return box_region(pf, c.x0, c.x1, c.y0, c.y1, t_lo, t_hi, grow);
 }
 
 #define OUT_DISCARDED 0
@@ -122,19 +115,10 @@ inline bool cell_geometry(const task_rec *t, __global const frame_rec *frames, c
     g->pf = plane_load(frames + t->quadric, t->plane, t->sheet);
     const plane_frame *pf = &g->pf;
     rect_bounds rb = rect_bounds_of(pf, c.x0, c.x1, c.y0, c.y1);
-    g->whole_domain = true;
-    if (pf->lk != 0) {
-        real Hlo = -(pf->lk > 0 ? rb.R.y : rb.R.x) / pf->lk;
-        real Hhi = -(pf->lk > 0 ? rb.R.x : rb.R.y) / pf->lk;
-        if (Hhi < 0) return false;
-        g->whole_domain = Hlo >= 0;
-        real a = sqrt(fmax(Hlo, (real)0)), b = sqrt(Hhi);
-        g->t_lo = pf->sheet > 0 ? a : -b;
-        g->t_hi = pf->sheet > 0 ? b : -a;
-    } else {
-        g->t_lo = fmin(-rb.R.y / (2 * pf->bk), -rb.R.x / (2 * pf->bk));
-        g->t_hi = fmax(-rb.R.y / (2 * pf->bk), -rb.R.x / (2 * pf->bk));
-    }
+    real2 t_range;
+    if (!rect_heights(pf, rb.R, &t_range, &g->whole_domain)) return false;
+    g->t_lo = t_range.x;
+    g->t_hi = t_range.y;
     if (!rect_may_be_owned(rb)) return false;
     if (g->t_hi < t->zlo[pf->k] || g->t_lo > t->zhi[pf->k]) return false;
     real ni_hi = rb.ni.y, nj_hi = rb.nj.y, nk_lo = rb.nk.x, nk_hi = rb.nk.y;
