@@ -17,7 +17,7 @@ the cells near it.  Per model, process CPU time (``time.process_time``; PoCL run
 in this process's threads) of: building the operand (the checks and the expression),
 compiling, sampling at 1/200 of the bound's diagonal (warm: the kernels built once before; the
 sampler's own split ``host_s`` (the resource guard's estimate and the root tapes) and
-``device_s`` (its levels and the finish pass) beside it), rendering the splats and ray tracing
+``device_s`` (its levels and reading the samples back) beside it), rendering the splats and ray tracing
 at 320x240; and manifold3d's Boolean of the same mesh minus the cylinders (32 segments) with
 ``to_mesh``.  Ratios are clcsg's sampling path (build + compile + sample) over manifold3d's
 Boolean.
