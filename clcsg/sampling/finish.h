@@ -58,8 +58,7 @@ typedef struct {
  * membership bits at p: from the decided root state, else from the (short) clip program,
  * which equals the tape over the ball; the full tape only if the clip buffer is full this
  * run (the level runs again).  Where the tape is a clip program already (clip_at >= 0) and
- * pruning keeps all its rows (then it keeps them unchanged: an operation is only rewritten
- * where a leaf became constant), the sample takes it as it is. */
+ * pruning would not shorten it (tape_write_pruned), the sample takes it as it is. */
 inline uint clip_program(sample_sink *k, __global const tape_op *tape, int nt, int clip_at, int q, real3 p,
                          real radius, int *first, int *count)
 {
@@ -76,8 +75,7 @@ inline uint clip_program(sample_sink *k, __global const tape_op *tape, int nt, i
     }
     uint base = atomic_add(&k->counters[SC_CLIP_ROWS], (uint)rows);
     if (base + (uint)rows > k->cap_clip) return tape_member(tape, nt, k->qs, p, q);
-    memo.mode = 2;
-    tape_prune_write_memo(tape, nt, k->qs, &ball, q, state, k->clip + base, first, count, &k->evals, &memo);
+    tape_write_pruned(tape, nt, rows, k->qs, &ball, q, state, k->clip + base, first, count, &k->evals, &memo);
     *first += (int)base;
     return tape_member(k->clip + *first, *count, k->qs, p, q);
 }

@@ -256,8 +256,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     uint copies = quad ? 2u : 1u;
     uint base = atomic_add(&counters[SC_ARENA], copies * (uint)rows);
     if (slot + k > cap_cells || base + copies * (uint)rows > cap_arena) return; /* overflow: the level re-runs */
-    memo.mode = 2;
-    tape_prune_write_memo(tape, n, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
+    tape_write_pruned(tape, n, rows, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
     w->tapes_written = copies;
     cell_rec a = c;
     a.level = c.level + 1;
@@ -349,9 +348,8 @@ inline sample_src fill_source(const cell_geom *g, cell_rec c, sample_src src, re
     uint base = atomic_add(&out->counters[SC_CLIP_ROWS], (uint)rows);
     if (base + (uint)rows > out->cap_clip) return src;
     int first, count;
-    memo.mode = 2;
-    tape_prune_write_memo(src.tape, src.tape_count, out->qs, &grown, src.quadric, state, out->clip + base, &first,
-                          &count, &w->evals, &memo);
+    tape_write_pruned(src.tape, src.tape_count, rows, out->qs, &grown, src.quadric, state, out->clip + base, &first,
+                      &count, &w->evals, &memo);
     src.clip_at = (int)base + first;
     src.tape = out->clip + src.clip_at;
     src.tape_count = count;

@@ -499,6 +499,25 @@ inline void tape_prune_write_memo(__global const tape_op *t, int n, __global con
     tape_prune_memo(t, n, qs, g, self_q, out, first, count, evals, memo);
 }
 
+/* tape_prune_write_memo after a count pass that gave `rows` (its leaf states in `memo`), or,
+ * where the count is the tape's own length, the tape copied as it is without the second pass:
+ * any tape that is exact over the region serves, the tape itself is, and pruning would save no
+ * row (where it keeps every row it keeps them unchanged: an operation is only rewritten where a
+ * leaf became constant). */
+inline void tape_write_pruned(__global const tape_op *t, int n, int rows, __global const quadric_rec *qs,
+                              const prune_region *g, int self_q, uchar state, __global tape_op *out, int *first,
+                              int *count, uint *evals, prune_memo *memo)
+{
+    if (rows == n) {
+        for (int m = 0; m < n; ++m) out[m] = t[m];
+        *first = 0;
+        *count = n;
+        return;
+    }
+    memo->mode = 2;
+    tape_prune_write_memo(t, n, qs, g, self_q, state, out, first, count, evals, memo);
+}
+
 inline void tape_prune_write(__global const tape_op *t, int n, __global const quadric_rec *qs,
                              const prune_region *g, int self_q, uchar state, __global tape_op *out, int *first,
                              int *count, uint *evals)
