@@ -96,10 +96,11 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
             uint base = atomic_add(&out->counters[SC_SAMPLES], (uint)nx);
             for (int a0 = 0; a0 < nx; a0 += FILL_CHUNK) {
                 int a1 = min(nx, a0 + FILL_CHUNK);
-                sample_src cs = a1 - a0 > 1 ? chunk_source(pf, x0 + a0 * sx, x0 + a1 * sx, y, yb, need, src, out) : src;
+                sample_src chunk = a1 - a0 > 1 ? chunk_source(pf, x0 + a0 * sx, x0 + a1 * sx, y, yb, need, src, out)
+                                               : src;
                 for (int a = a0; a < a1; ++a) {
                     real cx = x0 + (a + (real)0.5) * sx;
-                    emit_sample(out, base + a, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, cs);
+                    emit_sample(out, base + a, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, chunk);
                 }
             }
         } else {
