@@ -20,6 +20,12 @@ SAMPLER_COUNTERS = (
     "arena", "clip_rows", "finish_prune_evaluations",
 )
 
+#: the sampler's sample columns (sampling/finish.h writes them, sampling/sampler.py reads them
+#: into the Samples arrays): a buffer of reals and one of ints, each a run of regions of
+#: ``capacity`` entries, an entry ``width`` values wide; (name, width) in region order
+SAMPLE_REAL_COLUMNS = (("pos", 3), ("normal", 3), ("radius", 1))
+SAMPLE_INT_COLUMNS = (("quadric", 1), ("sign", 1), ("primitive", 1), ("clip_first", 1), ("clip_count", 1))
+
 #: counters of the splat kernel, in slot order
 SPLAT_COUNTERS = (
     "splats_drawn", "splats_culled", "splats_offscreen", "bound_pixels", "fragments_occluded", "fragments",
@@ -52,10 +58,24 @@ def _slots(prefix: str, group: str, names) -> dict:
     return out
 
 
+def _columns(prefix: str, group: str, columns) -> dict:
+    """``-D<prefix>_<NAME>=offset`` of each column's region, in units of the capacity (the region
+    of a column of width w starts at offset * capacity; its entry k at w * k past that), and
+    ``N_<group>`` the total width."""
+    out, offset = {}, 0
+    for name, width in columns:
+        out[f"{prefix}_{name.upper()}"] = offset
+        offset += width
+    out[f"N_{group}"] = offset
+    return out
+
+
 def defines() -> dict:
     d = {"OP_LEAF": OP_LEAF, "OP_AND": OP_AND, "OP_OR": OP_OR, "OP_COPY": OP_COPY, "OP_CONST": OP_CONST}
     d.update(_slots("SC", "SAMPLER_COUNTERS", SAMPLER_COUNTERS))
     d.update(_slots("PC", "SPLAT_COUNTERS", SPLAT_COUNTERS))
+    d.update(_columns("SR", "SAMPLE_REALS", SAMPLE_REAL_COLUMNS))
+    d.update(_columns("SI", "SAMPLE_INTS", SAMPLE_INT_COLUMNS))
     d["ROUNDING_ULPS"] = ROUNDING_ULPS
     d["INSTANCE_REGS"] = INSTANCE_REGS
     d["RESOLVE_LANES"] = RESOLVE_LANES

@@ -59,14 +59,6 @@ def cell_dtype(real) -> np.dtype:
     )
 
 
-def raw_sample_dtype(real) -> np.dtype:
-    return np.dtype(
-        [("pos", real, 3), ("normal", real, 3), ("radius", real), ("task", np.int32), ("sign", np.int32),
-         ("primitive", np.int32), ("clip_first", np.int32), ("clip_count", np.int32), ("pad", np.int32)],
-        align=True,
-    )
-
-
 #: (C struct name, header, dtype factory) of every record: the layout test walks this list
 RECORDS = (
     ("quadric_rec", "layout.h", quadric_dtype),
@@ -76,7 +68,6 @@ RECORDS = (
     ("frame_rec", "layout.h", frame_dtype),
     ("task_rec", "layout.h", task_dtype),
     ("cell_rec", "layout.h", cell_dtype),
-    ("raw_sample_rec", "layout.h", raw_sample_dtype),
     ("tape_op", "tape.h", lambda real: TAPE_OP_DTYPE),
 )
 

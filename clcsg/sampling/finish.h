@@ -1,7 +1,9 @@
-/* A sample as it is emitted (sampler.cl): its record (raw_sample_rec) holds its position,
- * splat radius and task, and what the renderer needs of it besides: its clip program, the side
- * the solid is on, its outward normal and its primitive, all written by the emitting work-item
- * while its cell's tape is at hand.
+/* A sample as it is emitted (sampler.cl): its position, splat radius and quadric, and what the
+ * renderer needs of it besides: its clip program, the side the solid is on, its outward normal
+ * and its primitive, all written by the emitting work-item while its cell's tape is at hand.
+ * They go to the sample columns (sample_sink.reals / ints), one region per field (the SR_* /
+ * SI_* offsets, in units of the capacity), so the host reads each field straight into its
+ * array.
  *
  * The clip program is the cell's tape pruned over the splat ball (s, r) with the sample's
  * quadric substituted.  If both sides come out constant (and, s being on the surface,
@@ -33,10 +35,12 @@ typedef struct {
     int tape_count, sides, clip_at;
 } sample_src;
 
-/* Where a level's samples go: their records, the clip buffer, and what the finish reads.
- * `evals` counts the prune evaluations of the work-item's clip programs. */
+/* Where a level's samples go: their columns (`cap` entries per region), the clip buffer, and
+ * what the finish reads.  `evals` counts the prune evaluations of the work-item's clip
+ * programs. */
 typedef struct {
-    __global raw_sample_rec *raw;
+    __global real *reals;
+    __global int *ints;
     uint cap;
     __global volatile uint *counters;
     __global tape_op *clip;
@@ -80,8 +84,13 @@ inline uint clip_program(sample_sink *k, __global const tape_op *tape, int nt, i
     return tape_member(k->clip + *first, *count, k->qs, p, q);
 }
 
-/* The clip program, sign, normal and primitive of sample *out at p (see above). */
-inline void finish_sample(sample_sink *k, __global raw_sample_rec *out, real3 p, real radius, sample_src src)
+/* Entry `slot` of the real column region at `offset` (SR_*), `width` reals wide. */
+#define SAMPLE_REAL(k, offset, width, slot) ((k)->reals + (size_t)(offset) * (k)->cap + (size_t)(width) * (slot))
+/* Entry `slot` of the int column region at `offset` (SI_*). */
+#define SAMPLE_INT(k, offset, slot) ((k)->ints[(size_t)(offset) * (k)->cap + (slot)])
+
+/* The clip program, sign, normal and primitive of sample `slot` at p (see above). */
+inline void finish_sample(sample_sink *k, uint slot, real3 p, real radius, sample_src src)
 {
     __global const owner_rec *owners = k->owners;
     __global const int *owner_list = k->owner_list;
@@ -94,8 +103,8 @@ inline void finish_sample(sample_sink *k, __global raw_sample_rec *out, real3 p,
     uint bits = src.sides & SIDES_KNOWN ? (uint)(src.sides & 3)
                                         : clip_program(k, src.tape, src.tape_count, src.clip_at, src.quadric, p,
                                                        radius, &first, &count);
-    out->clip_first = first;
-    out->clip_count = count;
+    SAMPLE_INT(k, SI_CLIP_FIRST, slot) = first;
+    SAMPLE_INT(k, SI_CLIP_COUNT, slot) = count;
     int sign = (bits & 1) ? 1 : -1;
     real3 g = sign * quadric_gradient(quadric_load(k->qs, src.quadric), p);
     real gl = length(g);
@@ -106,26 +115,26 @@ inline void finish_sample(sample_sink *k, __global raw_sample_rec *out, real3 p,
         real sh = src.sheet != 0 ? (real)src.sheet : (real)1;
         g = sh * (real3)(f->U[src.plane], f->U[3 + src.plane], f->U[6 + src.plane]);
     }
-    out->normal[0] = g.x;
-    out->normal[1] = g.y;
-    out->normal[2] = g.z;
-    out->sign = sign;
-    out->primitive = primitive_at(PRIMITIVE_TABLE_ARGS, k->qs, src.quadric, p);
+    __global real *normal = SAMPLE_REAL(k, SR_NORMAL, 3, slot);
+    normal[0] = g.x;
+    normal[1] = g.y;
+    normal[2] = g.z;
+    SAMPLE_INT(k, SI_SIGN, slot) = sign;
+    SAMPLE_INT(k, SI_PRIMITIVE, slot) = primitive_at(PRIMITIVE_TABLE_ARGS, k->qs, src.quadric, p);
 }
 
-/* Sample `slot` at p with splat radius `radius`: its record, finished (nothing past the
+/* Sample `slot` at p with splat radius `radius`: its columns, finished (nothing past the
  * capacity: the level runs again). */
 inline void emit_sample(sample_sink *k, uint slot, real3 p, real radius, sample_src src)
 {
     if (slot >= k->cap) return;
-    __global raw_sample_rec *out = k->raw + slot;
-    out->pos[0] = p.x;
-    out->pos[1] = p.y;
-    out->pos[2] = p.z;
-    out->radius = radius;
-    out->task = src.task;
-    out->pad = 0;
-    finish_sample(k, out, p, radius, src);
+    __global real *pos = SAMPLE_REAL(k, SR_POS, 3, slot);
+    pos[0] = p.x;
+    pos[1] = p.y;
+    pos[2] = p.z;
+    *SAMPLE_REAL(k, SR_RADIUS, 1, slot) = radius;
+    SAMPLE_INT(k, SI_QUADRIC, slot) = src.quadric;
+    finish_sample(k, slot, p, radius, src);
 }
 
 #endif

@@ -433,7 +433,7 @@ __kernel __attribute__((reqd_work_group_size(WORK_GROUP, 1, 1)))
 void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
               __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
               __global cell_rec *cells_out, uint cap_cells,
-              __global raw_sample_rec *samples, uint cap_samples,
+              __global real *sample_reals, __global int *sample_ints, uint cap_samples,
               __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
               __global volatile uint *counters, real radius, real floor_size,
               __global tape_op *clip, uint cap_clip, PRIMITIVE_TABLE)
@@ -445,7 +445,7 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
     tape_max[lid] = 0;
     if (gid < n_cells) {
         cell_work w = {0, 0, 0, 0};
-        sample_sink out = {samples, cap_samples, counters, clip, cap_clip, qs, frames, PRIMITIVE_TABLE_ARGS, 0};
+        sample_sink out = {sample_reals, sample_ints, cap_samples, counters, clip, cap_clip, qs, frames, PRIMITIVE_TABLE_ARGS, 0};
         cell_rec c = cells_in[gid];
         int o = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, arena_in, arena_out, cap_arena, counters,
                               radius, floor_size, &out, &w);

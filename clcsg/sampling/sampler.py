@@ -88,12 +88,13 @@ from ..cl.programs import build, kernel as program_kernel, launch
 from ..cl.buffer_pool import pool_of
 from ..cl.memory import check_allocation, device_buffer, upload
 from ..cl.constants import OP_LEAF
-from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, raw_sample_dtype, tape_rows, task_dtype
+from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, tape_rows, task_dtype
 from ..compile.quadric_frames import principal_frame_list
 from ..compile.root_tapes import prune_root_tapes
 from ..errors import LimitError, UsageError
 from ..readers.scenes import as_scene
 from .samples import Samples
+from .sample_columns import SampleColumns
 from ..compile.bounds import estimates as guard
 from ..progress import for_option
 from .forecast import Forecast, level_bounds
@@ -469,7 +470,6 @@ def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, 
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     sub = _Subdivision(ctx, prg, SceneBuffers(ctx, packed), frames_rec, tasks, roots, radius, floor, capacity,
                        expected, progress, max_levels, root_rows)
-    sub.task_quadrics = tasks["quadric"]
     return sub
 
 
@@ -576,7 +576,6 @@ class _Subdivision:
         # the arena starts with the root tapes (the full tape, then each quadric's)
         self.root_rows = scene.packed.tape if root_rows is None else root_rows
         self.cdt = cell_dtype(self.real)
-        self.sdt = raw_sample_dtype(self.real)
         tape = scene.packed.tape
         cap = tuple(capacity or ())
         self.sized = {"cells": len(cap) < 1, "arena": len(cap) < 3, "clip": len(cap) < 4}
@@ -656,10 +655,8 @@ class _Subdivision:
             self.grown["cells"] += 1
             over = True
         if n_samples_out > self.cap_samples:
-            new_cap = _grow(self.cap_samples, n_samples_out)
-            self.samples = self._grown_copy(self.samples, n_samples * self.sdt.itemsize,
-                                            new_cap * self.sdt.itemsize, "sample")
-            self.cap_samples = new_cap
+            self.cap_samples = _grow(self.cap_samples, n_samples_out)
+            self.samples.grow(n_samples, self.cap_samples)
             self.grown["samples"] += 1
             over = True
         if arena_out > self.cap_out:
@@ -689,7 +686,7 @@ class _Subdivision:
             counters_buf = upload(self.ctx, counters, writable=True)
             launch(kernel, self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
                    self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
-                   self.cells_out, np.uint32(self.cap_cells), self.samples, np.uint32(self.cap_samples),
+                   self.cells_out, np.uint32(self.cap_cells), *self.samples.args(),
                    self.arena_in, self.arena_out, np.uint32(self.cap_out), counters_buf,
                    self.real.type(self.radius), self.real.type(self.floor), self.clip, np.uint32(self.cap_clip),
                    *self.scene.colour_args())
@@ -715,7 +712,7 @@ class _Subdivision:
         self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
         self.cap_cells = max(self.cap_cells, MAX_CHILDREN * len(self.roots)) if self.sized["cells"] else self.cap_cells
         self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
-        self.samples = self._buffer(self.cap_samples * self.sdt.itemsize, "sample")
+        self.samples = SampleColumns(self.ctx, self.real, self.cap_samples, self._buffer)
         self.clip = self._buffer(self.cap_clip * tape.itemsize, "clip")
         return upload(self.ctx, self.roots, writable=True), bound
 
@@ -757,10 +754,8 @@ class _Subdivision:
         self.n_samples = n_samples
         # both reads are waited for at once (each blocking read is a round trip to the
         # device's threads)
-        self.raw = np.zeros(n_samples, dtype=self.sdt)
+        self.raw = self.samples.read(n_samples)
         self.clip_rows = np.zeros(self.clip_used, dtype=self.scene.packed.tape.dtype)
-        if n_samples:
-            cl.enqueue_copy(self.ctx.queue, self.raw, self.samples, is_blocking=False)
         if self.clip_used:
             cl.enqueue_copy(self.ctx.queue, self.clip_rows, self.clip, is_blocking=False)
         self.ctx.queue.finish()
@@ -771,17 +766,19 @@ class _Subdivision:
         """The samples of the run as :class:`Samples` (equal clip programs stored once)."""
         packed = self.scene.packed
         raw = self.raw
-        if not len(raw):
+        if not len(raw["pos"]):
             return Samples.empty(radius, tape, packed, {})
         clip_ops = self.clip_rows.view(np.int32).reshape(-1, 4)
         first, count, ops = dedupe_programs(clip_ops, raw["clip_first"], raw["clip_count"])
+        positions = raw["pos"].astype(np.float64, copy=False)
+        positions += packed.origin
         return Samples(
-            positions=np.add(raw["pos"], packed.origin, dtype=np.float64),
-            normals=np.array(raw["normal"], dtype=np.float64),
-            radii=np.array(raw["radius"], dtype=np.float64),
-            quadrics=self.task_quadrics[raw["task"]].astype(np.int32),
-            signs=np.array(raw["sign"], dtype=np.int32),
-            primitives=np.array(raw["primitive"], dtype=np.int32),
+            positions=positions,
+            normals=raw["normal"].astype(np.float64, copy=False),
+            radii=raw["radius"].astype(np.float64, copy=False),
+            quadrics=raw["quadric"],
+            signs=raw["sign"],
+            primitives=raw["primitive"],
             clip_first=first,
             clip_count=count,
             clip_ops=ops,
@@ -795,8 +792,8 @@ class _Subdivision:
     def release(self) -> None:
         """Hand the working buffers to the context's pool (all commands on them are done)."""
         if not self.zeroed:
-            pool_of(self.ctx).give(self.cells_in_last, self.cells_out, self.arena_in, self.arena_out, self.samples,
-                                   self.clip)
+            pool_of(self.ctx).give(self.cells_in_last, self.cells_out, self.arena_in, self.arena_out,
+                                   *self.samples.buffers(), self.clip)
 
 
 #: the share of the device's largest allocation (or global memory, if smaller) that a tape

@@ -126,20 +126,4 @@ typedef struct {
     int tape_count;
 } cell_rec;
 
-/* A sample as the subdivision emits it (clcsg/sampling/finish.h): position (device
- * coordinates), outward unit normal, splat radius, task, the side the solid is on (+1: the
- * quadric's negative side), primitive, and its clip program (rows of the clip buffer; count 0:
- * none). */
-typedef struct {
-    real pos[3];
-    real normal[3];
-    real radius;
-    int task;
-    int sign;
-    int primitive;
-    int clip_first;
-    int clip_count;
-    int pad;
-} raw_sample_rec;
-
 #endif

@@ -58,6 +58,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ...cl.constants import SAMPLE_INT_COLUMNS, SAMPLE_REAL_COLUMNS
 from ...errors import LimitError, UsageError
 from ...model.quadric import Quadric
 from .term_boxes import literal_box
@@ -95,10 +96,12 @@ AREA_FACTOR = 1.0
 EDGE_FACTOR = 0.5
 TASK_SAMPLES = 4
 
-#: bytes per sample: device buffers of the sampler (sample records, ``raw_sample_rec``, twice
-#: while growing; cells) and host arrays (the records' copy, Samples arrays, PLY record)
-DEVICE_BYTES_PER_SAMPLE = {8: 2 * 80 + 108, 4: 2 * 52 + 60}
-HOST_BYTES_PER_SAMPLE = 80 + 24 + 24 + 24 + 8 + 5 * 4 + 8 + 32
+#: bytes per sample: device buffers of the sampler (the sample columns of ``finish.h``, twice
+#: while growing; cells) and host arrays (Samples arrays, PLY record)
+_REALS = sum(w for _, w in SAMPLE_REAL_COLUMNS)
+_INTS = 4 * sum(w for _, w in SAMPLE_INT_COLUMNS)
+DEVICE_BYTES_PER_SAMPLE = {8: 2 * (8 * _REALS + _INTS) + 108, 4: 2 * (4 * _REALS + _INTS) + 60}
+HOST_BYTES_PER_SAMPLE = 24 + 24 + 24 + 8 + 5 * 4 + 8 + 32
 
 SQRT3 = math.sqrt(3.0)
 
