@@ -74,15 +74,32 @@ class SampleColumns:
 
     def read(self, n: int) -> dict:
         """The first ``n`` entries of every field, {name: (n, width) or (n,) array}, enqueued
-        without waiting: the caller finishes the queue before using them."""
+        without waiting: the caller finishes the queue before using them.  Adjacent regions of
+        one width are read by one rectangular copy into one array (each copy is a round trip
+        to the device's threads: eight of them cost the lens 0.35 ms), whose rows are the
+        fields' arrays."""
         import pyopencl as cl
 
         out = {}
         for buf, layout, dtype in ((self.reals, REAL_LAYOUT, self.real), (self.ints, INT_LAYOUT, INT)):
-            for name, (offset, width) in layout.items():
-                a = np.empty((n, width) if width > 1 else n, dtype=dtype)
+            for names, offset, width in _runs(layout):
+                block = np.empty((len(names), n, width), dtype=dtype)
                 if n:
-                    cl.enqueue_copy(self.ctx.queue, a, buf, src_offset=offset * self.cap * dtype.itemsize,
-                                    is_blocking=False)
-                out[name] = a
+                    row = width * dtype.itemsize
+                    cl.enqueue_copy(self.ctx.queue, block, buf, buffer_origin=(offset * self.cap * dtype.itemsize, 0),
+                                    host_origin=(0, 0), region=(n * row, len(names)),
+                                    buffer_pitches=(self.cap * row,), host_pitches=(n * row,), is_blocking=False)
+                for k, name in enumerate(names):
+                    out[name] = block[k] if width > 1 else block[k, :, 0]
         return out
+
+
+def _runs(layout) -> list:
+    """Adjacent regions of one width: [(names, offset of the first, width)]."""
+    runs = []
+    for name, (offset, width) in layout.items():
+        if runs and runs[-1][2] == width:
+            runs[-1][0].append(name)
+        else:
+            runs.append(([name], offset, width))
+    return runs
