@@ -284,6 +284,18 @@ def test_forced_overflow_gives_identical_results(name, cl_context):
     assert_same_samples(big, tiny)
 
 
+def test_overrun_inside_a_chain_gives_identical_results(cl_context):
+    """Cells and arenas large enough for chains of levels, samples and clip rows too small: a
+    level inside a chain overruns, the levels after it do nothing, and it runs again."""
+    shape, r = SCENES["drilled_block"]
+    big = sample(shape, r, device=cl_context)
+    small = sample(shape, r, device=cl_context, capacity=(1 << 16, 16, 1 << 18, 16))
+    assert big.stats["chains"] < big.stats["levels"]
+    assert small.stats["levels_skipped"] > 0
+    assert small.stats["buffer_growths"]["samples"] > 1 and small.stats["clip_buffer_growths"] > 0
+    assert_same_samples(big, small)
+
+
 def _points_near(s, i, rng, n=24):
     """Points on sample i's quadric inside its splat ball (projected along the normal)."""
     Kq = clcsg.Quadric(s.tape.quadrics[s.quadrics[i]])

@@ -17,7 +17,7 @@ OP_NAMES = ("LEAF", "AND", "OR", "COPY", "CONST")
 SAMPLER_COUNTERS = (
     "cells", "samples", "distance_queries", "leaf_distances", "unresolved", "discarded", "filled",
     "single", "split", "prune_evaluations", "pruned_decided", "tape_rows", "tape_max", "tapes_written",
-    "arena", "clip_rows", "finish_prune_evaluations",
+    "arena", "clip_rows", "finish_prune_evaluations", "status",
 )
 
 #: the sampler's sample columns (sampling/finish.h writes them, sampling/sampler.py reads them

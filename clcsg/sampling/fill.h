@@ -93,7 +93,7 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
         real ha = 0.5 * sx, hb = 0.5 * (yb - y), e = m.x * ha + m.y * hb;
         real need = fmin(radius, sqrt(ha * ha + hb * hb + e * e) * (1 + (real)1e-6));
         if (ni.y <= m.z && nj.y <= m.z) { /* owned everywhere */
-            uint base = atomic_add(&out->counters[SC_SAMPLES], (uint)nx);
+            uint base = sink_slots(out, (uint)nx);
             for (int a0 = 0; a0 < nx; a0 += FILL_CHUNK) {
                 int a1 = min(nx, a0 + FILL_CHUNK);
                 sample_src chunk = a1 - a0 > 1 ? chunk_source(pf, x0 + a0 * sx, x0 + a1 * sx, y, yb, need, src, out)
@@ -108,7 +108,7 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
                 real xa = x0 + a * sx;
                 if (!sub_rect_owned(pf, xa, xa + sx, y, yb)) continue;
                 real cx = xa + (real)0.5 * sx;
-                emit_sample(out, atomic_inc(&out->counters[SC_SAMPLES]),
+                emit_sample(out, sink_slots(out, 1),
                             plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, src);
             }
         }

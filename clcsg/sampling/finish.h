@@ -36,8 +36,10 @@ typedef struct {
 } sample_src;
 
 /* Where a level's samples go: their columns (`cap` entries per region), the clip buffer, and
- * what the finish reads.  `evals` counts the prune evaluations of the work-item's clip
- * programs. */
+ * what the finish reads.  `counters` is the run's running totals (slots SC_SAMPLES and
+ * SC_CLIP_ROWS: the next free sample slot and clip row); `evals` counts the prune evaluations
+ * of the work-item's clip programs, `emitted` and `clip_rows` what it reserved (the level's
+ * own counts: the host finds where a chain of levels first overflowed from them). */
 typedef struct {
     __global real *reals;
     __global int *ints;
@@ -54,8 +56,23 @@ typedef struct {
     __global const real4 *prim_box;
     __global const tape_op *inst_tape;
     int inst_rows;
-    uint evals;
+    uint evals, emitted, clip_rows;
 } sample_sink;
+
+/* `n` consecutive sample slots: the first (the sample columns hold only those below the
+ * capacity; the level runs again if any is past it) */
+inline uint sink_slots(sample_sink *k, uint n)
+{
+    k->emitted += n;
+    return atomic_add(&k->counters[SC_SAMPLES], n);
+}
+
+/* `rows` consecutive rows of the clip buffer: the first */
+inline uint sink_clip_rows(sample_sink *k, uint rows)
+{
+    k->clip_rows += rows;
+    return atomic_add(&k->counters[SC_CLIP_ROWS], rows);
+}
 
 /* The clip program of a sample at p on quadric q (the tape pruned over the splat ball,
  * written to the clip buffer unless both sides are decided) into *first, *count; returns the
@@ -77,7 +94,7 @@ inline uint clip_program(sample_sink *k, __global const tape_op *tape, int nt, i
         *count = nt;
         return tape_member(tape, nt, k->qs, p, q);
     }
-    uint base = atomic_add(&k->counters[SC_CLIP_ROWS], (uint)rows);
+    uint base = sink_clip_rows(k, (uint)rows);
     if (base + (uint)rows > k->cap_clip) return tape_member(tape, nt, k->qs, p, q);
     tape_write_pruned(tape, nt, rows, k->qs, &ball, q, state, k->clip + base, first, count, &k->evals, &memo);
     *first += (int)base;

@@ -38,10 +38,13 @@ def bytes_per_sample(real) -> int:
 
 class SampleColumns:
     """The sample buffers of one run, ``cap`` samples each.  ``buffer(nbytes, what)`` makes a
-    device buffer (the driver's pool, or zeroed memory where a checker needs it)."""
+    device buffer (the driver's pool, or zeroed memory where a checker needs it);
+    ``on_device``: grow by copies on the device (else through host memory, which Oclgrind's
+    uninitialized-value checker follows)."""
 
-    def __init__(self, ctx, real, cap: int, buffer):
+    def __init__(self, ctx, real, cap: int, buffer, on_device: bool = True):
         self.ctx, self.real, self.cap = ctx, np.dtype(real), int(cap)
+        self.buffer, self.on_device = buffer, on_device
         self.reals = buffer(REAL_WIDTH * self.cap * self.real.itemsize, "sample")
         self.ints = buffer(INT_WIDTH * self.cap * INT.itemsize, "sample")
 
@@ -53,8 +56,7 @@ class SampleColumns:
         return self.reals, self.ints
 
     def grow(self, n_used: int, cap: int) -> None:
-        """Larger buffers holding the first ``n_used`` entries of every region (through host
-        memory, as the driver grows its other buffers: growing is rare)."""
+        """Larger buffers holding the first ``n_used`` entries of every region."""
         self.reals = self._moved(self.reals, REAL_LAYOUT, REAL_WIDTH, self.real, n_used, cap)
         self.ints = self._moved(self.ints, INT_LAYOUT, INT_WIDTH, INT, n_used, cap)
         self.cap = int(cap)
@@ -62,6 +64,14 @@ class SampleColumns:
     def _moved(self, old, layout, width, dtype, n_used, cap):
         import pyopencl as cl
 
+        if self.on_device:
+            new = self.buffer(width * cap * dtype.itemsize, "sample")
+            for offset, w in layout.values():
+                if n_used:
+                    cl.enqueue_copy(self.ctx.queue, new, old, byte_count=w * n_used * dtype.itemsize,
+                                    src_offset=offset * self.cap * dtype.itemsize,
+                                    dst_offset=offset * cap * dtype.itemsize)
+            return new
         check_allocation(self.ctx, width * cap * dtype.itemsize, "sample")
         data = np.zeros(max(width * cap, 1), dtype=dtype)
         if n_used:

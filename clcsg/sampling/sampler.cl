@@ -1,7 +1,8 @@
 /* Adaptive subdivision sampler on the CSG tape (paper section 4.2 with eq. 22 generalized to
  * the tree; the driver is clcsg/sampling/sampler.py, which states the guarantee).
  *
- * One launch per level: every work-item takes one cell of the current queue.  The cell's tape
+ * One launch per level (levels run in chains: see the kernel): every work-item takes one cell
+ * of the current queue.  The cell's tape
  * is pruned over the cell's patch with the task's quadric substituted; if both sides come out
  * constant the patch is decided without a distance query (equal: no surface, discard;
  * different: all surface, fill).  Otherwise d_q(p) at the corners decides: discard, fill,
@@ -204,7 +205,7 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
         }
     }
     if (best >= 0 && best_r <= radius) {
-        emit_sample(out, atomic_inc(&out->counters[SC_SAMPLES]), plane_point(&g->pf, cx[best], cy[best], best_h),
+        emit_sample(out, sink_slots(out, 1), plane_point(&g->pf, cx[best], cy[best], best_h),
                     fmax(best_r, radius * (real)1e-3), src);
         return true;
     }
@@ -216,7 +217,7 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
     if (r > radius) return false;
     real3 pc = plane_point(&g->pf, mx, my, h);
     if (!(query(tape, n, qs, q, pc, w) < 0)) return false;
-    emit_sample(out, atomic_inc(&out->counters[SC_SAMPLES]), pc, fmax(r, radius * (real)1e-3), src);
+    emit_sample(out, sink_slots(out, 1), pc, fmax(r, radius * (real)1e-3), src);
     return true;
 }
 
@@ -257,7 +258,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     uint base = atomic_add(&counters[SC_ARENA], copies * (uint)rows);
     if (slot + k > cap_cells || base + copies * (uint)rows > cap_arena) return; /* overflow: the level re-runs */
     tape_write_pruned(tape, n, rows, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
-    w->tapes_written = copies;
+    w->tapes_written += copies;
     cell_rec a = c;
     a.level = c.level + 1;
     a.tape_first = (int)base + first;
@@ -345,7 +346,7 @@ inline sample_src fill_source(const cell_geom *g, cell_rec c, sample_src src, re
         src.sides = SIDES_KNOWN | (int)prune_member_bits(state);
         return src;
     }
-    uint base = atomic_add(&out->counters[SC_CLIP_ROWS], (uint)rows);
+    uint base = sink_clip_rows(out, (uint)rows);
     if (base + (uint)rows > out->cap_clip) return src;
     int first, count;
     tape_write_pruned(src.tape, src.tape_count, rows, out->qs, &grown, src.quadric, state, out->clip + base, &first,
@@ -422,54 +423,80 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
 
 /* the per-cell statistics summed over a work-group before one atomic per counter (an atomic
  * per cell and counter contends between the compute units) */
-#define WG_SUMS 12
+#define WG_SUMS 14
 constant int WG_SLOT[WG_SUMS] = {SC_DISCARDED, SC_FILLED, SC_SINGLE, SC_SPLIT, SC_UNRESOLVED, SC_PRUNED_DECIDED,
                                  SC_DISTANCE_QUERIES, SC_LEAF_DISTANCES, SC_PRUNE_EVALUATIONS, SC_TAPES_WRITTEN,
-                                 SC_TAPE_ROWS, SC_FINISH_PRUNE_EVALUATIONS};
+                                 SC_TAPE_ROWS, SC_FINISH_PRUNE_EVALUATIONS, SC_SAMPLES, SC_CLIP_ROWS};
 
-/* One cell per work-item (classify_cell); its samples are finished as they are emitted
- * (finish.h), into the per-sample outputs, while its tape is at hand. */
+/* One level: a cell per work-item (classify_cell); its samples are finished as they are
+ * emitted (finish.h), into the sample columns, while its tape is at hand.
+ *
+ * Levels run in chains, launched one after another with no read in between: the host reads
+ * the counters once per chain.  `counters` holds a row of N_SAMPLER_COUNTERS per level of the
+ * chain: row 0 is the host's seed (SC_CELLS: the first level's cells; SC_SAMPLES and
+ * SC_CLIP_ROWS: the running totals every level appends at), row `row` this level's own counts.
+ * A level's cells are the ones the level before wrote (its row's SC_CELLS), so a launch is
+ * sized to what that could be at most, and its work-groups loop over the cells in strides.  A
+ * level after one that overran a buffer does nothing and says so (SC_STATUS): its inputs stay
+ * as they were, and the host runs the overrun level again with larger buffers. */
 __kernel __attribute__((reqd_work_group_size(WORK_GROUP, 1, 1)))
 void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
-              __global const task_rec *tasks, __global const cell_rec *cells_in, int n_cells,
+              __global const task_rec *tasks, __global const cell_rec *cells_in, uint cap_cells_in,
               __global cell_rec *cells_out, uint cap_cells,
               __global real *sample_reals, __global int *sample_ints, uint cap_samples,
-              __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
-              __global volatile uint *counters, real radius, real floor_size,
+              __global const tape_op *arena_in, uint cap_arena_in, __global tape_op *arena_out, uint cap_arena,
+              __global volatile uint *counters, int row, real radius, real floor_size,
               __global tape_op *clip, uint cap_clip, PRIMITIVE_TABLE)
 {
     __local uint sums[WG_SUMS][WORK_GROUP];
     __local uint tape_max[WORK_GROUP];
-    int gid = get_global_id(0), lid = get_local_id(0);
-    for (int k = 0; k < WG_SUMS; ++k) sums[k][lid] = 0;
-    tape_max[lid] = 0;
-    if (gid < n_cells) {
-        cell_work w = {0, 0, 0, 0};
-        sample_sink out = {sample_reals, sample_ints, cap_samples, counters, clip, cap_clip, qs, frames, PRIMITIVE_TABLE_ARGS, 0};
-        cell_rec c = cells_in[gid];
-        int o = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, arena_in, arena_out, cap_arena, counters,
-                              radius, floor_size, &out, &w);
-        int k = o == OUT_DISCARDED || o == OUT_DECIDED_DISCARD ? 0
-              : o == OUT_FILLED || o == OUT_DECIDED_FILL ? 1
-              : o == OUT_SINGLE ? 2 : o == OUT_SPLIT ? 3 : 4;
-        sums[k][lid] = 1;
-        sums[5][lid] = o == OUT_DECIDED_DISCARD || o == OUT_DECIDED_FILL;
-        sums[6][lid] = w.queries;
-        sums[7][lid] = w.leaves;
-        sums[8][lid] = w.evals;
-        sums[9][lid] = w.tapes_written;
-        sums[10][lid] = (uint)c.tape_count;
-        sums[11][lid] = out.evals;
-        tape_max[lid] = (uint)c.tape_count;
+    __global volatile uint *running = counters;
+    __global volatile uint *prev = counters + (row - 1) * N_SAMPLER_COUNTERS;
+    __global volatile uint *mine = counters + row * N_SAMPLER_COUNTERS;
+    int lid = get_local_id(0);
+    __local uint skip;
+    /* a buffer overrun before this level (or by another work-group of it, which the host sees
+     * in this level's counts): nothing to do.  The running totals are read atomically: other
+     * work-groups may be adding to them */
+    if (lid == 0) {
+        skip = prev[SC_STATUS] || prev[SC_CELLS] > cap_cells_in || prev[SC_ARENA] > cap_arena_in
+            || atomic_or(&running[SC_SAMPLES], 0u) > cap_samples || atomic_or(&running[SC_CLIP_ROWS], 0u) > cap_clip;
+        if (skip) atomic_or(&mine[SC_STATUS], 1u);
     }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    uint n_cells = skip ? 0 : prev[SC_CELLS];
+    sample_sink out = {sample_reals, sample_ints, cap_samples, running, clip, cap_clip, qs, frames,
+                       PRIMITIVE_TABLE_ARGS, 0, 0, 0};
+    /* the work-item's sums over its cells, in registers until the work-group adds them up */
+    cell_work w = {0, 0, 0, 0};
+    uint discarded = 0, filled = 0, single = 0, split = 0, unresolved = 0, decided = 0, rows = 0, rows_max = 0;
+    for (uint start = get_group_id(0) * WORK_GROUP; start < n_cells; start += get_num_groups(0) * WORK_GROUP) {
+        uint gid = start + lid;
+        if (gid >= n_cells) continue;
+        cell_rec c = cells_in[gid];
+        int o = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, arena_in, arena_out, cap_arena, mine,
+                              radius, floor_size, &out, &w);
+        discarded += o == OUT_DISCARDED || o == OUT_DECIDED_DISCARD;
+        filled += o == OUT_FILLED || o == OUT_DECIDED_FILL;
+        single += o == OUT_SINGLE;
+        split += o == OUT_SPLIT;
+        unresolved += o == OUT_UNRESOLVED;
+        decided += o == OUT_DECIDED_DISCARD || o == OUT_DECIDED_FILL;
+        rows += (uint)c.tape_count;
+        rows_max = max(rows_max, (uint)c.tape_count);
+    }
+    uint mine_sums[WG_SUMS] = {discarded, filled, single, split, unresolved, decided, w.queries, w.leaves, w.evals,
+                               w.tapes_written, rows, out.evals, out.emitted, out.clip_rows};
+    for (int k = 0; k < WG_SUMS; ++k) sums[k][lid] = mine_sums[k];
+    tape_max[lid] = rows_max;
     barrier(CLK_LOCAL_MEM_FENCE);
     if (lid < WG_SUMS) {
         uint t = 0;
         for (int m = 0; m < WORK_GROUP; ++m) t += sums[lid][m];
-        if (t) atomic_add(&counters[WG_SLOT[lid]], t);
+        if (t) atomic_add(&mine[WG_SLOT[lid]], t);
     } else if (lid == WG_SUMS) {
         uint t = 0;
         for (int m = 0; m < WORK_GROUP; ++m) t = max(t, tape_max[m]);
-        atomic_max(&counters[SC_TAPE_MAX], t);
+        atomic_max(&mine[SC_TAPE_MAX], t);
     }
 }

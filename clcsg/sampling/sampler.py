@@ -62,7 +62,9 @@ surfaces shared by several parts of the tree and shared sub-graphs need no speci
 
 Nothing is lost: each level runs with buffers sized from an estimate; the kernel counts past
 the capacity without writing, the host sees it, grows the buffer (cells, samples, tape arena,
-clip programs) and re-runs the level.
+clip programs) and re-runs the level.  Levels run in chains of a few, launched back to back
+with one read of their counters (:class:`_Subdivision`); a level after one that overran does
+nothing, so the overrun level's inputs are intact when it runs again.
 
 Scale
 -----
@@ -101,7 +103,7 @@ from .forecast import Forecast, level_bounds
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
-WORK_GROUP = 64  # > the 13 statistics classify sums per work-group (sampler.cl)
+WORK_GROUP = 64  # > the 15 statistics classify sums per work-group (sampler.cl)
 
 #: counters summed over levels into the stats (the others are per-level positions)
 SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
@@ -543,25 +545,56 @@ def _grow(cap, needed):
     return int(max(2 * cap, needed + needed // 2))
 
 
-class _Subdivision:
-    """The level loop: buffers, the overflow protocol, per-level statistics.
+#: most levels launched one after another before their counters are read: a read is a round
+#: trip to the device's threads (about 40 us of the 2-core CPU's time per level, 13 levels on
+#: the lens)
+CHAIN_LEVELS = 4
+#: a chain's later levels may write more than its first (up to MAX_CHILDREN times as many cells
+#: per level): cell buffers and arenas are grown to their worst case up to these sizes (cells,
+#: tape rows); levels that could need more run one per read
+CHAIN_CELLS = 1 << 17
+CHAIN_ARENA_ROWS = 1 << 18
+#: work-groups of a chained level per compute unit, at least: its cells are counted on the
+#: device, so it is launched for as many as it could have (up to this), and the work-groups
+#: loop over them
+CHAIN_GROUPS_PER_CU = 8
 
-    Tape arenas ping-pong: level L reads its cells' tapes from one arena and writes its
-    children's tapes (exactly the rows pruning keeps) into the other, whose counter starts at
-    zero, so an arena holds the tapes of one level's live cells and never the tapes of cells
-    already done.  A sample is finished as it is emitted (``finish.h``): its clip program goes
-    to the clip buffer, whose rows are kept across levels and deduplicated at the end
+
+class _Side:
+    """One side of the ping-pong: a cell buffer and a tape arena, and their capacities (cells,
+    tape rows).  A level reads one side and writes the other."""
+
+    __slots__ = ("cells", "cap_cells", "arena", "cap_arena")
+
+    def __init__(self, cells, cap_cells, arena, cap_arena):
+        self.cells, self.cap_cells, self.arena, self.cap_arena = cells, int(cap_cells), arena, int(cap_arena)
+
+
+class _Subdivision:
+    """The level loop: buffers, chains of levels, the overflow protocol, per-level statistics.
+
+    Cells and tape arenas ping-pong between two sides (:class:`_Side`): level L reads its
+    cells and their tapes from one side and writes its children and their tapes (exactly the
+    rows pruning keeps) into the other, whose counters start at zero, so an arena holds the
+    tapes of one level's live cells and never the tapes of cells already done.  A sample is
+    finished as it is emitted (``finish.h``) into the sample columns; its clip program goes to
+    the clip buffer, whose rows are kept across levels and deduplicated at the end
     (:func:`dedupe_programs`).
 
-    Buffers are sized before a level to what it can write at most, so a level runs once: a
-    cell has at most :data:`MAX_CHILDREN` children, and a split writes its children's tape
-    (at most its cell's rows + 1, ``tape_prune_rows``) once per two children, so the
-    children's tapes take at most 2 ((the rows of the level's cells' tapes) + (its cells))
-    rows; the rows of a level's cells are at most twice the rows the level before wrote (two
-    cells to a tape).  A bound past :data:`ARENA_BUDGET` of the
-    device, and every buffer whose size the caller forces (``capacity``), is left to the
-    overflow protocol (run, see the counters past the capacity, grow, run the level again);
-    so are the samples and the clip programs, whose counts a level does not bound.
+    Levels run in chains of up to :data:`CHAIN_LEVELS`, launched one after another, and their
+    counters are read once per chain (``sampler.cl``).  Buffers are sized before a chain to
+    what its levels can write at most, so a level runs once: a cell has at most
+    :data:`MAX_CHILDREN` children, and a split writes its children's tape (at most its cell's
+    rows + 1, ``tape_prune_rows``) once per two children, so the children's tapes take at most
+    2 ((the rows of the level's cells' tapes) + (its cells)) rows; the rows of a level's cells
+    are at most twice the rows the level before wrote (two cells to a tape).  The side a
+    chain reads holds its first level's input and cannot be grown: a chain is as long as the
+    worst case of its levels fits (growing the side it writes up to :data:`CHAIN_CELLS` /
+    :data:`CHAIN_ARENA_ROWS`).  A bound past :data:`ARENA_BUDGET` of the device, and every
+    buffer whose size the caller forces (``capacity``), is left to the overflow protocol: the
+    levels after one that overran a buffer do nothing, the host sees the overrun in that
+    level's counts, grows the buffer and runs it again; so are the samples and the clip
+    programs, whose counts a level does not bound.
     """
 
     def __init__(self, ctx, prg, scene, frames_rec, tasks, roots, radius, floor, capacity, estimate, progress,
@@ -585,9 +618,11 @@ class _Subdivision:
         self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else max(int(estimate), 1 << 14)
         self.clip_used = self.clip_level = 0
         self.arena_budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem)
+        self.max_groups = CHAIN_GROUPS_PER_CU * max(1, int(ctx.info.compute_units))
         self.zeroed = "oclgrind" in ctx.info.platform.lower()
         self.progress = _Progress(progress, estimate, roots, radius, max_levels, floor)
         self.levels = []
+        self.chains = self.skipped = 0
         self.totals = {k: 0 for k in _SUMMED}
         self.grown = {"cells": 0, "samples": 0, "arena": 0, "clip": 0}
         self.arena_peak = 0
@@ -603,6 +638,21 @@ class _Subdivision:
         check_allocation(self.ctx, nbytes, what)
         return upload(self.ctx, np.zeros(max(int(nbytes), 16), dtype=np.uint8), writable=True, what=what)
 
+    def _holding(self, records, capacity, what):
+        """A buffer of ``capacity`` records (of ``records``' dtype) that starts with ``records``
+        (from host memory in one piece where Oclgrind checks it, see :meth:`_buffer`)."""
+        import pyopencl as cl
+
+        capacity = max(int(capacity), len(records), 1)
+        if self.zeroed:
+            data = np.zeros(capacity, dtype=records.dtype)
+            data[:len(records)] = records
+            return upload(self.ctx, data, writable=True, what=what)
+        buf = pool_of(self.ctx).take(capacity * records.dtype.itemsize, what)
+        if len(records):
+            cl.enqueue_copy(self.ctx.queue, buf, np.ascontiguousarray(records))
+        return buf
+
     def _replace(self, old, nbytes, what):
         """A new working buffer for ``old``, which goes back to the pool: the commands already
         enqueued on it run first (one in-order queue), and only later ones see its reuse."""
@@ -611,148 +661,194 @@ class _Subdivision:
         return self._buffer(nbytes, what)
 
     def _grown_copy(self, old, used_bytes, new_bytes, what):
-        """A larger buffer holding the first ``used_bytes`` of ``old``, made from host memory (a
-        device-to-device copy would do, but Oclgrind's uninitialized-value checker loses track
-        of such copies; growing is rare)."""
+        """A larger buffer holding the first ``used_bytes`` of ``old`` (which goes back to the
+        pool), copied on the device; on Oclgrind made from host memory (its
+        uninitialized-value checker loses track of device-to-device copies)."""
         import pyopencl as cl
 
+        if not self.zeroed:
+            new = pool_of(self.ctx).take(new_bytes, what)
+            if used_bytes:
+                cl.enqueue_copy(self.ctx.queue, new, old, byte_count=int(used_bytes))
+            pool_of(self.ctx).give(old)
+            return new
         check_allocation(self.ctx, new_bytes, what)
         data = np.zeros(max(int(new_bytes), 16), dtype=np.uint8)
         if used_bytes:
             cl.enqueue_copy(self.ctx.queue, data[:used_bytes], old)
         return upload(self.ctx, data, writable=True)
 
-    def _size_for(self, n_in, arena_bound):
-        """Grow the output buffers to what a level of ``n_in`` cells can write at most (see
-        the class docstring), where that is allowed; the clip buffer, which nothing bounds, to
-        four times the rows the last level wrote (a level run again costs more than memory)."""
+    def _grow_side(self, side, cells, arena_rows):
+        """Grow ``side`` (whose contents are dead) to ``cells`` cells and ``arena_rows`` tape rows
+        where allowed (by half again at least)."""
         rows = self.scene.packed.tape.itemsize
-        need = self.clip_used + 4 * self.clip_level
+        if self.sized["cells"] and cells > side.cap_cells:
+            side.cap_cells = max(cells, side.cap_cells + side.cap_cells // 2)
+            side.cells = self._replace(side.cells, side.cap_cells * self.cdt.itemsize, "cell")
+        budget = self.arena_budget // rows
+        if self.sized["arena"] and side.cap_arena < arena_rows <= budget:
+            side.cap_arena = int(min(max(arena_rows, side.cap_arena + side.cap_arena // 2), budget))
+            side.arena = self._replace(side.arena, side.cap_arena * rows, "tape arena")
+
+    def _plan(self, n_in, arena_bound, level) -> int:
+        """Size the buffers for the next chain and return its length.  The j-th level from now
+        (0-based) has at most MAX_CHILDREN^j ``n_in`` cells and writes at most its arena bound.
+        The output side, whose contents are dead, is grown for the first level and, within the
+        chain budgets, for the levels after it (it is written by this chain's even levels, and
+        read by the next chain, whose second level writes it again); the input side holds the
+        first level's input, so an odd level is chained only if it fits there.  The clip
+        buffer, which nothing bounds, is grown to four times the rows a level wrote lately for
+        each level of the chain (a level run again costs more than memory)."""
+        rows = self.scene.packed.tape.itemsize
+        cells_budget = CHAIN_CELLS if self.sized["cells"] else 0
+        arena_budget = min(CHAIN_ARENA_ROWS, self.arena_budget // rows) if self.sized["arena"] else 0
+        cells, arenas = [MAX_CHILDREN * n_in], [arena_bound]
+        for _ in range(CHAIN_LEVELS):
+            cells.append(MAX_CHILDREN * cells[-1])
+            arenas.append(2 * (2 * arenas[-1] + cells[-2]))
+        self._grow_side(self.out, max([cells[0]] + [c for c in cells if c <= cells_budget]),
+                        max([arenas[0]] + [a for a in arenas if a <= arena_budget]))
+        k_max = max(1, min(CHAIN_LEVELS, self.max_levels - level))
+        k = 1
+        while k < k_max:
+            side = self.src if k % 2 else self.out
+            if cells[k] > side.cap_cells or arenas[k] > side.cap_arena:
+                break
+            k += 1
+        need = self.clip_used + 4 * k * self.clip_level
         if self.sized["clip"] and need > self.cap_clip:
             new_cap = max(need, 2 * self.cap_clip)
             self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
             self.cap_clip = new_cap
-        if self.sized["cells"] and MAX_CHILDREN * n_in > self.cap_cells:
-            self.cap_cells = max(MAX_CHILDREN * n_in, self.cap_cells + self.cap_cells // 2)
-            self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
-        if self.sized["arena"] and self.cap_out < arena_bound <= self.arena_budget / rows:
-            self.cap_out = int(min(max(arena_bound, self.cap_out + self.cap_out // 2), self.arena_budget // rows))
-            self.arena_out = self._replace(self.arena_out, self.cap_out * rows, "tape arena")
+        return k
 
-    def _overflows(self, counters, n_samples) -> bool:
-        """Grow every buffer the level's ``counters`` show it overran (keeping what earlier
-        levels wrote: ``n_samples`` sample records, ``self.clip_used`` clip rows); True if
-        any was."""
+    def _chain(self, kernel, n_in, n_samples, k):
+        """Launch ``k`` levels, the first on ``n_in`` cells of the input side, and read their
+        counters: a (k + 1, counters) array, row 0 the seed (``sampler.cl``)."""
+        import pyopencl as cl
+
+        counters = np.zeros((k + 1, len(SAMPLER_COUNTERS)), dtype=np.uint32)
+        counters[0, _SLOT["cells"]] = n_in
+        counters[0, _SLOT["samples"]] = n_samples
+        counters[0, _SLOT["clip_rows"]] = self.clip_used
+        # a fresh buffer from host memory each chain (Oclgrind's uninitialized-value checker
+        # does not see host writes into an existing buffer)
+        counters_buf = upload(self.ctx, counters, writable=True)
+        src, out = self.src, self.out
+        most = n_in
+        for row in range(1, k + 1):
+            groups = -(-most // WORK_GROUP)
+            if row > 1:
+                groups = min(groups, max(self.max_groups, -(-n_in // WORK_GROUP)))
+            launch(kernel, self.ctx.queue, (max(1, groups) * WORK_GROUP,), (WORK_GROUP,),
+                   self.scene.quadrics, self.frames, self.tasks, src.cells, np.uint32(src.cap_cells), out.cells,
+                   np.uint32(out.cap_cells),
+                   *self.samples.args(), src.arena, np.uint32(src.cap_arena), out.arena, np.uint32(out.cap_arena),
+                   counters_buf, np.int32(row), self.real.type(self.radius), self.real.type(self.floor), self.clip,
+                   np.uint32(self.cap_clip), *self.scene.colour_args())
+            src, out = out, src
+            most = min(MAX_CHILDREN * most, src.cap_cells)
+        self.chains += 1
+        cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
+        return counters
+
+    def _overran(self, c, n_samples) -> bool:
+        """Grow every buffer a level's counters ``c`` show it overran (keeping what the levels
+        before wrote: ``n_samples`` samples, ``self.clip_used`` clip rows); True if any was."""
         rows = self.scene.packed.tape.itemsize
-        n_cells_out = int(counters[_SLOT["cells"]])
-        n_samples_out = int(counters[_SLOT["samples"]])
-        arena_out = int(counters[_SLOT["arena"]])
-        clip_out = int(counters[_SLOT["clip_rows"]])
+        out = self.out
         over = False
-        if n_cells_out > self.cap_cells:
-            self.cap_cells = _grow(self.cap_cells, n_cells_out)
-            self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
+        if c[_SLOT["cells"]] > out.cap_cells:
+            out.cap_cells = _grow(out.cap_cells, int(c[_SLOT["cells"]]))
+            out.cells = self._replace(out.cells, out.cap_cells * self.cdt.itemsize, "cell")
             self.grown["cells"] += 1
             over = True
-        if n_samples_out > self.cap_samples:
-            self.cap_samples = _grow(self.cap_samples, n_samples_out)
+        if n_samples + c[_SLOT["samples"]] > self.cap_samples:
+            self.cap_samples = _grow(self.cap_samples, n_samples + int(c[_SLOT["samples"]]))
             self.samples.grow(n_samples, self.cap_samples)
             self.grown["samples"] += 1
             over = True
-        if arena_out > self.cap_out:
-            self.cap_out = _grow(self.cap_out, arena_out)
-            self.arena_out = self._replace(self.arena_out, self.cap_out * rows, "tape arena")
+        if c[_SLOT["arena"]] > out.cap_arena:
+            out.cap_arena = _grow(out.cap_arena, int(c[_SLOT["arena"]]))
+            out.arena = self._replace(out.arena, out.cap_arena * rows, "tape arena")
             self.grown["arena"] += 1
             over = True
-        if clip_out > self.cap_clip:
-            new_cap = _grow(self.cap_clip, clip_out)
+        if self.clip_used + c[_SLOT["clip_rows"]] > self.cap_clip:
+            new_cap = _grow(self.cap_clip, self.clip_used + int(c[_SLOT["clip_rows"]]))
             self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
             self.cap_clip = new_cap
             self.grown["clip"] += 1
             over = True
+        if not over and c[_SLOT["status"]]:
+            raise RuntimeError("sampler: a level did nothing after one that overran no buffer")
         return over
 
-    def _level(self, kernel, cells_in, n_in, n_samples):
-        """Run one level until it fits (the overflow protocol); returns its counters."""
-        import pyopencl as cl
-
-        counters = np.zeros(len(SAMPLER_COUNTERS), dtype=np.uint32)
-        while True:
-            counters[:] = 0
-            counters[_SLOT["samples"]] = n_samples
-            counters[_SLOT["clip_rows"]] = self.clip_used
-            # a fresh buffer from host memory each run (Oclgrind's uninitialized-value
-            # checker does not see host writes into an existing buffer)
-            counters_buf = upload(self.ctx, counters, writable=True)
-            launch(kernel, self.ctx.queue, launch_size(n_in), (WORK_GROUP,),
-                   self.scene.quadrics, self.frames, self.tasks, cells_in, np.int32(n_in),
-                   self.cells_out, np.uint32(self.cap_cells), *self.samples.args(),
-                   self.arena_in, self.arena_out, np.uint32(self.cap_out), counters_buf,
-                   self.real.type(self.radius), self.real.type(self.floor), self.clip, np.uint32(self.cap_clip),
-                   *self.scene.colour_args())
-            cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
-            if not self._overflows(counters, n_samples):
-                self.clip_level = int(counters[_SLOT["clip_rows"]]) - self.clip_used
-                self.clip_used += self.clip_level
-                return counters
-
     def _start(self):
-        """The first level's buffers: the root cells, the arena with the root tapes (exactly
-        them when the arenas are sized per level: this arena takes level 1's output and is
-        grown for it then), the other arena, cells, samples and clip rows."""
+        """The first level's buffers: the input side with the root cells and the root tapes,
+        the output side, the samples and the clip rows; returns level 1's arena bound.  Sized
+        arenas hold the default capacity, or exactly what level 1 reads and writes at most where
+        that is more (a scene of thousands of primitives has long root tapes)."""
         tape = self.scene.packed.tape
-        n_first = len(self.root_rows) if self.sized["arena"] else max(self.cap_arena, len(self.root_rows))
-        first = np.zeros(max(n_first, 1), dtype=tape.dtype)
-        first[:len(self.root_rows)] = self.root_rows
-        self.arena_in, self.cap_in = upload(self.ctx, first, writable=True, what="tape arena"), len(first)
         bound = 2 * (int(self.roots["tape_count"].sum()) + len(self.roots))
-        self.cap_out = self.cap_arena
+        cap_in = max(self.cap_arena, len(self.root_rows))
+        cap_out = self.cap_arena
         if self.sized["arena"] and bound <= self.arena_budget / tape.itemsize:
-            self.cap_out = max(bound, 16)
-        self.arena_out = self._buffer(self.cap_out * tape.itemsize, "tape arena")
-        self.cap_cells = max(self.cap_cells, MAX_CHILDREN * len(self.roots)) if self.sized["cells"] else self.cap_cells
-        self.cells_out = self._buffer(self.cap_cells * self.cdt.itemsize, "cell")
-        self.samples = SampleColumns(self.ctx, self.real, self.cap_samples, self._buffer)
+            cap_out = max(bound, cap_out)
+        cap_cells = max(self.cap_cells, MAX_CHILDREN * len(self.roots)) if self.sized["cells"] else self.cap_cells
+        self.src = _Side(self._holding(self.roots, cap_cells, "cell"), max(cap_cells, len(self.roots)),
+                         self._holding(np.ascontiguousarray(self.root_rows, dtype=tape.dtype), cap_in, "tape arena"),
+                         cap_in)
+        self.out = _Side(self._buffer(cap_cells * self.cdt.itemsize, "cell"), cap_cells,
+                         self._buffer(cap_out * tape.itemsize, "tape arena"), cap_out)
+        self.samples = SampleColumns(self.ctx, self.real, self.cap_samples, self._buffer, on_device=not self.zeroed)
         self.clip = self._buffer(self.cap_clip * tape.itemsize, "clip")
-        return upload(self.ctx, self.roots, writable=True), bound
+        return bound
+
+    def _accept(self, level, c, n_in, n_samples):
+        """Record level ``level``, which ran on ``n_in`` cells with counters ``c`` and fit, and
+        swap the sides; returns its children and the samples so far."""
+        n_cells_out = int(c[_SLOT["cells"]])
+        n_samples_out = n_samples + int(c[_SLOT["samples"]])
+        for name in _SUMMED:
+            self.totals[name] += int(c[_SLOT[name]])
+        arena_rows = int(c[_SLOT["arena"]])
+        self.levels.append({
+            "cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples,
+            "tape_mean": int(c[_SLOT["tape_rows"]]) / max(n_in, 1), "tape_max": int(c[_SLOT["tape_max"]]),
+            "arena_rows": arena_rows,
+        })
+        self.arena_peak = max(self.arena_peak, arena_rows)
+        self.clip_level = max(self.clip_level, int(c[_SLOT["clip_rows"]]))
+        self.clip_used += int(c[_SLOT["clip_rows"]])
+        self.progress.level(level, n_in, n_samples_out, n_cells_out)
+        self.src, self.out = self.out, self.src
+        return n_cells_out, n_samples_out
 
     def run(self):
         import pyopencl as cl
 
-        cells_in, arena_bound = self._start()
+        arena_bound = self._start()
         kernel = program_kernel(self.prg, "classify")
         n_in, n_samples, level = len(self.roots), 0, 0
         while n_in > 0:
             if level >= self.max_levels:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
-            self._size_for(n_in, arena_bound)
-            counters = self._level(kernel, cells_in, n_in, n_samples)
-            n_cells_out = int(counters[_SLOT["cells"]])
-            n_samples_out = int(counters[_SLOT["samples"]])
-            for name in _SUMMED:
-                self.totals[name] += int(counters[_SLOT[name]])
-            arena_rows = int(counters[_SLOT["arena"]])
-            self.levels.append({
-                "cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples,
-                "tape_mean": int(counters[_SLOT["tape_rows"]]) / n_in, "tape_max": int(counters[_SLOT["tape_max"]]),
-                "arena_rows": arena_rows,
-            })
-            self.arena_peak = max(self.arena_peak, arena_rows)
-            n_samples = n_samples_out
-            self.progress.level(level, n_in, n_samples, n_cells_out)
-            cells_in, self.cells_out = self.cells_out, cells_in
-            # the old input buffer becomes the next output: make sure it is large enough
-            if self.cap_cells * self.cdt.itemsize > self.cells_out.size:
-                self.cells_out = self._replace(self.cells_out, self.cap_cells * self.cdt.itemsize, "cell")
-            self.arena_in, self.arena_out = self.arena_out, self.arena_in
-            self.cap_in, self.cap_out = self.cap_out, self.cap_in
-            n_in = n_cells_out
-            arena_bound = 2 * (2 * arena_rows + n_in)
-            level += 1
+            k = self._plan(n_in, arena_bound, level)
+            counters = self._chain(kernel, n_in, n_samples, k)
+            self.clip_level = 0
+            for row in range(1, k + 1):
+                c = counters[row]
+                if self._overran(c, n_samples):
+                    self.skipped += int(counters[row + 1:, _SLOT["status"]].sum())
+                    break
+                n_in, n_samples = self._accept(level, c, n_in, n_samples)
+                arena_bound = 2 * (2 * int(c[_SLOT["arena"]]) + n_in)
+                level += 1
+                if n_in == 0 or level >= self.max_levels:
+                    break
         self.progress.done()
-        self.cells_in_last = cells_in
         self.n_samples = n_samples
-        # both reads are waited for at once (each blocking read is a round trip to the
+        # the reads are waited for at once (each blocking read is a round trip to the
         # device's threads)
         self.raw = self.samples.read(n_samples)
         self.clip_rows = np.zeros(self.clip_used, dtype=self.scene.packed.tape.dtype)
@@ -760,6 +856,8 @@ class _Subdivision:
             cl.enqueue_copy(self.ctx.queue, self.clip_rows, self.clip, is_blocking=False)
         self.ctx.queue.finish()
         self.totals["buffer_growths"] = {k: v for k, v in self.grown.items() if k != "clip"}
+        self.totals["chains"] = self.chains
+        self.totals["levels_skipped"] = self.skipped
         self.totals["arena_rows"] = self.arena_peak
 
     def collect(self, tape, radius) -> Samples:
@@ -792,7 +890,7 @@ class _Subdivision:
     def release(self) -> None:
         """Hand the working buffers to the context's pool (all commands on them are done)."""
         if not self.zeroed:
-            pool_of(self.ctx).give(self.cells_in_last, self.cells_out, self.arena_in, self.arena_out,
+            pool_of(self.ctx).give(self.src.cells, self.out.cells, self.src.arena, self.out.arena,
                                    *self.samples.buffers(), self.clip)
 
 
