@@ -345,3 +345,20 @@ def test_the_bar_fraction_never_goes_back_and_ends_at_100():
     assert pct == sorted(pct) and pct[-1] == 1.0 and progress[-1]["eta"] == 0
     for e, f in zip(progress, shown):
         assert abs(e["done"] / e["total"] - f) <= 0.01 + 1 / e["total"]
+
+
+def test_a_chain_of_levels_shares_its_seconds_by_their_work():
+    """Levels that ran in one chain are reported at once: the forecast sees each level's share
+    of the chain's seconds, in proportion to 1 + cells + SAMPLE_COST samples emitted."""
+    from clcsg.sampling.forecast import SAMPLE_COST
+    from clcsg.sampling.sampler import _Progress
+
+    prog = _Progress(Reporter("json", stream=io.StringIO()), estimate=1_000, max_levels=400)
+    levels = [(0, 10, 0, 40), (1, 40, 100, 160), (2, 160, 400, 300)]
+    prog.chain(levels)
+    work = [1 + 10, 1 + 40 + SAMPLE_COST * 100, 1 + 160 + SAMPLE_COST * 300]
+    secs = prog.forecast.seconds
+    assert prog.forecast.cells == [10, 40, 160] and len(secs) == 3 and sum(secs) > 0
+    for s, w in zip(secs, work):
+        assert s / sum(secs) == pytest.approx(w / sum(work))
+    assert 0 < prog.fraction < 1

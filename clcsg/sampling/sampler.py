@@ -99,7 +99,7 @@ from .samples import Samples
 from .sample_columns import SampleColumns
 from ..compile.bounds import estimates as guard
 from ..progress import for_option
-from .forecast import Forecast, level_bounds
+from .forecast import SAMPLE_COST, Forecast, level_bounds
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
@@ -327,12 +327,30 @@ class _Progress:
         self.shown = 0.0
         self.t0 = self.t_last = time.perf_counter()
 
-    def level(self, level, cells, samples, children=0):
+    def chain(self, levels):
+        """The levels of one chain, (level, cells, samples so far, children) each, done at
+        once: the chain's seconds are shared among them by their work as the forecast costs it
+        (one level, cells + SAMPLE_COST samples emitted), so that its time model sees each
+        level's share, not the whole chain on its first level and nothing on the others."""
+        if self.reporter.mode == "none":  # nothing is shown: no forecast to make
+            self.cells += sum(lv[1] for lv in levels)
+            return
+        spent = time.perf_counter() - self.t_last
+        work, seen = [], self.forecast.samples
+        for _, cells, samples, _ in levels:
+            work.append(1 + cells + SAMPLE_COST * max(0, samples - seen))
+            seen = samples
+        for (level, cells, samples, children), w in zip(levels, work):
+            self.level(level, cells, samples, children, spent * w / sum(work))
+
+    def level(self, level, cells, samples, children=0, seconds=None):
+        """A level done (``seconds``: its share of the time since the last one; None: all of
+        it)."""
         if self.reporter.mode == "none":  # nothing is shown: no forecast to make
             self.cells += cells
             return
         now = time.perf_counter()
-        self.forecast.add(cells, samples, now - self.t_last)
+        self.forecast.add(cells, samples, now - self.t_last if seconds is None else seconds)
         self.t_last = now
         self.cells += cells
         elapsed = now - self.t0
@@ -820,7 +838,6 @@ class _Subdivision:
         self.arena_peak = max(self.arena_peak, arena_rows)
         self.clip_level = max(self.clip_level, int(c[_SLOT["clip_rows"]]))
         self.clip_used += int(c[_SLOT["clip_rows"]])
-        self.progress.level(level, n_in, n_samples_out, n_cells_out)
         self.src, self.out = self.out, self.src
         return n_cells_out, n_samples_out
 
@@ -836,16 +853,21 @@ class _Subdivision:
             k = self._plan(n_in, arena_bound, level)
             counters = self._chain(kernel, n_in, n_samples, k)
             self.clip_level = 0
+            done = []
             for row in range(1, k + 1):
                 c = counters[row]
                 if self._overran(c, n_samples):
                     self.skipped += int(counters[row + 1:, _SLOT["status"]].sum())
                     break
+                cells = n_in
                 n_in, n_samples = self._accept(level, c, n_in, n_samples)
+                done.append((level, cells, n_samples, n_in))
                 arena_bound = 2 * (2 * int(c[_SLOT["arena"]]) + n_in)
                 level += 1
                 if n_in == 0 or level >= self.max_levels:
                     break
+            if done:
+                self.progress.chain(done)
         self.progress.done()
         self.n_samples = n_samples
         # the reads are waited for at once (each blocking read is a round trip to the
