@@ -1,11 +1,10 @@
 /* Adaptive subdivision sampler on the CSG tape (paper section 4.2 with eq. 22 generalized to
  * the tree; the driver is clcsg/sampling/sampler.py, which states the guarantee).
  *
- * One launch per level (levels run in chains: see the kernel): every work-item takes one cell
- * of the current queue.  The cell's tape
- * is pruned over the cell's patch with the task's quadric substituted; if both sides come out
- * constant the patch is decided without a distance query (equal: no surface, discard;
- * different: all surface, fill).  Otherwise d_q(p) at the corners decides: discard, fill,
+ * One launch per level (levels run in chains: see the kernel), one cell per work-item.  The
+ * cell's tape is pruned over the cell's patch with the task's quadric substituted; if both
+ * sides come out constant the patch is decided without a distance query (equal: no surface,
+ * discard; different: all surface, fill).  Otherwise d_q(p) at the corners decides: discard, fill,
  * single sample, or split (the children get the tape pruned over the patch grown by the
  * radius, written once, with exactly the rows pruning keeps, into the level's output arena).
  * Arenas ping-pong: a level reads its cells' tapes from `arena_in` and writes its children's
