@@ -88,7 +88,7 @@ from ..cl import device as _device
 from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build, kernel as program_kernel, launch
 from ..cl.buffer_pool import pool_of
-from ..cl.memory import check_allocation, device_buffer, upload
+from ..cl.memory import check_allocation, upload
 from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, tape_rows, task_dtype
 from ..compile.quadric_frames import principal_frame_list
@@ -109,10 +109,6 @@ WORK_GROUP = 64  # > the 15 statistics classify sums per work-group (sampler.cl)
 SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
            "prune_evaluations", "pruned_decided", "tapes_written", "finish_prune_evaluations")
 _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
-
-
-def launch_size(n: int) -> tuple[int]:
-    return (max(1, -(-n // WORK_GROUP)) * WORK_GROUP,)
 
 
 def frame_records(frames, real) -> np.ndarray:
