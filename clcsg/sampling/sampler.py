@@ -123,41 +123,57 @@ def frame_records(frames, real) -> np.ndarray:
     return rec
 
 
-def _face_box(inst, q):
-    """The box of instance ``inst``'s face on quadric ``q`` (its face boxes, which bound the
-    part of its boundary on each literal; else its box); None if empty.  A plane's face box is
-    flat: it is padded by a relative 1e-9, so that cutting it by the scene bound (computed
-    apart, and rounded) cannot empty it."""
-    if inst.box is None:
-        return None
-    if inst.face_boxes is not None:
-        rows = [f for (u, _), f in zip(inst.literals, inst.face_boxes) if u == q and np.all(f[1] >= f[0])]
-        if not rows:
-            return None
-        lo, hi = np.min([f[0] for f in rows], axis=0), np.max([f[1] for f in rows], axis=0)
-        pad = 1e-9 * (1.0 + float(np.abs(np.where(np.isfinite(lo), lo, 0.0)).max())
-                      + float(np.abs(np.where(np.isfinite(hi), hi, 0.0)).max()))
-        return lo - pad, hi + pad
-    return inst.box
-
-
 def quadric_boxes(tape) -> dict:
-    """World box per sampled quadric: the union of the boxes of the faces on it of the
-    primitive instances that have it as a literal (:func:`_face_box`), cut by the scene bound
-    (None where that is empty)."""
-    used = set(int(q) for q in tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
-    owners = tape.owners()
-    lo_b, hi_b = tape.bound
-    out = {}
-    for q in sorted(used):
-        boxes = [b for b in (_face_box(tape.instances[i], q) for i in owners[q]) if b is not None]
-        if not boxes:
+    """World box per sampled quadric: the union over the primitive instances that have it as a
+    literal of the box of their face on it (their face boxes, which bound the part of their
+    boundary on each literal; else their box), cut by the scene bound (no entry where that is
+    empty).  A plane's face box is flat: the union per instance is padded by a relative 1e-9,
+    so that cutting it by the scene bound (computed apart, and rounded) cannot empty it.
+    One row per (instance, literal), unions by ``np.minimum.at`` (a loop per quadric took the
+    2,500-hole plate 0.39 s)."""
+    n_q = tape.n_quadrics
+    inst_of, q_of, los, his, from_faces = [], [], [], [], []
+    for inst in tape.instances:
+        if inst.box is None or not inst.literals:
             continue
-        lo = np.maximum(np.min([b[0] for b in boxes], axis=0), lo_b)
-        hi = np.minimum(np.max([b[1] for b in boxes], axis=0), hi_b)
-        if np.all(hi >= lo):
-            out[q] = (lo, hi)
-    return out
+        qs = np.array([u for u, _ in inst.literals], dtype=np.int64)
+        inst_of.append(np.full(len(qs), inst.index, dtype=np.int64))
+        q_of.append(qs)
+        if inst.face_boxes is not None:
+            f = np.asarray(inst.face_boxes, dtype=np.float64).reshape(len(qs), 2, 3)
+            los.append(f[:, 0])
+            his.append(f[:, 1])
+        else:
+            los.append(np.broadcast_to(np.asarray(inst.box[0], dtype=np.float64), (len(qs), 3)))
+            his.append(np.broadcast_to(np.asarray(inst.box[1], dtype=np.float64), (len(qs), 3)))
+        from_faces.append(np.full(len(qs), inst.face_boxes is not None))
+    if not inst_of:
+        return {}
+    inst_of, q_of, from_faces = np.concatenate(inst_of), np.concatenate(q_of), np.concatenate(from_faces)
+    lo, hi = np.concatenate(los), np.concatenate(his)
+    keep = ~from_faces | np.all(hi >= lo, axis=1)  # an empty face adds nothing
+    inst_of, q_of, lo, hi, from_faces = inst_of[keep], q_of[keep], lo[keep], hi[keep], from_faces[keep]
+    # the union per (instance, quadric), padded where made of face boxes
+    pairs, pair = np.unique(inst_of * n_q + q_of, return_inverse=True)
+    plo, phi = np.full((len(pairs), 3), np.inf), np.full((len(pairs), 3), -np.inf)
+    np.minimum.at(plo, pair, lo)
+    np.maximum.at(phi, pair, hi)
+    padded = np.zeros(len(pairs), dtype=bool)
+    padded[pair[from_faces]] = True
+    with np.errstate(invalid="ignore"):
+        size = np.abs(np.where(np.isfinite(plo), plo, 0.0)).max(axis=1) + np.abs(np.where(np.isfinite(phi), phi, 0.0)).max(axis=1)
+    pad = np.where(padded, 1e-9 * (1.0 + size), 0.0)[:, None]
+    quad = pairs % n_q
+    qlo, qhi = np.full((n_q, 3), np.inf), np.full((n_q, 3), -np.inf)
+    np.minimum.at(qlo, quad, plo - pad)
+    np.maximum.at(qhi, quad, phi + pad)
+    lo_b, hi_b = tape.bound
+    qlo, qhi = np.maximum(qlo, lo_b), np.minimum(qhi, hi_b)
+    used = np.unique(tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
+    ok = np.zeros(n_q, dtype=bool)
+    ok[quad] = True
+    ok &= np.all(qhi >= qlo, axis=1)
+    return {int(q): (qlo[q], qhi[q]) for q in used if ok[q]}
 
 
 def root_tasks(tape, packed, frames, radius: float = 0.0):
@@ -168,31 +184,36 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     primitive to what can matter within ``radius`` of the patches of the quadrics' tasks
     (:mod:`clcsg.compile.root_tapes`); each root cell's ``tape_first`` / ``tape_count`` point
     at its quadric's tape."""
-    tasks = []
     scale = float(np.abs(tape.bound).max(initial=1.0))
-    for q, (lo, hi) in quadric_boxes(tape).items():
-        lo, hi = lo - packed.origin, hi - packed.origin
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        f = frames[q]
-        z = (corners - f.center) @ f.U
-        # pad by a relative epsilon: surface points on the box's faces (a box face is the
-        # bound) must not be lost to rounding in the local coordinates
-        pad = 1e-7 * (np.abs(z).max() + np.abs(hi - lo).max()) + 1e-12 * scale
-        zlo, zhi = z.min(0) - pad, z.max(0) + pad
-        for k in range(3):
-            if f.lam[k] != 0.0:
-                sheets = (1, -1)
-            elif f.beta[k] != 0.0:
-                sheets = (0,)
-            else:
-                continue  # a cylinder along u_k: plane k owns no point
-            for sheet in sheets:
-                tasks.append((q, k, sheet, 0, zlo, zhi))
-    t = np.zeros(len(tasks), dtype=task_dtype(packed.real))
-    for n, row in enumerate(tasks):
-        t[n] = row
-    c = np.zeros(len(tasks), dtype=cell_dtype(packed.real))
-    if not len(tasks):
+    boxes = quadric_boxes(tape)
+    qs = np.array(list(boxes), dtype=np.int64)
+    lo = np.array([boxes[q][0] for q in qs.tolist()]).reshape(-1, 3) - packed.origin
+    hi = np.array([boxes[q][1] for q in qs.tolist()]).reshape(-1, 3) - packed.origin
+    pick = np.array([[(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)]])  # (1, 8, 3): hi or lo
+    corners = np.where(pick == 1, hi[:, None, :], lo[:, None, :])
+    U = np.array([frames[q].U for q in qs.tolist()]).reshape(-1, 3, 3)
+    center = np.array([frames[q].center for q in qs.tolist()]).reshape(-1, 3)
+    z = np.matmul(corners - center[:, None, :], U)
+    # pad by a relative epsilon: surface points on the box's faces (a box face is the
+    # bound) must not be lost to rounding in the local coordinates
+    pad = 1e-7 * (np.abs(z).max(axis=(1, 2), initial=0.0) + np.abs(hi - lo).max(axis=1, initial=0.0)) + 1e-12 * scale
+    zlo, zhi = z.min(axis=1) - pad[:, None], z.max(axis=1) + pad[:, None]
+    # per (quadric, plane k): sheets +1 and -1 where lam_k != 0, sheet 0 where only beta_k
+    # (a paraboloid's axis), none for a cylinder along u_k (plane k owns no point)
+    lam = np.array([frames[q].lam for q in qs.tolist()]).reshape(-1, 3)
+    beta = np.array([frames[q].beta for q in qs.tolist()]).reshape(-1, 3)
+    count = np.where(lam != 0.0, 2, np.where(beta != 0.0, 1, 0)).ravel()
+    which = np.repeat(np.arange(count.size), count)  # (quadric index, plane) flattened
+    first = np.repeat(np.cumsum(count) - count, count)
+    nth = np.arange(len(which)) - first
+    plane = which % 3
+    t = np.zeros(len(which), dtype=task_dtype(packed.real))
+    t["quadric"] = qs[which // 3]
+    t["plane"] = plane
+    t["sheet"] = np.where(count[which] == 2, 1 - 2 * nth, 0)
+    t["zlo"], t["zhi"] = zlo[which // 3], zhi[which // 3]
+    c = np.zeros(len(t), dtype=cell_dtype(packed.real))
+    if not len(t):
         return t, c, tape_rows(tape.ops)
     zlo, zhi = t["zlo"].astype(np.float64), t["zhi"].astype(np.float64)
     i = np.where(t["plane"] == 0, 1, 0)
