@@ -289,7 +289,7 @@ def test_overrun_inside_a_chain_gives_identical_results(cl_context):
     level inside a chain overruns, the levels after it do nothing, and it runs again."""
     shape, r = SCENES["drilled_block"]
     big = sample(shape, r, device=cl_context)
-    small = sample(shape, r, device=cl_context, capacity=(1 << 16, 16, 1 << 18, 16))
+    small = sample(shape, r, device=cl_context, capacity=(1 << 16, 500, 1 << 18, 16))
     assert big.stats["chains"] < big.stats["levels"]
     assert small.stats["levels_skipped"] > 0
     assert small.stats["buffer_growths"]["samples"] > 1 and small.stats["clip_buffer_growths"] > 0

@@ -584,6 +584,8 @@ def _grow(cap, needed):
 #: trip to the device's threads (about 40 us of the 2-core CPU's time per level, 13 levels on
 #: the lens)
 CHAIN_LEVELS = 4
+#: the clip rows per cell a chain is given room for, over the most a level wrote lately
+CLIP_MARGIN = 2
 #: a chain's later levels may write more than its first (up to MAX_CHILDREN times as many cells
 #: per level): cell buffers and arenas are grown to their worst case up to these sizes (cells,
 #: tape rows); levels that could need more run one per read
@@ -651,7 +653,8 @@ class _Subdivision:
         self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(int(2 * estimate), 4096)
         self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
         self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else max(int(estimate), 1 << 14)
-        self.clip_used = self.clip_level = 0
+        self.clip_used = 0
+        self.clip_per_cell = 0.0  # the most clip rows per cell a level of the last chain wrote
         self.arena_budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem)
         self.max_groups = CHAIN_GROUPS_PER_CU * max(1, int(ctx.info.compute_units))
         self.zeroed = "oclgrind" in ctx.info.platform.lower()
@@ -732,8 +735,11 @@ class _Subdivision:
         chain budgets, for the levels after it (it is written by this chain's even levels, and
         read by the next chain, whose second level writes it again); the input side holds the
         first level's input, so an odd level is chained only if it fits there.  The clip
-        buffer, which nothing bounds, is grown to four times the rows a level wrote lately for
-        each level of the chain (a level run again costs more than memory)."""
+        buffer, which nothing bounds, is to hold CLIP_MARGIN times the most rows per cell a
+        level of the last chain wrote, for the chain's levels' most cells: the chain is
+        shortened to fit it, and only a single level that does not fit grows it (a level run
+        again costs more than memory; growing it for a chain of 15k cells copied the
+        sponge's 14M rows at 0.1% into a new buffer, 0.1-0.4 s)."""
         rows = self.scene.packed.tape.itemsize
         cells_budget = CHAIN_CELLS if self.sized["cells"] else 0
         arena_budget = min(CHAIN_ARENA_ROWS, self.arena_budget // rows) if self.sized["arena"] else 0
@@ -750,9 +756,13 @@ class _Subdivision:
             if cells[k] > side.cap_cells or arenas[k] > side.cap_arena:
                 break
             k += 1
-        need = self.clip_used + 4 * k * self.clip_level
-        if self.sized["clip"] and need > self.cap_clip:
-            new_cap = max(need, 2 * self.cap_clip)
+        def need(k):
+            return self.clip_used + int(CLIP_MARGIN * self.clip_per_cell * n_in * sum(MAX_CHILDREN ** j for j in range(k)))
+
+        while k > 1 and need(k) > self.cap_clip:  # a shorter chain, not a copy of the clip rows
+            k -= 1
+        if self.sized["clip"] and need(k) > self.cap_clip:
+            new_cap = max(need(k), 2 * self.cap_clip)
             self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
             self.cap_clip = new_cap
         return k
@@ -787,19 +797,25 @@ class _Subdivision:
         cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
         return counters
 
-    def _overran(self, c, n_samples) -> bool:
+    def _overran(self, c, n_samples, n_in) -> bool:
         """Grow every buffer a level's counters ``c`` show it overran (keeping what the levels
-        before wrote: ``n_samples`` samples, ``self.clip_used`` clip rows); True if any was."""
+        before wrote: ``n_samples`` samples, ``self.clip_used`` clip rows); True if any was.
+        A level that overran the samples or the clip rows stopped taking cells (its
+        work-groups that started after skipped theirs): what it wrote is scaled by its
+        ``n_in`` cells over those it classified (a level of the sponge ran four times, the
+        buffer doubled each time, when grown by what the counts said)."""
         rows = self.scene.packed.tape.itemsize
         out = self.out
         over = False
+        done = sum(int(c[_SLOT[k]]) for k in ("discarded", "filled", "single", "split", "unresolved"))
+        scale = max(1.0, n_in / max(done, 1))
         if c[_SLOT["cells"]] > out.cap_cells:
             out.cap_cells = _grow(out.cap_cells, int(c[_SLOT["cells"]]))
             out.cells = self._replace(out.cells, out.cap_cells * self.cdt.itemsize, "cell")
             self.grown["cells"] += 1
             over = True
         if n_samples + c[_SLOT["samples"]] > self.cap_samples:
-            self.cap_samples = _grow(self.cap_samples, n_samples + int(c[_SLOT["samples"]]))
+            self.cap_samples = _grow(self.cap_samples, n_samples + int(scale * int(c[_SLOT["samples"]])))
             self.samples.grow(n_samples, self.cap_samples)
             self.grown["samples"] += 1
             over = True
@@ -809,7 +825,7 @@ class _Subdivision:
             self.grown["arena"] += 1
             over = True
         if self.clip_used + c[_SLOT["clip_rows"]] > self.cap_clip:
-            new_cap = _grow(self.cap_clip, self.clip_used + int(c[_SLOT["clip_rows"]]))
+            new_cap = _grow(self.cap_clip, self.clip_used + int(scale * int(c[_SLOT["clip_rows"]])))
             self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
             self.cap_clip = new_cap
             self.grown["clip"] += 1
@@ -853,7 +869,7 @@ class _Subdivision:
             "arena_rows": arena_rows,
         })
         self.arena_peak = max(self.arena_peak, arena_rows)
-        self.clip_level = max(self.clip_level, int(c[_SLOT["clip_rows"]]))
+        self.clip_per_cell = max(self.clip_per_cell, int(c[_SLOT["clip_rows"]]) / max(n_in, 1))
         self.clip_used += int(c[_SLOT["clip_rows"]])
         self.src, self.out = self.out, self.src
         return n_cells_out, n_samples_out
@@ -869,11 +885,11 @@ class _Subdivision:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
             k = self._plan(n_in, arena_bound, level)
             counters = self._chain(kernel, n_in, n_samples, k)
-            self.clip_level = 0
+            self.clip_per_cell = 0.0
             done = []
             for row in range(1, k + 1):
                 c = counters[row]
-                if self._overran(c, n_samples):
+                if self._overran(c, n_samples, n_in):
                     self.skipped += int(counters[row + 1:, _SLOT["status"]].sum())
                     break
                 cells = n_in
