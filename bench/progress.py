@@ -21,10 +21,10 @@ examples and the 50 x 50 perforated plate (:func:`bench.zoo.plate`, 5,001 primit
 small enough for the level loop to be the bulk of the run (at 0.2-0.3% of the diagonal the
 examples sample in under 0.5 s).  Every run is made ``rounds`` times (the machine
 is shared and the ETA is about wall time), the runs in turn.  The level histories (per level:
-cells, samples, arrival time) are kept in the JSON, so a forecast can be replayed on them
-(:func:`replay`).  A separate pass measures expected / real on every example at r = 1% and
-0.2% of the diagonal (``clcsg.sample`` in this process, no timing).  Writes
-``bench/results/progress.json``.
+cells, samples, arrival time) are kept in the JSON; :func:`record_histories` records them
+in this process level by level, for :func:`replay_history` to feed a forecast.  A separate
+pass measures expected / real on every example at r = 1% and 0.2% of the diagonal
+(``clcsg.sample`` in this process, no timing).  Writes ``bench/results/progress.json``.
 """
 
 from __future__ import annotations
@@ -108,10 +108,11 @@ def history(events) -> dict:
             "eta": [e["eta"] for e in bar], "estimated": bar[-1]["estimated"] if bar else 0}
 
 
-def judge(points, end) -> dict:
+def judge(points, end, min_left: float = MIN_LEFT) -> dict:
     """ETA ratios over the second half: ``points`` are (t, eta, fraction) of the bar, ``end``
-    the time of its last level (all since the step's start)."""
-    ratios = [eta / (end - t) for t, eta, _ in points if t >= end / 2 and end - t >= MIN_LEFT and eta is not None]
+    the time of its last level (all since the step's start); events with less than
+    ``min_left`` seconds left are not judged."""
+    ratios = [eta / (end - t) for t, eta, _ in points if t >= end / 2 and end - t >= min_left and eta is not None]
     fractions = [f for _, _, f in points]
     out = {"monotone": all(b >= a for a, b in zip(fractions, fractions[1:])), "judged": len(ratios)}
     if ratios:
@@ -136,16 +137,81 @@ def measure_run(events, wall) -> dict:
     return out
 
 
-def replay(hist: dict, forecast) -> dict:
-    """Judge ``forecast`` on a recorded level history: ``forecast(level, cells, samples,
-    children, t)`` -> (fraction, eta) is called per level as the sampler calls its progress."""
-    cells, samples, ts = hist["cells"], hist["samples"], hist["t"]
-    points = []
-    for i, (n, s, t) in enumerate(zip(cells, samples, ts)):
-        children = cells[i + 1] if i + 1 < len(cells) else 0
-        f, eta = forecast(i, n, s, children, t)
-        points.append((t, eta, f))
-    return judge(points, ts[-1])
+def record_histories(path: str, runs=RUNS) -> list:
+    """Record the level history of each run in this process (no timing of the bar): the
+    sampler's progress is observed as it is fed, chain by chain, so that
+    :func:`replay_history` can feed a :class:`~clcsg.sampling.forecast.Forecast` the same.
+    Per run: the forecast's inputs (expected samples, level bounds, the root cells' peak
+    levels and areas, merged where the peaks agree to 1e-3), the samples written and per
+    chain its arrival (seconds since the level loop started) and (level, cells, samples so
+    far, children) per level.  A warm run (the kernels built) is recorded.  Writes JSON to
+    ``path`` (``tests/data/level_histories.json`` is one)."""
+    import numpy as np
+
+    import clcsg
+    from clcsg.sampling import sampler
+
+    out = []
+    seen: dict = {}
+    init, chain = sampler._Progress.__init__, sampler._Progress.chain
+
+    def observed_init(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        f = self.forecast
+        peaks, areas = f.roots if f.roots is not None else ([], [])
+        merged, at = np.unique(np.round(peaks, 3), return_inverse=True)
+        summed = np.zeros(len(merged))
+        np.add.at(summed, at, areas)
+        seen.update(estimate=f.estimate, quad=f.quad, peak=f.peak, last=f.last, max_levels=f.max_levels,
+                    roots=[merged.tolist(), summed.tolist()], chains=[], t0=time.perf_counter())
+
+    def observed_chain(self, levels):
+        seen["chains"].append([round(time.perf_counter() - seen["t0"], 5), [[int(x) for x in lv] for lv in levels]])
+        chain(self, levels)
+
+    folder = tempfile.mkdtemp(prefix="clcsg-progress-")
+    sampler._Progress.__init__, sampler._Progress.chain = observed_init, observed_chain
+    try:
+        for name, scene, radius in runs:
+            sc = clcsg.load(scene_path(scene, folder))
+            tape = sc.compile()
+            r = float(radius.rstrip("%")) / 100 * float(np.linalg.norm(tape.bound[1] - tape.bound[0]))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                clcsg.sample(sc, r, progress=False)  # builds the kernels
+                s = clcsg.sample(sc, r, progress=False)
+            seen.pop("t0")
+            out.append({"name": name, "samples": len(s), **seen})
+    finally:
+        sampler._Progress.__init__, sampler._Progress.chain = init, chain
+    with open(path, "w") as f:
+        json.dump(out, f, separators=(",", ":"))
+    return out
+
+
+def replay_history(run: dict, min_left: float = 0.1) -> dict:
+    """Feed a recorded run (:func:`record_histories`) to a fresh
+    :class:`~clcsg.sampling.forecast.Forecast` chain by chain, the chain's seconds shared by
+    its levels' work as the sampler shares them, and judge the seconds left forecast after
+    each chain over the second half of the run (:func:`judge`, with ``min_left`` of the run's
+    seconds as the least left), and the fraction elapsed / (elapsed + forecast) held at its
+    largest as the bar shows it."""
+    from clcsg.sampling.forecast import SAMPLE_COST, Forecast
+
+    fc = Forecast(run["estimate"], run["quad"], run["peak"], run["last"], run["max_levels"], run["roots"])
+    points, t_last, shown = [], 0.0, 0.0
+    for t, levels in run["chains"]:
+        work, seen = [], fc.samples
+        for _, cells, samples, _ in levels:
+            work.append(1 + cells + SAMPLE_COST * max(0, samples - seen))
+            seen = samples
+        for (_, cells, samples, _), w in zip(levels, work):
+            fc.add(cells, samples, (t - t_last) * w / sum(work))
+        t_last = t
+        left = fc.seconds_left(levels[-1][3])
+        shown = 1.0 if not levels[-1][3] else max(shown, min(t / (t + left), 0.999) if t + left > 0 else 0.0)
+        points.append((t, left, shown))
+    return judge(points, points[-1][0], min_left * points[-1][0])
 
 
 def expected_counts(radii=(0.01, 0.002)) -> list:

@@ -71,8 +71,10 @@ class Step:
         self.note = None
         self.t0 = time.perf_counter()
         self.t_phase = self.t0
+        self.forecast = None  # (seconds left, when forecast) as the caller forecast them
         self.t_end = None
         self.bar = None
+        self.bar_kind = None  # the format the bar was made with, before the forecast goes in
         self._json_t = -1.0
         reporter._open(self)
 
@@ -85,21 +87,31 @@ class Step:
         return self.t_end is not None
 
     def eta(self):
-        """Seconds left at the average rate of the current phase (None if unknown)."""
+        """Seconds left: the caller's last forecast less the time since (see :meth:`update`),
+        else at the average rate of the current phase (None if unknown)."""
+        if self.forecast is not None:
+            left, t = self.forecast
+            return max(0.0, left - (time.perf_counter() - t))
         if not self.total or self.done <= 0:
             return None
         dt = time.perf_counter() - self.t_phase
         return max(0.0, (self.total - self.done) * dt / self.done)
 
-    def update(self, done=None, total=None, label=None, unit=None, phase=False, note=None, always=False, **info):
+    def update(self, done=None, total=None, label=None, unit=None, phase=False, note=None, always=False,
+               forecast=None, **info):
         """New counts (absolute), label or unit; ``phase``: a new phase starts (its rate and
-        ETA count from now; or from ``phase``, a ``time.perf_counter()`` time it started); ``info``: extra fields for JSON, shown after the bar unless a
+        ETA count from now; or from ``phase``, a ``time.perf_counter()`` time it started);
+        ``forecast``: the seconds left as the caller knows them, the ETA from now on (counting
+        down) in place of the one from the rate, which a bar whose total is not the work left
+        cannot give; ``info``: extra fields for JSON, shown after the bar unless a
         ``note`` (text) is given for the bar.  JSON progress lines come at most every
         :data:`JSON_INTERVAL` seconds, unless ``always``."""
         if self.closed:
             return
         if phase:
             self.t_phase = time.perf_counter() if phase is True else float(phase)
+        if forecast is not None:
+            self.forecast = (float(forecast), time.perf_counter())
         if label is not None:
             self.label = label
         if unit is not None:
@@ -219,16 +231,20 @@ class Reporter:
             fmt = ("{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} {unit} [{elapsed}<{remaining}{postfix}]"
                    if st.total else "{desc}: {n_fmt} {unit} [{elapsed}{postfix}]" if counted
                    else "{desc} [{elapsed}{postfix}]")
+            # the caller's forecast in place of tqdm's ETA from the rate (Step.update)
+            shown = fmt.replace("{remaining}", tqdm.format_interval(st.eta())) if st.forecast is not None else fmt
             bar = st.bar
-            if bar is None or bar.bar_format != fmt:
+            if bar is None or st.bar_kind != fmt:
                 if bar is not None:
                     bar.close()
                 # the size from $COLUMNS or the terminal, 100 x 20 where it reports none (a new pty)
                 cols, rows = shutil.get_terminal_size((100, 20))
                 bar = st.bar = tqdm(total=st.total, desc=st.label, unit=st.unit, file=self.stream, leave=False,
-                                    ncols=max(40, min(cols, 160)), nrows=max(rows, 2), bar_format=fmt, unit_scale=max(st.total or 0, st.done) >= 10_000,
+                                    ncols=max(40, min(cols, 160)), nrows=max(rows, 2), bar_format=shown, unit_scale=max(st.total or 0, st.done) >= 10_000,
                                     mininterval=0, miniters=0, smoothing=0)
                 bar.start_t -= time.perf_counter() - st.t_phase  # the phase started before the bar
+                st.bar_kind = fmt
+            bar.bar_format = shown
             bar.desc = st.label
             bar.unit = st.unit
             bar.total = st.total

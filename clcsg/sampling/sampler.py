@@ -99,7 +99,7 @@ from .samples import Samples
 from .sample_columns import SampleColumns
 from ..compile.bounds import estimates as guard
 from ..progress import for_option
-from .forecast import SAMPLE_COST, Forecast, level_bounds
+from .forecast import SAMPLE_COST, Forecast, level_bounds, peak_levels
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
@@ -320,57 +320,65 @@ class _Progress:
     a + b (cells + samples), the expected sample count as the samples still to come while the
     emission grows).  The fraction shown is elapsed / (elapsed + forecast), elapsed counted
     from the start of the level loop, and the largest seen so far: it never goes back, and is
-    100% when the last level is done.  The bar counts cells; its total is done / fraction and
-    its rate counts from the same start, so its ETA (the rate so far times the cells left) is
-    the forecast.  The samples so far and the expected count
-    (:func:`clcsg.compile.bounds.estimates.expected_samples`) are shown next to the bar.
+    100% when the last level is done.  The bar counts cells; its total is done / fraction.
+    Its ETA is the forecast itself, counting down between levels (``Step.update``'s
+    ``forecast``): the rate so far times the cells left would be the forecast too, but not
+    once the fraction is held (a forecast that grows would not show).  The samples so far
+    and the expected count (:func:`clcsg.compile.bounds.estimates.expected_samples`) are
+    shown next to the bar.
     """
 
     def __init__(self, enabled, estimate=0, roots=None, radius=None, max_levels=400, floor=None):
         self.reporter = for_option(enabled)
         self.estimate = int(estimate)
-        peak = last = None
+        peak = last = levels = None
         quad = 0.0
         if roots is not None and len(roots) and radius and floor:
-            diag = float(np.max(np.hypot(roots["x1"] - roots["x0"], roots["y1"] - roots["y0"])))
-            if diag > 0:
-                quad, peak, last = level_bounds(diag, radius, floor, SPLIT_LARGER, QUAD_SPLIT_DIAG)
-        self.forecast = Forecast(self.estimate, quad, peak, last, max_levels)
+            wx, wy = roots["x1"] - roots["x0"], roots["y1"] - roots["y0"]
+            diag = np.hypot(wx, wy)
+            if diag.max() > 0:
+                # the deepest levels come from the largest root cell, the most cells of a
+                # level from the root cells of its peak (Forecast.peak_at)
+                quad, peak, last = level_bounds(float(diag.max()), radius, floor, SPLIT_LARGER, QUAD_SPLIT_DIAG)
+                levels = (peak_levels(diag, radius, SPLIT_LARGER, QUAD_SPLIT_DIAG), wx * wy)
+        self.forecast = Forecast(self.estimate, quad, peak, last, max_levels, levels)
         outer = self.reporter.active()
         self.own = outer is None or outer.name != "sample"
         self.step = self.reporter.step("sample", "sampling") if self.own else outer
         self.cells = 0
         self.fraction = 0.0
         self.shown = 0.0
+        self.moved = False
         self.t0 = self.t_last = time.perf_counter()
 
     def chain(self, levels):
         """The levels of one chain, (level, cells, samples so far, children) each, done at
         once: the chain's seconds are shared among them by their work as the forecast costs it
         (one level, cells + SAMPLE_COST samples emitted), so that its time model sees each
-        level's share, not the whole chain on its first level and nothing on the others."""
+        level's share, not the whole chain on its first level and nothing on the others.  The
+        bar moves once, to the chain's last level: the forecasts after the levels before it
+        would count levels already done."""
         if self.reporter.mode == "none":  # nothing is shown: no forecast to make
             self.cells += sum(lv[1] for lv in levels)
             return
-        spent = time.perf_counter() - self.t_last
+        now = time.perf_counter()
+        spent = now - self.t_last
         work, seen = [], self.forecast.samples
         for _, cells, samples, _ in levels:
             work.append(1 + cells + SAMPLE_COST * max(0, samples - seen))
             seen = samples
-        for (level, cells, samples, children), w in zip(levels, work):
-            self.level(level, cells, samples, children, spent * w / sum(work))
-
-    def level(self, level, cells, samples, children=0, seconds=None):
-        """A level done (``seconds``: its share of the time since the last one; None: all of
-        it)."""
-        if self.reporter.mode == "none":  # nothing is shown: no forecast to make
+        for (_, cells, samples, _), w in zip(levels, work):
+            self.forecast.add(cells, samples, spent * w / sum(work))
             self.cells += cells
-            return
-        now = time.perf_counter()
-        self.forecast.add(cells, samples, now - self.t_last if seconds is None else seconds)
         self.t_last = now
-        self.cells += cells
-        elapsed = now - self.t0
+        self._show(*levels[-1])
+
+    def level(self, level, cells, samples, children=0):
+        """A level done on its own (a chain of one)."""
+        self.chain([(level, cells, samples, children)])
+
+    def _show(self, level, cells, samples, children):
+        elapsed = time.perf_counter() - self.t0
         left = self.forecast.seconds_left(children)
         if not children:
             self.fraction = 1.0
@@ -380,9 +388,10 @@ class _Progress:
         if self.cells / total < self.shown:  # rounding must not take the bar back either
             total = max(self.cells, math.floor(self.cells / self.shown))
         self.shown = self.cells / total
+        first, self.moved = not self.moved, True
         self.step.update(done=self.cells, total=total, label="sampling", unit="cells",
-                         phase=self.t0 if level == 0 else False, level=level + 1, samples=samples,
-                         estimated=self.estimate,
+                         phase=self.t0 if first else False, forecast=left if children else 0.0, level=level + 1,
+                         samples=samples, estimated=self.estimate,
                          note=f"level {level + 1}, {samples:,} samples (estimate {self.estimate:,})", always=True)
 
     def done(self):
