@@ -662,6 +662,7 @@ class _Subdivision:
         self.cap_samples = max(2, int(cap[1])) if len(cap) > 1 else max(int(2 * estimate), 4096)
         self.cap_arena = max(2, int(cap[2])) if len(cap) > 2 else max(8 * len(tape), 1 << 16)
         self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else max(int(estimate), 1 << 14)
+        self.estimate = int(estimate)
         self.clip_used = 0
         self.clip_per_cell = 0.0  # the most clip rows per cell a level of the last chain wrote
         self.arena_budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem)
@@ -737,7 +738,7 @@ class _Subdivision:
             side.cap_arena = int(min(max(arena_rows, side.cap_arena + side.cap_arena // 2), budget))
             side.arena = self._replace(side.arena, side.cap_arena * rows, "tape arena")
 
-    def _plan(self, n_in, arena_bound, level) -> int:
+    def _plan(self, n_in, n_samples, arena_bound, level) -> int:
         """Size the buffers for the next chain and return its length.  The j-th level from now
         (0-based) has at most MAX_CHILDREN^j ``n_in`` cells and writes at most its arena bound.
         The output side, whose contents are dead, is grown for the first level and, within the
@@ -748,7 +749,7 @@ class _Subdivision:
         level of the last chain wrote, for the chain's levels' most cells: the chain is
         shortened to fit it, and only a single level that does not fit grows it (a level run
         again costs more than memory; growing it for a chain of 15k cells copied the
-        sponge's 14M rows at 0.1% into a new buffer, 0.1-0.4 s)."""
+        sponge's 14M rows at 0.1% into a new buffer, 0.1-0.4 s; see also _plan_clip)."""
         rows = self.scene.packed.tape.itemsize
         cells_budget = CHAIN_CELLS if self.sized["cells"] else 0
         arena_budget = min(CHAIN_ARENA_ROWS, self.arena_budget // rows) if self.sized["arena"] else 0
@@ -765,15 +766,31 @@ class _Subdivision:
             if cells[k] > side.cap_cells or arenas[k] > side.cap_arena:
                 break
             k += 1
+        return self._plan_clip(n_in, n_samples, k)
+
+    def _plan_clip(self, n_in, n_samples, k) -> int:
+        """The clip buffer for a chain of ``k`` levels on ``n_in`` cells (``_plan``), and the
+        chain's length that fits it.  Once samples were written, it is first grown to hold
+        CLIP_MARGIN times their clip rows per sample for the samples still expected (at most
+        the arena budget): early, while the rows to copy are few (the sponge at 1% wrote 12
+        rows per sample on its first level of samples and 17 on the next, 12x as many cells,
+        which ran twice when the room was the rows per cell)."""
+        rows = self.scene.packed.tape.itemsize
+
         def need(k):
             return self.clip_used + int(CLIP_MARGIN * self.clip_per_cell * n_in * sum(MAX_CHILDREN ** j for j in range(k)))
 
-        while k > 1 and need(k) > self.cap_clip:  # a shorter chain, not a copy of the clip rows
-            k -= 1
-        if self.sized["clip"] and need(k) > self.cap_clip:
-            new_cap = max(need(k), 2 * self.cap_clip)
+        want = need(1)
+        if n_samples and self.clip_used:
+            per_sample = self.clip_used / n_samples
+            expected = self.clip_used + int(CLIP_MARGIN * per_sample * max(0, self.estimate - n_samples))
+            want = max(want, min(expected, self.arena_budget // rows))
+        if self.sized["clip"] and want > self.cap_clip:
+            new_cap = max(want, 2 * self.cap_clip)
             self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
             self.cap_clip = new_cap
+        while k > 1 and need(k) > self.cap_clip:  # a shorter chain, not a copy of the clip rows
+            k -= 1
         return k
 
     def _chain(self, kernel, n_in, n_samples, k):
@@ -892,7 +909,7 @@ class _Subdivision:
         while n_in > 0:
             if level >= self.max_levels:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
-            k = self._plan(n_in, arena_bound, level)
+            k = self._plan(n_in, n_samples, arena_bound, level)
             counters = self._chain(kernel, n_in, n_samples, k)
             self.clip_per_cell = 0.0
             done = []
