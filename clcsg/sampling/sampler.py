@@ -595,6 +595,9 @@ def _grow(cap, needed):
 CHAIN_LEVELS = 4
 #: the clip rows per cell a chain is given room for, over the most a level wrote lately
 CLIP_MARGIN = 2
+#: clip rows written so far up to which the clip buffer is grown for a whole chain (a copy of
+#: them is cheap); past them a chain that does not fit is shortened
+CLIP_CHEAP_ROWS = 1 << 20
 #: a chain's later levels may write more than its first (up to MAX_CHILDREN times as many cells
 #: per level): cell buffers and arenas are grown to their worst case up to these sizes (cells,
 #: tape rows); levels that could need more run one per read
@@ -774,13 +777,15 @@ class _Subdivision:
         CLIP_MARGIN times their clip rows per sample for the samples still expected (at most
         the arena budget): early, while the rows to copy are few (the sponge at 1% wrote 12
         rows per sample on its first level of samples and 17 on the next, 12x as many cells,
-        which ran twice when the room was the rows per cell)."""
+        which ran twice when the room was the rows per cell).  While the rows written are
+        few (CLIP_CHEAP_ROWS) the buffer is grown for the whole chain; past them the chain is
+        shortened to what fits."""
         rows = self.scene.packed.tape.itemsize
 
-        def need(k):
-            return self.clip_used + int(CLIP_MARGIN * self.clip_per_cell * n_in * sum(MAX_CHILDREN ** j for j in range(k)))
+        def need(k):  # the cells of a chain's levels double (not the worst case, four times)
+            return self.clip_used + int(CLIP_MARGIN * self.clip_per_cell * n_in * (2 ** k - 1))
 
-        want = need(1)
+        want = need(k) if self.clip_used <= CLIP_CHEAP_ROWS else need(1)
         if n_samples and self.clip_used:
             per_sample = self.clip_used / n_samples
             expected = self.clip_used + int(CLIP_MARGIN * per_sample * max(0, self.estimate - n_samples))
@@ -789,7 +794,7 @@ class _Subdivision:
             new_cap = max(want, 2 * self.cap_clip)
             self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
             self.cap_clip = new_cap
-        while k > 1 and need(k) > self.cap_clip:  # a shorter chain, not a copy of the clip rows
+        while k > 1 and need(k) > self.cap_clip:  # a shorter chain, not a copy of many clip rows
             k -= 1
         return k
 
