@@ -30,6 +30,7 @@ pass measures expected / real on every example at r = 1% and 0.2% of the diagona
 from __future__ import annotations
 
 import glob
+import io
 import json
 import os
 import statistics
@@ -149,6 +150,7 @@ def record_histories(path: str, runs=RUNS) -> list:
     import numpy as np
 
     import clcsg
+    from clcsg.progress import Reporter
     from clcsg.sampling import sampler
 
     out = []
@@ -179,7 +181,8 @@ def record_histories(path: str, runs=RUNS) -> list:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 clcsg.sample(sc, r, progress=False)  # builds the kernels
-                s = clcsg.sample(sc, r, progress=False)
+                # a reporter that shows something, so that the sampler forecasts
+                s = clcsg.sample(sc, r, progress=Reporter("json", stream=io.StringIO()))
             seen.pop("t0")
             out.append({"name": name, "samples": len(s), **seen})
     finally:

@@ -333,7 +333,8 @@ class _Progress:
         self.estimate = int(estimate)
         peak = last = levels = None
         quad = 0.0
-        if roots is not None and len(roots) and radius and floor:
+        shown = self.reporter.mode != "none"  # else nothing is forecast (see chain)
+        if shown and roots is not None and len(roots) and radius and floor:
             wx, wy = roots["x1"] - roots["x0"], roots["y1"] - roots["y0"]
             diag = np.hypot(wx, wy)
             if diag.max() > 0:
