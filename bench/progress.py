@@ -199,17 +199,12 @@ def replay_history(run: dict, min_left: float = 0.1) -> dict:
     each chain over the second half of the run (:func:`judge`, with ``min_left`` of the run's
     seconds as the least left), and the fraction elapsed / (elapsed + forecast) held at its
     largest as the bar shows it."""
-    from clcsg.sampling.forecast import SAMPLE_COST, Forecast
+    from clcsg.sampling.forecast import Forecast
 
     fc = Forecast(run["estimate"], run["quad"], run["peak"], run["last"], run["max_levels"], run["roots"])
     points, t_last, shown = [], 0.0, 0.0
     for t, levels in run["chains"]:
-        work, seen = [], fc.samples
-        for _, cells, samples, _ in levels:
-            work.append(1 + cells + SAMPLE_COST * max(0, samples - seen))
-            seen = samples
-        for (_, cells, samples, _), w in zip(levels, work):
-            fc.add(cells, samples, (t - t_last) * w / sum(work))
+        fc.add_chain(levels, t - t_last)
         t_last = t
         left = fc.seconds_left(levels[-1][3])
         shown = 1.0 if not levels[-1][3] else max(shown, min(t / (t + left), 0.999) if t + left > 0 else 0.0)

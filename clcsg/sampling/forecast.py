@@ -168,6 +168,18 @@ class Forecast:
         self.samples = int(samples)
         self.seconds.append(max(0.0, float(seconds)))
 
+    def add_chain(self, levels, seconds: float) -> None:
+        """The levels of one chain, (level, cells, samples so far, children) each, done in
+        ``seconds`` together: shared among them by their work as :meth:`costs` counts it
+        (1 + cells + SAMPLE_COST samples emitted), so that the time model sees each level's
+        share."""
+        shares, seen = [], self.samples
+        for _, cells, samples, _ in levels:
+            shares.append(1 + cells + SAMPLE_COST * max(0, samples - seen))
+            seen = samples
+        for (_, cells, samples, _), share in zip(levels, shares):
+            self.add(cells, samples, seconds * share / sum(shares))
+
     def cells_ahead(self, children: int, tail: bool = False) -> list[float]:
         """Forecast cells of the levels after the last one added: the collapse scenario, or
         (``tail``) the tail one, of the cells alive, and the cells to come of root cells that

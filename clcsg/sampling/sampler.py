@@ -99,7 +99,7 @@ from .samples import Samples
 from .sample_columns import SampleColumns
 from ..compile.bounds import estimates as guard
 from ..progress import for_option
-from .forecast import SAMPLE_COST, Forecast, level_bounds, peak_levels
+from .forecast import Forecast, level_bounds, peak_levels
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
@@ -354,23 +354,16 @@ class _Progress:
 
     def chain(self, levels):
         """The levels of one chain, (level, cells, samples so far, children) each, done at
-        once: the chain's seconds are shared among them by their work as the forecast costs it
-        (one level, cells + SAMPLE_COST samples emitted), so that its time model sees each
-        level's share, not the whole chain on its first level and nothing on the others.  The
-        bar moves once, to the chain's last level: the forecasts after the levels before it
-        would count levels already done."""
+        once: the chain's seconds are shared among them by their work as the forecast costs
+        it (``Forecast.add_chain``), so that its time model sees each level's share, not the
+        whole chain on its first level and nothing on the others.  The bar moves once, to the
+        chain's last level: the forecasts after the levels before it would count levels
+        already done."""
+        self.cells += sum(lv[1] for lv in levels)
         if self.reporter.mode == "none":  # nothing is shown: no forecast to make
-            self.cells += sum(lv[1] for lv in levels)
             return
         now = time.perf_counter()
-        spent = now - self.t_last
-        work, seen = [], self.forecast.samples
-        for _, cells, samples, _ in levels:
-            work.append(1 + cells + SAMPLE_COST * max(0, samples - seen))
-            seen = samples
-        for (_, cells, samples, _), w in zip(levels, work):
-            self.forecast.add(cells, samples, spent * w / sum(work))
-            self.cells += cells
+        self.forecast.add_chain(levels, now - self.t_last)
         self.t_last = now
         self._show(*levels[-1])
 
