@@ -105,8 +105,7 @@ class PrimitiveDag:
                 if p not in seen:
                     seen.add(p)
                     stack.append(p)
-        nb = _Builder()
-        full: dict = {}
+        nb, full, need = self._target()
         built: dict = {}
         for e in sorted(seen | {self.root}, key=self.pos.__getitem__):
             if e in fixed:
@@ -124,7 +123,16 @@ class PrimitiveDag:
                 continue
             ids = [built[a] for a in args] + [self._copy(a, nb, full) for a in self.none_args[e] if a not in args]
             built[e] = nb.combine(kind, ids)
-        return _emit(nb, built[self.root], registers)
+        return _emit(nb, built[self.root], registers, need)
+
+    def _target(self) -> tuple:
+        """(builder, copies, register estimates) shared by the tapes pruned from this DAG: a
+        primitive's sub-DAG is copied into the builder once, however many regions keep it (a
+        hole of the 2,500-hole plate is near 20 of its 599 root tapes), and its estimates are
+        found once.  Started again past TARGET_NODES times the DAG's nodes."""
+        if getattr(self, "_nb", None) is None or len(self._nb.kind) > TARGET_NODES * max(len(self.order), 64):
+            self._nb, self._full, self._need = _Builder(), {}, {}
+        return self._nb, self._full, self._need
 
     def _copy(self, e, nb: _Builder, full: dict) -> int:
         """The whole sub-DAG of ``e`` in ``nb`` (iterative post-order, memoized in ``full``)."""
@@ -175,6 +183,8 @@ def half_spaces(tape) -> list:
 #: full tape would give their root cells (the host's pruning then costs a small share of the
 #: level-0 work it saves; a mesh of 20,000 face planes has about 1.3M pairs)
 DENSE_FRACTION = 0.5
+#: the tapes pruned from a DAG share a builder until it has this many times the DAG's nodes
+TARGET_NODES = 16
 MAX_NEAR = 400_000
 NEAR_SHARE = 64
 #: quadrics whose regions are neighbours along a Morton curve share one root tape, pruned to

@@ -478,15 +478,24 @@ def _postorder(b: _Builder, root: int) -> list[int]:
     return order
 
 
-def _needs(b: _Builder, root: int) -> dict:
-    """Sethi-Ullman register estimates of every node reachable from ``root``."""
-    need: dict = {}
-    for i in _postorder(b, root):
+def _needs(b: _Builder, root: int, need: dict | None = None) -> dict:
+    """Sethi-Ullman register estimates of every node reachable from ``root``, added to
+    ``need`` (a node's estimate depends on its sub-DAG only: nodes already in it are kept, and
+    their operands not visited)."""
+    need = {} if need is None else need
+    stack = [(root, False)]
+    while stack:
+        i, done = stack.pop()
+        if i in need:
+            continue
         if b.kind[i] in (_LEAF, _CONST):
             need[i] = 1
-            continue
-        ns = sorted((need[c] for c in b.args[i]), reverse=True)
-        need[i] = max(ns[0], 1 + max(ns[1:], default=0))
+        elif done:
+            ns = sorted((need[c] for c in b.args[i]), reverse=True)
+            need[i] = max(ns[0], 1 + max(ns[1:], default=0))
+        else:
+            stack.append((i, True))
+            stack.extend((c, False) for c in b.args[i] if c not in need)
     return need
 
 
@@ -498,22 +507,24 @@ REMATERIALIZE_PAST = 32
 REMATERIALIZE = 64
 
 
-def _emit(b: _Builder, root: int, registers: int | None = None) -> tuple[np.ndarray, int]:
+def _emit(b: _Builder, root: int, registers: int | None = None, need: dict | None = None) -> tuple[np.ndarray, int]:
     """SSA instructions in evaluation order, then linear-scan register allocation (see
     :data:`REMATERIALIZE_PAST`; ``registers``: a lower count past which to try, the budget of
-    a tape that must fit another's registers)."""
-    ops, n_regs = _emit_once(b, root, None)
+    a tape that must fit another's registers; ``need``: register estimates known already,
+    kept and added to, for a builder that emits many tapes)."""
+    need = _needs(b, root, need)
+    ops, n_regs = _emit_once(b, root, None, need)
     if n_regs > min(REMATERIALIZE_PAST, registers if registers is not None else REMATERIALIZE_PAST):
-        again, regs = _emit_once(b, root, REMATERIALIZE)
+        again, regs = _emit_once(b, root, REMATERIALIZE, need)
         if regs < n_regs:
             return again, regs
     return ops, n_regs
 
 
-def _emit_once(b: _Builder, root: int, remat: int | None) -> tuple[np.ndarray, int]:
-    """:func:`_emit` with leaves evaluated again past ``remat`` instructions (None: never)."""
+def _emit_once(b: _Builder, root: int, remat: int | None, need: dict) -> tuple[np.ndarray, int]:
+    """:func:`_emit` with leaves evaluated again past ``remat`` instructions (None: never);
+    ``need``: the register estimates of the nodes (:func:`_needs`)."""
     remat = float("inf") if remat is None else remat
-    need = _needs(b, root)
     value: dict = {}  # expression id -> SSA value
     ssa: list = []  # (op, a, b) with SSA operands for AND/OR
 
