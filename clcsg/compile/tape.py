@@ -523,74 +523,80 @@ def _emit(b: _Builder, root: int, registers: int | None = None, need: dict | Non
 
 def _emit_once(b: _Builder, root: int, remat: int | None, need: dict) -> tuple[np.ndarray, int]:
     """:func:`_emit` with leaves evaluated again past ``remat`` instructions (None: never);
-    ``need``: the register estimates of the nodes (:func:`_needs`)."""
+    ``need``: the register estimates of the nodes (:func:`_needs`).  (Names bound locally and
+    rows kept in lists: the host prunes hundreds of root tapes per scene with it.)"""
     remat = float("inf") if remat is None else remat
+    kinds, args = b.kind, b.args
     value: dict = {}  # expression id -> SSA value
     ssa: list = []  # (op, a, b) with SSA operands for AND/OR
-
-    def emit(op, x, y):
-        ssa.append((op, x, y))
-        return len(ssa) - 1
-
+    append = ssa.append
     # frames: [node, sorted children, next index, accumulated value]
     stack = [[root, None, 0, None]]
     while stack:
         fr = stack[-1]
         i = fr[0]
-        if i in value and not (b.kind[i] == _LEAF and len(ssa) - value[i] > remat):
+        kind = kinds[i]
+        if i in value and not (kind == _LEAF and len(ssa) - value[i] > remat):
             stack.pop()
             continue
-        kind = b.kind[i]
         if kind == _LEAF:
-            q, s = b.args[i]
-            value[i] = emit(OP_LEAF, q, s)
+            q, sign = args[i]
+            value[i] = len(ssa)
+            append((OP_LEAF, q, sign))
             stack.pop()
             continue
         if kind == _CONST:
-            value[i] = emit(OP_CONST, b.args[i][0], 0)
+            value[i] = len(ssa)
+            append((OP_CONST, args[i][0], 0))
             stack.pop()
             continue
-        if fr[1] is None:
-            fr[1] = sorted(b.args[i], key=lambda c: -need[c])
         kids = fr[1]
+        if kids is None:
+            kids = fr[1] = sorted(args[i], key=lambda c: -need[c])
         if fr[2] < len(kids):
             c = kids[fr[2]]
-            if c not in value or (b.kind[c] == _LEAF and len(ssa) - value[c] > remat):
+            if c not in value or (kinds[c] == _LEAF and len(ssa) - value[c] > remat):
                 stack.append([c, None, 0, None])
                 continue
             v = value[c]
-            fr[3] = v if fr[3] is None else emit(OP_AND if kind == _AND else OP_OR, fr[3], v)
+            if fr[3] is None:
+                fr[3] = v
+            else:
+                append((OP_AND if kind == _AND else OP_OR, fr[3], v))
+                fr[3] = len(ssa) - 1
             fr[2] += 1
             continue
         value[i] = fr[3]
         stack.pop()
     result = value[root]
     # linear scan: a value dies at its last use; its register is free for the next write
+    binary = (OP_AND, OP_OR)
     last = {}
     for k, (op, x, y) in enumerate(ssa):
-        if op in (OP_AND, OP_OR):
+        if op in binary:
             last[x] = k
             last[y] = k
     last[result] = len(ssa)
     free: list = []
     n_regs = 0
-    reg = {}
-    ops = np.zeros((len(ssa), 4), dtype=np.int32)
+    reg: list = []
+    rows: list = []
+    push, pop = heapq.heappush, heapq.heappop
     for k, (op, x, y) in enumerate(ssa):
-        if op in (OP_AND, OP_OR):
-            for v in {x, y}:
-                if last.get(v) == k:
-                    heapq.heappush(free, reg[v])
-            ops[k] = (op, 0, reg[x], reg[y])
-        else:
-            ops[k] = (op, 0, x, y)
+        if op in binary:
+            if last[x] == k:
+                push(free, reg[x])
+            if y != x and last[y] == k:
+                push(free, reg[y])
+            x, y = reg[x], reg[y]
         if free:
-            r = heapq.heappop(free)
+            r = pop(free)
         else:
             r = n_regs
             n_regs += 1
-        reg[k] = r
-        ops[k, 1] = r
+        reg.append(r)
+        rows.append((op, r, x, y))
+    ops = np.array(rows, dtype=np.int32).reshape(-1, 4)
     assert result == len(ssa) - 1  # the root's value is the last one computed
     return ops, max(n_regs, 1)
 
