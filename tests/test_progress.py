@@ -4,6 +4,7 @@ pipe, JSON lines with --progress json, silence with --quiet; the sampler's forec
 from __future__ import annotations
 
 import io
+import math
 import json
 import os
 import pty
@@ -13,6 +14,7 @@ import subprocess
 import sys
 
 import numpy as np
+from hypothesis import given, settings, strategies as st
 import pytest
 
 import clcsg
@@ -381,3 +383,24 @@ def test_a_chain_of_levels_shares_its_seconds_by_their_work():
     for s, w in zip(secs, work):
         assert s / sum(secs) == pytest.approx(w / sum(work))
     assert 0 < prog.fraction < 1
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 10**6), st.integers(0, 10**6), st.floats(0, 1.0)), min_size=1, max_size=30),
+       st.integers(0, 10**7), st.floats(0, 30), st.floats(0, 40), st.floats(0, 40),
+       st.lists(st.tuples(st.floats(0, 20), st.floats(0, 1e4)), max_size=8))
+def test_the_forecast_is_finite_and_not_negative_on_any_history(levels, estimate, quad, peak, last, roots):
+    """Whatever the levels seen (cells, samples emitted, seconds), the level bounds and the
+    root cells' peaks, the seconds left are a finite number, 0 with no children, and the
+    cells ahead stop at the last level."""
+    from clcsg.sampling.forecast import Forecast
+
+    fc = Forecast(estimate, quad, peak, last, roots=tuple(map(list, zip(*roots))) if roots else None)
+    samples = 0
+    for cells, emitted, seconds in levels:
+        samples += emitted
+        fc.add(cells, samples, seconds)
+        for children in (0, 1, cells, 4 * cells):
+            left = fc.seconds_left(children)
+            assert math.isfinite(left) and left >= 0 and (children or left == 0)
+            assert len(fc.cells_ahead(children)) <= max(0, fc.last - len(fc.cells) + 1)
