@@ -4,8 +4,8 @@ pipe, JSON lines with --progress json, silence with --quiet; the sampler's forec
 from __future__ import annotations
 
 import io
-import math
 import json
+import math
 import os
 import pty
 import re
@@ -14,8 +14,8 @@ import subprocess
 import sys
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
 import pytest
+from hypothesis import given, settings, strategies as st
 
 import clcsg
 from clcsg.progress import Reporter, current, for_option, using
