@@ -261,23 +261,28 @@ def _recorded_runs():
         return json.load(f)
 
 
+#: recorded runs where the forecast misses the bench's 2x, and by how much at most: whether the
+#: cells past the peak collapse or trail down to the floor (the pen stand's do, along tangent
+#: contacts) shows only two levels after the peak; until then the forecast hedges between the
+#: two, which differ by 3-6x, and misses one of them by about 2x (the pen stand under, the
+#: sponge over)
+FORECAST_MISSES = {"pen_stand": 2.5, "menger3": 2.5}
+
+
 @pytest.mark.parametrize("run", _recorded_runs(), ids=lambda r: r["name"])
 def test_the_forecast_on_recorded_level_histories(run):
     """Forecast (the sampler's ETA) fed the level histories of ``python -m bench progress``'s
     runs as the sampler feeds it, chain by chain (recorded by
-    ``bench.progress.record_histories``: warm runs in one process, 0.2-2 s each): the fraction
+    ``bench.progress.record_histories``: warm runs in one process, 0.2-3 s each): the fraction
     it gives the bar never goes back and ends at 100%, and over the second half of each run
-    (judged while at least 10% of it is left) its seconds left are within 3x of the seconds
-    actually left, with a median within 2.5x.  The bench's target is 2x; in this recording the
-    runs meet it but for the pen stand (2.35x: whether the cells past the peak collapse or
-    trail down to the floor, as the pen stand's do along tangent contacts, shows only two
-    levels later) and the sponge (2.3x, median 2.0x: the other side of the same hedge, until
-    its cells collapse)."""
+    (judged while at least 10% of it is left) its seconds left are within 2x of the seconds
+    actually left, worst and median (the bench's target), but where FORECAST_MISSES says."""
     from bench.progress import replay_history
 
     judged = replay_history(run)
+    bound = FORECAST_MISSES.get(run["name"], 2.0)
     assert judged["monotone"] and judged["judged"] >= 1, judged
-    assert judged["worst"] <= 3 and 0.4 <= judged["median_ratio"] <= 2.5, judged
+    assert judged["worst"] <= bound and 1 / bound <= judged["median_ratio"] <= bound, judged
 
 
 def test_the_forecast_ends_at_the_floor_and_fits_the_costs():
