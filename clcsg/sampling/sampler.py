@@ -199,7 +199,8 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     pad = 1e-7 * (np.abs(z).max(axis=(1, 2), initial=0.0) + np.abs(hi - lo).max(axis=1, initial=0.0)) + 1e-12 * scale
     zlo, zhi = z.min(axis=1) - pad[:, None], z.max(axis=1) + pad[:, None]
     # per (quadric, plane k): sheets +1 and -1 where lam_k != 0, sheet 0 where only beta_k
-    # (a paraboloid's axis), none for a cylinder along u_k (plane k owns no point)
+    # (a plane's normal, a paraboloid's axis), none for a cylinder along u_k (plane k owns
+    # no point)
     lam = np.array([frames[q].lam for q in qs.tolist()]).reshape(-1, 3)
     beta = np.array([frames[q].beta for q in qs.tolist()]).reshape(-1, 3)
     count = np.where(lam != 0.0, 2, np.where(beta != 0.0, 1, 0)).ravel()
@@ -742,11 +743,8 @@ class _Subdivision:
         chain budgets, for the levels after it (it is written by this chain's even levels, and
         read by the next chain, whose second level writes it again); the input side holds the
         first level's input, so an odd level is chained only if it fits there.  The clip
-        buffer, which nothing bounds, is to hold CLIP_MARGIN times the most rows per cell a
-        level of the last chain wrote, for the chain's levels' most cells: the chain is
-        shortened to fit it, and only a single level that does not fit grows it (a level run
-        again costs more than memory; growing it for a chain of 15k cells copied the
-        sponge's 14M rows at 0.1% into a new buffer, 0.1-0.4 s; see also _plan_clip)."""
+        buffer, which nothing bounds, is sized by :meth:`_plan_clip`, which may shorten the
+        chain."""
         rows = self.scene.packed.tape.itemsize
         cells_budget = CHAIN_CELLS if self.sized["cells"] else 0
         arena_budget = min(CHAIN_ARENA_ROWS, self.arena_budget // rows) if self.sized["arena"] else 0
@@ -767,13 +765,17 @@ class _Subdivision:
 
     def _plan_clip(self, n_in, n_samples, k) -> int:
         """The clip buffer for a chain of ``k`` levels on ``n_in`` cells (``_plan``), and the
-        chain's length that fits it.  Once samples were written, it is first grown to hold
+        chain's length that fits it.  A chain is to have room for CLIP_MARGIN times the most
+        clip rows per cell a level of the last chain wrote, for its levels' cells (doubling
+        per level).  While the rows written are few (CLIP_CHEAP_ROWS) the buffer is grown for
+        the whole chain; past them the chain is shortened to what fits, and only a single
+        level that does not fit grows it (a level run again costs more than memory, but
+        growing it for a chain of 15k cells copied the sponge's 14M rows at 0.1% into a new
+        buffer, 0.1-0.4 s).  Once samples were written, it is also grown to hold
         CLIP_MARGIN times their clip rows per sample for the samples still expected (at most
         the arena budget): early, while the rows to copy are few (the sponge at 1% wrote 12
-        rows per sample on its first level of samples and 17 on the next, 12x as many cells,
-        which ran twice when the room was the rows per cell).  While the rows written are
-        few (CLIP_CHEAP_ROWS) the buffer is grown for the whole chain; past them the chain is
-        shortened to what fits."""
+        rows per sample for the 1,858 samples of its first level of samples and 17 for the
+        22,437 of the next, which ran twice when the room was the rows per cell)."""
         rows = self.scene.packed.tape.itemsize
 
         def need(k):  # the cells of a chain's levels double (not the worst case, four times)
