@@ -154,6 +154,7 @@ class Forecast:
         if roots is not None and len(roots[0]):
             order = np.argsort(roots[0], kind="stable")
             self.roots = (np.asarray(roots[0])[order], np.asarray(roots[1], dtype=np.float64)[order])
+        self._peaks: dict = {}  # peak_at by level
         self.last = max_levels - 1 if last is None else min(max_levels - 1, math.floor(last + 0.5))
         self.max_levels = max_levels
         self.cells: list[int] = []
@@ -269,11 +270,13 @@ class Forecast:
         all of them where none is left), or the ``peak`` given."""
         if self.roots is None:
             return self.peak
-        peaks, areas = self.roots
-        first = min(int(np.searchsorted(peaks, level - len(PAST_PEAK))), len(peaks) - 1)
-        held = np.cumsum(areas[first:])
-        k = min(int(np.searchsorted(held, 0.5 * held[-1])), len(held) - 1)
-        return float(peaks[first + k])
+        if level not in self._peaks:
+            peaks, areas = self.roots
+            first = min(int(np.searchsorted(peaks, level - len(PAST_PEAK))), len(peaks) - 1)
+            held = np.cumsum(areas[first:])
+            k = min(int(np.searchsorted(held, 0.5 * held[-1])), len(held) - 1)
+            self._peaks[level] = float(peaks[first + k])
+        return self._peaks[level]
 
     def scenario(self, children: int) -> str:
         """Which cells the levels ahead have: ``"collapse"`` or ``"tail"`` once the levels
