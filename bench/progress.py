@@ -198,7 +198,7 @@ def replay_history(run: dict, min_left: float = 0.1) -> dict:
     its levels' work as the sampler shares them, and judge the seconds left forecast after
     each chain over the second half of the run (:func:`judge`, with ``min_left`` of the run's
     seconds as the least left), and the fraction elapsed / (elapsed + forecast) held at its
-    largest as the bar shows it."""
+    largest as the bar shows it (``final_fraction``: the last one's)."""
     from clcsg.sampling.forecast import Forecast
 
     fc = Forecast(run["estimate"], run["quad"], run["peak"], run["last"], run["max_levels"], run["roots"])
@@ -209,7 +209,9 @@ def replay_history(run: dict, min_left: float = 0.1) -> dict:
         left = fc.seconds_left(levels[-1][3])
         shown = 1.0 if not levels[-1][3] else max(shown, min(t / (t + left), 0.999) if t + left > 0 else 0.0)
         points.append((t, left, shown))
-    return judge(points, points[-1][0], min_left * points[-1][0])
+    out = judge(points, points[-1][0], min_left * points[-1][0])
+    out["final_fraction"] = points[-1][2]
+    return out
 
 
 def expected_counts(radii=(0.01, 0.002)) -> list:
