@@ -461,8 +461,9 @@ def _pair(b: _Builder, memo: dict, key) -> None:
         b.complement[other] = memo[key]
 
 
-def _postorder(b: _Builder, root: int) -> list[int]:
-    """Every node reachable from ``root`` once, each after its operands (iterative)."""
+def _postorder(b: _Builder, root: int, known=()) -> list[int]:
+    """Every node reachable from ``root`` once, each after its operands (iterative); nodes in
+    ``known`` are left out, and their operands not visited."""
     order: list[int] = []
     seen: set = set()
     stack = [(root, False)]
@@ -470,7 +471,7 @@ def _postorder(b: _Builder, root: int) -> list[int]:
         i, done = stack.pop()
         if done:
             order.append(i)
-        elif i not in seen:
+        elif i not in seen and i not in known:
             seen.add(i)
             stack.append((i, True))
             if b.kind[i] not in (_LEAF, _CONST):
@@ -483,19 +484,12 @@ def _needs(b: _Builder, root: int, need: dict | None = None) -> dict:
     ``need`` (a node's estimate depends on its sub-DAG only: nodes already in it are kept, and
     their operands not visited)."""
     need = {} if need is None else need
-    stack = [(root, False)]
-    while stack:
-        i, done = stack.pop()
-        if i in need:
-            continue
+    for i in _postorder(b, root, need):
         if b.kind[i] in (_LEAF, _CONST):
             need[i] = 1
-        elif done:
-            ns = sorted((need[c] for c in b.args[i]), reverse=True)
-            need[i] = max(ns[0], 1 + max(ns[1:], default=0))
-        else:
-            stack.append((i, True))
-            stack.extend((c, False) for c in b.args[i] if c not in need)
+            continue
+        ns = sorted((need[c] for c in b.args[i]), reverse=True)
+        need[i] = max(ns[0], 1 + max(ns[1:], default=0))
     return need
 
 

@@ -128,6 +128,11 @@ def level_bounds(root_diagonal: float, radius: float, floor: float, split_larger
             quad + max(0.0, 2 * math.log(d / floor) / step))
 
 
+def _work(cells: float, emitted: float) -> float:
+    """A level's work in cells: its cells and SAMPLE_COST per sample it emitted."""
+    return cells + SAMPLE_COST * emitted
+
+
 def peak_levels(diagonals: np.ndarray, radius: float, split_larger: float, quad_split_diag: float) -> np.ndarray:
     """The peak level (:func:`level_bounds`) of root cells of these diagonals."""
     d = np.asarray(diagonals, dtype=np.float64)
@@ -176,7 +181,7 @@ class Forecast:
         share."""
         shares, seen = [], self.samples
         for _, cells, samples, _ in levels:
-            shares.append(1 + cells + SAMPLE_COST * max(0, samples - seen))
+            shares.append(1 + _work(cells, max(0, samples - seen)))
             seen = samples
         for (_, cells, samples, _), share in zip(levels, shares):
             self.add(cells, samples, seconds * share / sum(shares))
@@ -316,10 +321,10 @@ class Forecast:
         for i in range(first, len(secs)):
             age = DECAY ** (len(secs) - 1 - i)
             w += age * (secs[i] - a)
-            x += age * (cells[i] + SAMPLE_COST * emitted[i])
+            x += age * _work(cells[i], emitted[i])
         b = w / x if x > 0 and first else 0.0
         if b <= 0:  # nothing to fit yet: the first level's cost, less its one-off share
-            b = secs[0] / FIRST_LEVEL / max(cells[0] + SAMPLE_COST * emitted[0], 1)
+            b = secs[0] / FIRST_LEVEL / max(_work(cells[0], emitted[0]), 1)
         return a, b, SAMPLE_COST * b
 
     def seconds_left(self, children: int) -> float:
