@@ -662,7 +662,7 @@ class _Subdivision:
         self.cap_clip = max(2, int(cap[3])) if len(cap) > 3 else max(int(estimate), 1 << 14)
         self.estimate = int(estimate)
         self.clip_used = 0
-        self.clip_per_cell = 0.0  # the most clip rows per cell a level of the last chain wrote
+        self.clip_per_cell = 0.0  # the most clip rows per cell a level wrote so far
         self.arena_budget = ARENA_BUDGET * min(ctx.info.max_mem_alloc, ctx.info.global_mem)
         self.max_groups = CHAIN_GROUPS_PER_CU * max(1, int(ctx.info.compute_units))
         self.zeroed = "oclgrind" in ctx.info.platform.lower()
@@ -766,8 +766,10 @@ class _Subdivision:
     def _plan_clip(self, n_in, n_samples, k) -> int:
         """The clip buffer for a chain of ``k`` levels on ``n_in`` cells (``_plan``), and the
         chain's length that fits it.  A chain is to have room for CLIP_MARGIN times the most
-        clip rows per cell a level of the last chain wrote, for its levels' cells (doubling
-        per level).  While the rows written are few (CLIP_CHEAP_ROWS) the buffer is grown for
+        clip rows per cell a level wrote so far, for its levels' cells (doubling per level).
+        The most of the run, not of the last chain: the rate jumps where cells start to be
+        filled (the flange at 1/150: 1.3 rows per cell at level 5, 1.0 at level 6, 2.2 at
+        level 7, which ran twice).  While the rows written are few (CLIP_CHEAP_ROWS) the buffer is grown for
         the whole chain; past them the chain is shortened to what fits, and only a single
         level that does not fit grows it (a level run again costs more than memory, but
         growing it for a chain of 15k cells copied the sponge's 14M rows at 0.1% into a new
@@ -912,7 +914,6 @@ class _Subdivision:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
             k = self._plan(n_in, n_samples, arena_bound, level)
             counters = self._chain(kernel, n_in, n_samples, k)
-            self.clip_per_cell = 0.0
             done = []
             for row in range(1, k + 1):
                 c = counters[row]
