@@ -169,7 +169,8 @@ def quadric_boxes(tape) -> dict:
     np.maximum.at(qhi, quad, phi + pad)
     lo_b, hi_b = tape.bound
     qlo, qhi = np.maximum(qlo, lo_b), np.minimum(qhi, hi_b)
-    used = np.unique(tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
+    used = np.sort(tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
+    used = used[np.r_[True, used[1:] != used[:-1]]]  # not np.unique: it imports numpy.ma (7 ms)
     ok = np.zeros(n_q, dtype=bool)
     ok[quad] = True
     ok &= np.all(qhi >= qlo, axis=1)
@@ -1066,9 +1067,16 @@ def _multipliers(k: int) -> None:
     """Grow the odd multipliers of :func:`program_keys` to at least ``k``."""
     global _KEY_MULTIPLIERS
     if len(_KEY_MULTIPLIERS) < k:
-        rng = np.random.default_rng(0x5EED)
-        _KEY_MULTIPLIERS = rng.integers(1, 2 ** 63, size=max(k, 2 * len(_KEY_MULTIPLIERS), 64),
-                                        dtype=np.uint64) | np.uint64(1)
+        _KEY_MULTIPLIERS = _splitmix64(np.arange(max(k, 2 * len(_KEY_MULTIPLIERS), 64), dtype=np.uint64)) | np.uint64(1)
+
+
+def _splitmix64(i: np.ndarray) -> np.ndarray:
+    """SplitMix64 of the integers ``i``: well-mixed 64-bit words, the same on every run (not
+    numpy.random, whose import costs a short CLI run 5 ms)."""
+    z = (i + np.uint64(1)) * np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
 
 
 def dedupe_by_length(rows, first, count):
