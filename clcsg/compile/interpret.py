@@ -275,7 +275,8 @@ def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=Non
         elif op in (OP_AND, OP_OR):
             sa, sb = state[a], state[b]
             absorb, neutral = (_F, _T) if op == OP_AND else (_T, _F)
-            sides = tuple(_combine3(op, sa[k], sb[k]) for k in (1, 2))
+            table = _AND3 if op == OP_AND else _OR3
+            sides = (table[sa[1], sb[1]], table[sa[2], sb[2]])
             if sa[0] == absorb or sb[0] == absorb:
                 state[out] = (absorb,) + sides
             elif sa[0] == neutral or sb[0] == neutral:
@@ -316,6 +317,11 @@ def prune(ops, quadrics, center, radius: float, self_quadric: int = -1, axes=Non
         kept.append(ins)
     kept.reverse()
     return np.array(kept, dtype=np.int32).reshape(-1, 4), decided, evaluations
+
+
+#: _combine3 of scalar states, looked up (the pruning pass meets them one register at a time)
+_AND3 = {(x, y): _F if _F in (x, y) else _T if x == y == _T else _LIVE for x in (_F, _T, _LIVE) for y in (_F, _T, _LIVE)}
+_OR3 = {(x, y): _T if _T in (x, y) else _F if x == y == _F else _LIVE for x in (_F, _T, _LIVE) for y in (_F, _T, _LIVE)}
 
 
 def _combine3(op, x, y):

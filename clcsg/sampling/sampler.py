@@ -92,6 +92,7 @@ from ..cl.memory import check_allocation, upload
 from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, tape_rows, task_dtype
 from ..compile.quadric_frames import principal_frame_list
+from ..compile.contacts import contact_pairs, contact_root_tapes
 from ..compile.root_tapes import prune_root_tapes
 from ..errors import LimitError, UsageError
 from ..readers.scenes import as_scene
@@ -183,8 +184,9 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     Returns (tasks, cells, rows): ``rows`` (TAPE_OP_DTYPE) start the tape arena; they begin
     with the full tape and continue with the quadrics' root tapes, pruned primitive by
     primitive to what can matter within ``radius`` of the patches of the quadrics' tasks
-    (:mod:`clcsg.compile.root_tapes`); each root cell's ``tape_first`` / ``tape_count`` point
-    at its quadric's tape."""
+    (:mod:`clcsg.compile.root_tapes`), on the tree tape then with the leaves of the quadrics
+    in contact with the sampled one folded (:mod:`clcsg.compile.contacts`); each root cell's
+    ``tape_first`` / ``tape_count`` point at its quadric's tape."""
     scale = float(np.abs(tape.bound).max(initial=1.0))
     boxes = quadric_boxes(tape)
     qs = np.array(list(boxes), dtype=np.int64)
@@ -226,6 +228,8 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     c["task"] = rows
     regions, oriented = _task_regions(t, frames, packed.origin, 1.01 * radius + 1e-6 * scale)
     spans, root_rows = prune_root_tapes(tape, regions, oriented)
+    if tape.shape == "tree":  # the DNF stays the paper's
+        spans, root_rows = contact_root_tapes(tape, spans, root_rows, regions)
     span = np.array([spans[int(q)] for q in t["quadric"]]).reshape(-1, 2)
     c["tape_first"], c["tape_count"] = span[:, 0], span[:, 1]
     return t, c, tape_rows(root_rows)
@@ -443,6 +447,7 @@ def sample(
     tasks, roots, root_rows = _root_tasks(tape, packed, frames, radius)
     timings["analyse_s"] = time.perf_counter() - t1
     stats = {"radius": radius, "floor": floor, "tasks": len(tasks), "normal_form": tape.shape,
+             "contact_pairs": contact_pairs(tape),
              "estimated_samples": est.samples,
              **{f"tape_{k}": v for k, v in tape.stats.items()}}
     if len(roots) == 0 or tape.empty:
