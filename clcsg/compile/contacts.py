@@ -11,18 +11,25 @@ Interval bounds cannot decide such a leaf near a tangent contact: the blends tha
 minkowski() build (a face plane touching an edge cylinder along a line, a cone touching its
 sphere along a circle) make o's value on s vanish to second order along the contact, so the
 cells beside the contact have all four corners off the surface by next to nothing, no bound
-proves their patch free of the surface, and they split down to the floor (the pen stand: 55% of
-its cells).  For a contact, W is semidefinite and singular at the certificate; where W is
+proves their patch free of the surface, and they split down to the floor (half the cells of
+a rounded box).  For a contact, W is semidefinite and singular at the certificate; where W is
 singular det(A_o - mu A_s) = 0, so the candidates for mu are the real roots of that polynomial
 (of degree at most 4, on the complement of the null space the two matrices share: two parallel
 cylinders share their axis direction, and their pencil's determinant vanishes for every mu).
+Pairs apart (o's value on s bounded away from 0) are left to the interval bounds, which
+decide them once the cells are as small as the gap.
 
-Both matrices are first carried to the unit cube of the scene bound and scaled to unit norm.
-W counts as semidefinite when its eigenvalues are not below -EPS (|A_o| + |mu| |A_s|): on s's
-surface the replaced leaf is then wrong only where o's value is within 2 EPS (1 + |mu|) of zero
-(its unit-cube value), a band along the contact some 1e-6 of the bound wide for a tangent
-contact (o's value grows with the square of the distance from it), far below the sampler's
-floor, for a crossing narrower still.
+Not covered: a plane through a cone's apex touching it along a ruling keeps one sign on each
+nappe but opposite signs on the two, so no certificate holds on the whole cone (the hull of a
+box and a disc is made of such pairs); nor does a surface that passes through an edge of the
+solid without bounding it there (a separator of a rotate_extrude through a profile vertex).
+
+The pair is taken in a frame centered on the region where it matters and scaled to the scene
+(:func:`in_frames`), each matrix scaled to a largest entry of 1.  W counts as semidefinite when
+its eigenvalues are not below -EPS (1 + |mu|): on s's surface the replaced leaf is then wrong
+only where o's value is within 2 EPS (1 + |mu|) of zero (in that frame), a band along the
+contact some 1e-6 of the scene wide for a tangent contact (o's value grows with the square of
+the distance from it), far below the sampler's floor, for a crossing narrower still.
 """
 
 from __future__ import annotations
@@ -260,8 +267,9 @@ def contact_root_tapes(tape, spans: dict, rows: np.ndarray, regions: dict) -> tu
     the rows and their quadrics pointed at them.
 
     The pairs tried are a quadric and the other quadrics of its root tape whose surface comes
-    near its region (``regions``: {quadric: (lo, hi)}, the world boxes of its tasks;
-    :func:`_meets`), not two planes (a plane keeps one sign on another only if parallel, and
+    near its region (``regions``: {quadric: (lo, hi)}, a world box holding every point of its
+    surface where its root tape is used: the box of its tasks' patches grown by the splat
+    radius; :func:`_meets`), not two planes (a plane keeps one sign on another only if parallel, and
     then interval bounds decide it).  Past PAIR_BUDGET pairs none is tried (the 2,500-hole
     plate has 300,000, and no contact).  The certificates are kept on the tape."""
     quadrics = np.asarray(tape.quadrics, dtype=np.float64)

@@ -229,7 +229,9 @@ def root_tasks(tape, packed, frames, radius: float = 0.0):
     regions, oriented = _task_regions(t, frames, packed.origin, 1.01 * radius + 1e-6 * scale)
     spans, root_rows = prune_root_tapes(tape, regions, oriented)
     if tape.shape == "tree":  # the DNF stays the paper's
-        spans, root_rows = contact_root_tapes(tape, spans, root_rows, regions)
+        grow = 1.01 * radius + 1e-6 * scale  # the patches (in the quadric's box) and their splat balls
+        near = {q: (boxes[q][0] - grow, boxes[q][1] + grow) for q in regions}
+        spans, root_rows = contact_root_tapes(tape, spans, root_rows, near)
     span = np.array([spans[int(q)] for q in t["quadric"]]).reshape(-1, 2)
     c["tape_first"], c["tape_count"] = span[:, 0], span[:, 1]
     return t, c, tape_rows(root_rows)
