@@ -31,13 +31,14 @@ the four-way levels and [GROWTH_MIN, 2] after, and AT_PEAK of that into the top.
 levels after it keep 0.8 of the cells each (PAST_PEAK); the recorded runs then take one of two
 courses.  A *collapse* (the zoo, the sponge, the plate: the cells are now small enough for one
 sample to cover each): 0.4 into the third level, 0.05 into the fourth, halving after.  A
-*tail* (the pen stand: cells along tangent contacts that pruning never decides, split down to
-the floor, half of its run): as many cells again each level, TAIL_LEVEL of the most a level
+*tail* (the pen stand at 0.05%: cells along curves that pruning never decides, split down to
+the floor, a third of its run): as many cells again each level, TAIL_LEVEL of the most a level
 had at most, down to the floor.  The levels tell which: two levels past the top, cells that
 emit fewer than TAIL_YIELD samples each are a tail, more than COLLAPSE_YIELD a collapse; past
-the collapse level, a tail keeps TAIL_SHARE of the most cells.  Until then the forecast is the
-weighted geometric mean of the two (TAIL_WEIGHT on the tail; the two differ by 3-6x there, so
-one of them is missed by about 2x whichever it leans to).  Root cells that peak after the
+the collapse level, a tail keeps TAIL_SHARE of the most cells, or BARREN_SHARE of them while
+emitting fewer than TAIL_YIELD samples each.  Until then the forecast is the weighted
+geometric mean of the two (TAIL_WEIGHT on the tail; the two differ by 3-6x there, so one of
+them is missed by up to about 2x whichever it leans to).  Root cells that peak after the
 cells alive have collapsed (the plate's faces, after its 2,500 holes) add their own cells: as
 many per area at their peak as the cells alive had, growing into it by 4 or 2 a level
 (:meth:`Forecast.later_cells`).  The cells of the last level are dropped, not split: they cost
@@ -89,10 +90,13 @@ COLLAPSE_ONSET = 0.4
 COLLAPSE, AFTER_COLLAPSE = 0.05, 0.5
 #: a level past the collapse level keeping this share of the most cells a level had is a tail
 TAIL_SHARE = 0.3
+#: a level past the collapse level keeping this share of the most cells and emitting fewer
+#: than TAIL_YIELD samples per cell is a tail too (the pen stand's contacts at 0.05%: 19%)
+BARREN_SHARE = 0.1
 #: samples per cell of a level past the peak below which it is a tail, above which a collapse
-TAIL_YIELD, COLLAPSE_YIELD = 0.2, 0.3
+TAIL_YIELD, COLLAPSE_YIELD = 0.25, 0.3
 #: the tail's weight in the forecast while the scenario is not known
-TAIL_WEIGHT = 0.35
+TAIL_WEIGHT = 0.2
 #: the cells per level of a tail not yet seen, over the most cells a level had
 TAIL_LEVEL = 0.5
 #: growth per level of a tail to the floor, at least and at most
@@ -286,15 +290,17 @@ class Forecast:
     def scenario(self, children: int) -> str:
         """Which cells the levels ahead have: ``"collapse"`` or ``"tail"`` once the levels
         show it, else ``"both"`` (not yet known: the forecast hedges).  Past the collapse level,
-        the tail keeps TAIL_SHARE of the most cells a level had; from the second level past
+        the tail keeps TAIL_SHARE of the most cells a level had, or BARREN_SHARE of them while
+        emitting fewer than TAIL_YIELD samples per cell; from the second level past
         the peak, a level whose cells emit fewer than TAIL_YIELD samples each is stuck on
         curves that pruning never decides (a tail), one whose cells emit more than
         COLLAPSE_YIELD is still resolving surface (a collapse)."""
         past = len(self.cells) - 1 - self.peak_level(children)
+        y = self.emitted[-1] / max(self.cells[-1], 1)
         if past > len(PAST_PEAK):
-            return "tail" if children >= TAIL_SHARE * max(self.cells) else "collapse"
+            share = children / max(self.cells)
+            return "tail" if share >= TAIL_SHARE or (share >= BARREN_SHARE and y < TAIL_YIELD) else "collapse"
         if past >= 2:
-            y = self.emitted[-1] / max(self.cells[-1], 1)
             if y < TAIL_YIELD:
                 return "tail"
             if y > COLLAPSE_YIELD:
