@@ -171,7 +171,7 @@ def quadric_boxes(tape) -> dict:
     lo_b, hi_b = tape.bound
     qlo, qhi = np.maximum(qlo, lo_b), np.minimum(qhi, hi_b)
     used = np.sort(tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
-    used = used[np.r_[True, used[1:] != used[:-1]]]  # not np.unique: it imports numpy.ma (7 ms)
+    used = used[np.r_[True, used[1:] != used[:-1]]] if len(used) else used  # not np.unique: it imports numpy.ma
     ok = np.zeros(n_q, dtype=bool)
     ok[quad] = True
     ok &= np.all(qhi >= qlo, axis=1)
