@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cl.constants import OP_LEAF
 from ..model.quadric import ray_distance
 from .interpret import _F, _LIVE, _T, prune
+from .tape import leaf_quadrics
 
 #: a quadric is tried against another if its conservative distance from the center of the
 #: other's region is within this many half-diagonals of it
@@ -279,9 +279,7 @@ def contact_root_tapes(tape, spans: dict, rows: np.ndarray, regions: dict) -> tu
     selfs, others = [], []
     for q, (first, count) in spans.items():
         if (first, count) not in leaves_of:
-            ops = rows[first:first + count]
-            used = np.sort(ops[ops[:, 0] == OP_LEAF, 2]).astype(np.int64)
-            leaves_of[first, count] = used[np.r_[True, used[1:] != used[:-1]]] if len(used) else used
+            leaves_of[first, count] = leaf_quadrics(rows[first:first + count])
         o = leaves_of[first, count]
         o = o[(o != q) & ~(plane[o] & plane[q])]
         selfs.append(np.full(len(o), q, dtype=np.int64))

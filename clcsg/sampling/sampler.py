@@ -89,11 +89,11 @@ from ..cl.constants import SAMPLER_COUNTERS
 from ..cl.programs import build, kernel as program_kernel, launch
 from ..cl.buffer_pool import pool_of
 from ..cl.memory import check_allocation, upload
-from ..cl.constants import OP_LEAF
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, tape_rows, task_dtype
 from ..compile.quadric_frames import principal_frame_list
 from ..compile.contacts import contact_pairs, contact_root_tapes
 from ..compile.root_tapes import prune_root_tapes
+from ..compile.tape import leaf_quadrics
 from ..errors import LimitError, UsageError
 from ..readers.scenes import as_scene
 from .samples import Samples
@@ -170,8 +170,7 @@ def quadric_boxes(tape) -> dict:
     np.maximum.at(qhi, quad, phi + pad)
     lo_b, hi_b = tape.bound
     qlo, qhi = np.maximum(qlo, lo_b), np.minimum(qhi, hi_b)
-    used = np.sort(tape.ops[tape.ops[:, 0] == OP_LEAF, 2])
-    used = used[np.r_[True, used[1:] != used[:-1]]] if len(used) else used  # not np.unique: it imports numpy.ma
+    used = leaf_quadrics(tape.ops)
     ok = np.zeros(n_q, dtype=bool)
     ok[quad] = True
     ok &= np.all(qhi >= qlo, axis=1)
