@@ -302,6 +302,7 @@ def contact_root_tapes(tape, spans: dict, rows: np.ndarray, regions: dict) -> tu
         found = signs_on(quadrics[s_q[todo]], quadrics[o_q[todo]],
                          0.5 * (lo[region[todo]] + hi[region[todo]]), size)
         known.update(zip(codes[todo].tolist(), found.tolist()))
+        tape.__dict__["_contact_count"] = tape.__dict__.get("_contact_count", 0) + int(np.count_nonzero(found))
     sign = np.array([known[c] for c in codes.tolist()], dtype=np.int64)
     certified: dict = {}
     for q, o, v in zip(s_q[sign != 0].tolist(), o_q[sign != 0].tolist(), sign[sign != 0].tolist()):
@@ -317,5 +318,6 @@ def contact_root_tapes(tape, spans: dict, rows: np.ndarray, regions: dict) -> tu
 
 
 def contact_pairs(tape) -> int:
-    """The pairs (sampled quadric, other quadric) in contact found on ``tape`` so far."""
-    return sum(1 for v in tape.__dict__.get("_contact_signs", {}).values() if v)
+    """The pairs (sampled quadric, other quadric) in contact found on ``tape`` so far (counted
+    as they are found: this is asked on every sampling call)."""
+    return tape.__dict__.get("_contact_count", 0)
