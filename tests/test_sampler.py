@@ -424,3 +424,31 @@ def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed, collide,
     stored = {tuple(map(tuple, r2[f:f + c])) for f, c in zip(f2[count > 0], c2[count > 0])}
     distinct = {tuple(map(tuple, rows[f:f + c])) for f, c in zip(first[count > 0], count[count > 0])}
     assert stored == distinct and len(r2) == sum(len(p) for p in distinct)
+
+def test_dedupe_programs_merges_the_programs_samples_share():
+    """Samples that share a program (the device gives a repeated program the rows of its first
+    copy) share its first row, and rows no sample names (given back, or an extra copy) lie
+    between programs: each sample reads back its own rows, each distinct program is stored
+    once, and nothing else is kept."""
+    from clcsg.sampling.sampler import dedupe_programs
+
+    rng = np.random.default_rng(7)
+    programs = [rng.integers(0, 2, (int(rng.integers(1, 6)), 4)) for _ in range(40)]
+    pieces, starts = [], []
+    for p in programs:
+        pieces.append(rng.integers(5, 9, (int(rng.integers(0, 3)), 4)))  # rows no sample names
+        starts.append(sum(len(q) for q in pieces))
+        pieces.append(p)
+    rows = np.concatenate(pieces).astype(np.int32)
+    pick = rng.integers(0, len(programs), 500)
+    first = np.array(starts)[pick].astype(np.int32)
+    count = np.array([len(p) for p in programs])[pick].astype(np.int32)
+    first[::7] = 0
+    count[::7] = 0
+    f2, c2, r2 = dedupe_programs(rows, first, count)
+    assert np.array_equal(c2, count) and np.all(f2[count == 0] == 0)
+    for i in range(len(pick)):
+        assert np.array_equal(r2[f2[i]:f2[i] + c2[i]], rows[first[i]:first[i] + count[i]])
+    distinct = {tuple(map(tuple, programs[k])) for k in pick[count > 0]}
+    stored = {tuple(map(tuple, r2[f:f + c])) for f, c in zip(f2[count > 0], c2[count > 0])}
+    assert stored == distinct and len(r2) == sum(len(p) for p in distinct)

@@ -1020,6 +1020,31 @@ def program_keys_flat(words: np.ndarray, pos: np.ndarray, starts: np.ndarray) ->
 def dedupe_programs(rows, first, count):
     """Equal clip programs stored once: (first, count, rows) over a compact row buffer.
 
+    Samples that share a program (a filled cell's samples take its program as it is) share its
+    first row: the programs are taken once per distinct first row (a scatter over the rows, no
+    sort) and merged by :func:`dedupe_spans`; rows that no sample names are dropped."""
+    first = np.asarray(first)
+    count = np.asarray(count)
+    live = count > 0
+    shared = first[live].astype(np.int64)
+    at = np.zeros(len(rows) + 1, dtype=bool)
+    at[shared] = True
+    starts = np.flatnonzero(at)
+    if len(starts) == len(shared):
+        return dedupe_spans(rows, first, count)
+    rows_at = np.zeros(len(rows) + 1, dtype=np.int32)
+    rows_at[shared] = count[live]
+    new_at, _, out = dedupe_spans(rows, starts, rows_at[starts])
+    moved = np.zeros(len(rows) + 1, dtype=np.int32)
+    moved[starts] = new_at
+    new_first = np.zeros(len(first), dtype=np.int32)
+    new_first[live] = moved[shared]
+    return new_first, count.astype(np.int32), out
+
+
+def dedupe_spans(rows, first, count):
+    """:func:`dedupe_programs` of programs (``first``, ``count``) over ``rows``, one per entry.
+
     Every program's rows are gathered as whole rows in one pass (a row's 16 bytes as one array
     element, which ``np.take`` copies three times faster than fancy indexing over columns),
     keyed (:func:`program_keys_flat`, the length folded in, 32 bits: :func:`_key32`), grouped
