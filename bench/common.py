@@ -245,6 +245,7 @@ def sampling_record(ts: dict, cu: int) -> dict:
         "tape_mean_per_level": st.get("tape_mean_per_level"),
         "tape_max_per_level": st.get("tape_max_per_level"),
         "clip_rows": st.get("clip_rows"),
+        "clip_rows_written": st.get("clip_rows_written"),
         "clipped_samples": st.get("clipped_samples"),
         "us_per_query_kernel_per_cu": 1e6 * ts["classify_kernel_s"] * cu / q if q else None,
     }

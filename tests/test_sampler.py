@@ -12,6 +12,7 @@ oracle (tests/tree_oracle.py) on PoCL, for the tree and, where it fits, the DNF 
 from __future__ import annotations
 
 import math
+import os
 import types
 import warnings
 
@@ -26,6 +27,8 @@ from clcsg.sampling.sampler import sample
 
 import tree_oracle as T
 from coverage import assert_same_samples, uncovered
+
+EXAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples")
 
 B = clcsg.box(2)
 
@@ -349,6 +352,23 @@ def test_clip_programs_decide_the_surface_within_the_splat(name, cl_context):
     assert len(progs) == len(spans)
 
 
+def test_the_device_stores_a_program_of_an_earlier_launch_once(cl_context):
+    """Most clip programs repeat from level to level (the samples along one edge, a filled
+    patch's rows): a program that an earlier launch stored is not written again (clip_table.h),
+    so a run of many levels writes far fewer rows than one copy per clipped sample; the merge
+    on the host keeps fewer still, and every sample's program stays its own (checked against
+    the tree oracle above)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = clcsg.load(os.path.join(EXAMPLES, "flange.csg"))
+    b = sc.compile().bound
+    s = sample(sc, 0.003 * float(np.linalg.norm(b[1] - b[0])), device=cl_context)
+    named = int(s.clip_count.sum())  # a copy per clipped sample
+    written = s.stats["clip_rows_written"]
+    assert s.stats["levels"] > 10
+    assert s.stats["clip_rows"] <= written and 2 * written < named, (s.stats["clip_rows"], written, named)
+
+
 def test_stats_have_the_papers_columns(cl_context):
     shape, r = SCENES["rounded_cube"]
     st = sample(shape, r, device=cl_context).stats
@@ -424,6 +444,7 @@ def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed, collide,
     stored = {tuple(map(tuple, r2[f:f + c])) for f, c in zip(f2[count > 0], c2[count > 0])}
     distinct = {tuple(map(tuple, rows[f:f + c])) for f, c in zip(first[count > 0], count[count > 0])}
     assert stored == distinct and len(r2) == sum(len(p) for p in distinct)
+
 
 def test_dedupe_programs_merges_the_programs_samples_share():
     """Samples that share a program (the device gives a repeated program the rows of its first

@@ -48,6 +48,18 @@ RESOLVE_LANES = 8
 #: branch-free arithmetic runs as real8 vectors, their shading as one float8 (pixel.h's pixel_lanes)
 RAY_LANES = 8
 
+#: the sampler's table of clip programs (sampling/clip_table.h): the entries a lookup probes, an
+#: entry's 32-bit words (a 64-byte line: state, first row, rows and the first CLIP_TABLE_INLINE
+#: rows of the program)
+CLIP_TABLE_PROBES = 8
+CLIP_ENTRY_WORDS = 16
+CLIP_TABLE_INLINE = 3
+#: the programs a work-item of the sampler keeps at hand before it looks in that table
+CLIP_RECENT = 4
+#: clip programs of at most this many rows are built in a work-item's private memory and stored
+#: once per run where they can be; longer ones are written as they are
+CLIP_BUILD_ROWS = 32
+
 #: the framebuffer word of a pixel no fragment reached (float bits of t << 32 | index; splat.cl)
 EMPTY_KEY = 0xFFFFFFFFFFFFFFFF
 
@@ -80,5 +92,10 @@ def defines() -> dict:
     d["INSTANCE_REGS"] = INSTANCE_REGS
     d["RESOLVE_LANES"] = RESOLVE_LANES
     d["RAY_LANES"] = RAY_LANES
+    d["CLIP_TABLE_PROBES"] = CLIP_TABLE_PROBES
+    d["CLIP_ENTRY_WORDS"] = CLIP_ENTRY_WORDS
+    d["CLIP_TABLE_INLINE"] = CLIP_TABLE_INLINE
+    d["CLIP_RECENT"] = CLIP_RECENT
+    d["CLIP_BUILD_ROWS"] = CLIP_BUILD_ROWS
     d["EMPTY_KEY"] = f"0x{EMPTY_KEY:016x}UL"
     return d

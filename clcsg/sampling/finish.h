@@ -21,6 +21,7 @@
 #define CLCSG_FINISH_H
 #include "tape.h"
 #include "primitives.h"
+#include "clip_table.h"
 
 /* sample_src.sides: 0, or SIDES_KNOWN with the membership bits (bit 0 side -, bit 1 side +) */
 #define SIDES_KNOWN 4
@@ -57,6 +58,9 @@ typedef struct {
     __global const tape_op *inst_tape;
     int inst_rows;
     uint evals, emitted, clip_rows;
+    __global volatile uint *table; /* the run's clip programs (clip_table.h) */
+    uint table_mask, launch;
+    clip_recent recent;
 } sample_sink;
 
 /* `n` consecutive sample slots: the first (the sample columns hold only those below the
@@ -74,6 +78,46 @@ inline uint sink_clip_rows(sample_sink *k, uint rows)
     return atomic_add(&k->counters[SC_CLIP_ROWS], rows);
 }
 
+/* Program p[0..n) (private) in the clip buffer: the first row of an equal one stored before
+ * (clip_table.h), or of a new copy; -1 if the copy would end past the capacity (the level runs
+ * again). */
+inline int clip_store(sample_sink *k, const tape_op *p, int n)
+{
+    uint key = clip_program_key(p, n), claimed;
+    int at = clip_recent_find(&k->recent, k->clip, key, p, n);
+    if (at < 0) at = clip_table_find(k->table, k->table_mask, k->launch, k->clip, key, p, n, &claimed);
+    if (at < 0) {
+        uint base = sink_clip_rows(k, (uint)n);
+        if (base + (uint)n > k->cap_clip) return -1;
+        for (int m = 0; m < n; ++m) k->clip[base + m] = p[m];
+        at = (int)base;
+        if (claimed != ~0u) clip_table_publish(k->table, claimed, k->launch, key, at, p, n);
+    }
+    clip_recent_add(&k->recent, key, at, n);
+    return at;
+}
+
+/* Tape t (n rows) pruned over g with q substituted, as a clip program: `rows` and `state` come
+ * from its count pass, whose leaf states and rows' fates `memo` holds (leaves tested again are
+ * counted in *evals).  Returns its first row in the clip buffer and its rows in *count, or -1 if
+ * the buffer is full (the level runs again).  Up to CLIP_BUILD_ROWS rows it is built in private
+ * memory and stored once per run where it can be (clip_store); a longer one is written into the
+ * buffer as it is. */
+inline int sink_clip_program(sample_sink *k, __global const tape_op *t, int n, int rows, const prune_region *g,
+                             int q, uchar state, prune_memo *memo, uint *evals, int *count)
+{
+    int first;
+    if (rows <= CLIP_BUILD_ROWS && n <= PRUNE_MEMO_ROWS) {
+        tape_op built[CLIP_BUILD_ROWS];
+        tape_pruned_private(t, n, rows, state, memo, built, &first, count);
+        return clip_store(k, built + first, *count);
+    }
+    uint base = sink_clip_rows(k, (uint)rows);
+    if (base + (uint)rows > k->cap_clip) return -1;
+    tape_write_pruned(t, n, rows, k->qs, g, q, state, k->clip + base, &first, count, evals, memo);
+    return (int)base + first;
+}
+
 /* The clip program of a sample at p on quadric q (the tape pruned over the splat ball,
  * written to the clip buffer unless both sides are decided) into *first, *count; returns the
  * membership bits at p: from the decided root state, else from the (short) clip program,
@@ -85,8 +129,8 @@ inline uint clip_program(sample_sink *k, __global const tape_op *tape, int nt, i
 {
     prune_region ball = {p, (real3)(0), (real3)(0), (real3)(0), radius};
     uchar state;
-    prune_memo memo; /* the count's leaf states, replayed by the write */
-    memo.mode = 1;
+    prune_memo memo; /* the count's leaf states and rows' fates, for the write */
+    memo.mode = 3;
     int rows = tape_prune_rows_memo(tape, nt, k->qs, &ball, q, &state, &k->evals, &memo);
     if (prune_decision(state) < 0) return prune_member_bits(state);
     if (clip_at >= 0 && rows == nt) {
@@ -94,11 +138,12 @@ inline uint clip_program(sample_sink *k, __global const tape_op *tape, int nt, i
         *count = nt;
         return tape_member(tape, nt, k->qs, p, q);
     }
-    uint base = sink_clip_rows(k, (uint)rows);
-    if (base + (uint)rows > k->cap_clip) return tape_member(tape, nt, k->qs, p, q);
-    tape_write_pruned(tape, nt, rows, k->qs, &ball, q, state, k->clip + base, first, count, &k->evals, &memo);
-    *first += (int)base;
-    return tape_member(k->clip + *first, *count, k->qs, p, q);
+    int n;
+    int at = sink_clip_program(k, tape, nt, rows, &ball, q, state, &memo, &k->evals, &n);
+    if (at < 0) return tape_member(tape, nt, k->qs, p, q);
+    *first = at;
+    *count = n;
+    return tape_member(k->clip + at, n, k->qs, p, q);
 }
 
 /* Entry `slot` of the real column region at `offset` (SR_*), `width` reals wide. */

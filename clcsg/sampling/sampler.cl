@@ -338,20 +338,19 @@ inline sample_src fill_source(const cell_geom *g, cell_rec c, sample_src src, re
 {
     prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
     uchar state;
-    prune_memo memo; /* the count's leaf states, replayed by the write */
-    memo.mode = 1;
+    prune_memo memo; /* the count's leaf states and rows' fates, for the write */
+    memo.mode = 3;
     int rows = tape_prune_rows_memo(src.tape, src.tape_count, out->qs, &grown, src.quadric, &state, &w->evals, &memo);
     if (prune_decision(state) < 0) {
         src.sides = SIDES_KNOWN | (int)prune_member_bits(state);
         return src;
     }
-    uint base = sink_clip_rows(out, (uint)rows);
-    if (base + (uint)rows > out->cap_clip) return src;
-    int first, count;
-    tape_write_pruned(src.tape, src.tape_count, rows, out->qs, &grown, src.quadric, state, out->clip + base, &first,
-                      &count, &w->evals, &memo);
-    src.clip_at = (int)base + first;
-    src.tape = out->clip + src.clip_at;
+    int count;
+    int at = sink_clip_program(out, src.tape, src.tape_count, rows, &grown, src.quadric, state, &memo, &w->evals,
+                               &count);
+    if (at < 0) return src;
+    src.clip_at = at;
+    src.tape = out->clip + at;
     src.tape_count = count;
     return src;
 }
@@ -445,7 +444,8 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
               __global real *sample_reals, __global int *sample_ints, uint cap_samples,
               __global const tape_op *arena_in, uint cap_arena_in, __global tape_op *arena_out, uint cap_arena,
               __global volatile uint *counters, int row, real radius, real floor_size,
-              __global tape_op *clip, uint cap_clip, PRIMITIVE_TABLE)
+              __global tape_op *clip, uint cap_clip, __global uint *clip_table, uint clip_table_mask,
+              uint launch, PRIMITIVE_TABLE)
 {
     __local uint sums[WG_SUMS][WORK_GROUP];
     __local uint tape_max[WORK_GROUP];
@@ -465,7 +465,7 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
     barrier(CLK_LOCAL_MEM_FENCE);
     uint n_cells = skip ? 0 : prev[SC_CELLS];
     sample_sink out = {sample_reals, sample_ints, cap_samples, running, clip, cap_clip, qs, frames,
-                       PRIMITIVE_TABLE_ARGS, 0, 0, 0};
+                       PRIMITIVE_TABLE_ARGS, 0, 0, 0, clip_table, clip_table_mask, launch};
     /* the work-item's sums over its cells, in registers until the work-group adds them up */
     cell_work w = {0, 0, 0, 0};
     uint discarded = 0, filled = 0, single = 0, split = 0, unresolved = 0, decided = 0, rows = 0, rows_max = 0;

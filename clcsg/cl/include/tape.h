@@ -274,10 +274,13 @@ inline int leaf_over_patch(__global const quadric_rec *qs, int q, int sign, cons
 
 /* Leaf states of a forward pass kept for a second pass over the same tape and region (2 bits
  * a row, for rows below PRUNE_MEMO_ROWS): mode 1 records them, mode 2 replays them, so a split
- * that counts its children's rows and then writes them tests each leaf once. */
+ * that counts its children's rows and then writes them tests each leaf once.  Mode 3 records
+ * them and what became of each row (`acts`, 2 bits a row: 0 dropped, 1 kept as it is, 2 and 3
+ * kept as a COPY of its operand a or b), from which tape_pruned_private builds the pruned tape
+ * without a second pass. */
 #define PRUNE_MEMO_ROWS 256
 typedef struct {
-    uint bits[PRUNE_MEMO_ROWS / 16];
+    uint bits[PRUNE_MEMO_ROWS / 16], acts[PRUNE_MEMO_ROWS / 16];
     int mode;
 } prune_memo;
 
@@ -295,8 +298,11 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
     uchar st[TAPE_REGS];
     bool write = out != 0;
     int memo_mode = memo ? memo->mode : 0;
-    if (memo_mode == 1) /* the words of the rows there are: the states of no others are read */
-        for (int w = 0; w < (min(n, PRUNE_MEMO_ROWS) + 15) >> 4; ++w) memo->bits[w] = 0;
+    if (memo_mode & 1) /* the words of the rows there are: the states of no others are read */
+        for (int w = 0; w < (min(n, PRUNE_MEMO_ROWS) + 15) >> 4; ++w) {
+            memo->bits[w] = 0;
+            if (memo_mode == 3) memo->acts[w] = 0;
+        }
     int k_out = 0, lst = -1;
     prune_consts pk;
     bool have_pk = false;
@@ -304,6 +310,7 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
         tape_op o = t[k];
         tape_op keep = o;
         bool kept = false;
+        uint act = 1;
         if (o.op == OP_LEAF) {
             if (o.a == self_q) {
                 st[o.out] = (o.b > 0 ? ST_PACK(ST_LIVE, ST_T, ST_F) : ST_PACK(ST_LIVE, ST_F, ST_T)) | ST_SELF;
@@ -320,7 +327,7 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
                     }
                     s = leaf_over_region(qs, o.a, o.b, g, &pk);
                     if (s == ST_LIVE && g->on_patch) s = leaf_over_patch(qs, o.a, o.b, g, &pk);
-                    if (memo_mode == 1 && k < PRUNE_MEMO_ROWS) memo->bits[k >> 4] |= (uint)s << (2 * (k & 15));
+                    if ((memo_mode & 1) && k < PRUNE_MEMO_ROWS) memo->bits[k >> 4] |= (uint)s << (2 * (k & 15));
                 }
                 st[o.out] = ST_PACK(s, s, s);
                 kept = s == ST_LIVE;
@@ -339,6 +346,7 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
                 int src = ta == neutral ? o.b : o.a;
                 kept = ST_TAPE(st[src]) == ST_LIVE && src != o.out;
                 keep = (tape_op){OP_COPY, o.out, src, 0};
+                act = ta == neutral ? 3 : 2;
                 st[o.out] = r | (st[src] & ST_SELF);
             } else {
                 kept = true;
@@ -352,6 +360,7 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
         }
         if (kept) {
             if (write) out[k_out] = keep;
+            if (memo_mode == 3 && k < PRUNE_MEMO_ROWS) memo->acts[k >> 4] |= act << (2 * (k & 15));
             ++k_out;
             lst = o.out;
         }
@@ -516,6 +525,40 @@ inline void tape_write_pruned(__global const tape_op *t, int n, int rows, __glob
     }
     memo->mode = 2;
     tape_prune_write_memo(t, n, qs, g, self_q, state, out, first, count, evals, memo);
+}
+
+/* The tape tape_write_pruned writes after a count pass over t (n <= PRUNE_MEMO_ROWS rows) that
+ * gave `rows` and `state` and recorded its rows' fates in `memo` (mode 3), built in private
+ * memory out[0..rows) from those fates, with no second pass: the same rows, *first and *count. */
+inline void tape_pruned_private(__global const tape_op *t, int n, int rows, uchar state, const prune_memo *memo,
+                                tape_op *out, int *first, int *count)
+{
+    int root = t[n - 1].out;
+    *first = 0;
+    if (rows == n) {
+        for (int m = 0; m < n; ++m) out[m] = t[m];
+        *count = n;
+        return;
+    }
+    int k = prune_constant(state);
+    if (k >= 0) {
+        out[0] = (tape_op){OP_CONST, root, k, 0};
+        *count = 1;
+        return;
+    }
+    int m = 0, last = -1;
+    for (int r = 0; r < n; ++r) {
+        uint a = (memo->acts[r >> 4] >> (2 * (r & 15))) & 3;
+        if (a == 0) continue;
+        tape_op o = t[r];
+        out[m++] = a == 1 ? o : (tape_op){OP_COPY, o.out, a == 2 ? o.a : o.b, 0};
+        last = o.out;
+    }
+    if (last != root) out[m++] = (tape_op){OP_COPY, root, root, 0};
+    int w;
+    TAPE_KEEP_LIVE_ROWS(out, m, root, w);
+    *first = w;
+    *count = m - w;
 }
 
 inline void tape_prune_write(__global const tape_op *t, int n, __global const quadric_rec *qs,
