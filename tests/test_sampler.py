@@ -299,6 +299,29 @@ def test_overrun_inside_a_chain_gives_identical_results(cl_context):
     assert_same_samples(big, small)
 
 
+def test_launches_capped_below_a_second_build_lose_nothing(cl_context, monkeypatch):
+    """A launch has at most LAUNCH_GROUPS work-groups, which loop over the level's cells (PoCL
+    builds a second variant of a kernel for 65,536 work-items or more): capped at two
+    work-groups, every level still classifies all its cells and the samples are the same."""
+    from clcsg.sampling import sampler as S
+
+    shape, r = SCENES["drilled_block"]
+    full = sample(shape, r, device=cl_context)
+    assert S.LAUNCH_GROUPS * S.WORK_GROUP < 1 << 16
+    sizes = []
+    launch = S.launch
+
+    def recorded(knl, queue, global_size, local_size, *args):
+        sizes.append(global_size[0])
+        return launch(knl, queue, global_size, local_size, *args)
+
+    monkeypatch.setattr(S, "launch", recorded)
+    monkeypatch.setattr(S, "LAUNCH_GROUPS", 2)
+    capped = sample(shape, r, device=cl_context)
+    assert max(sizes) == 2 * S.WORK_GROUP and max(full.stats["cells_per_level"]) > 2 * S.WORK_GROUP
+    assert_same_samples(full, capped)
+
+
 def _points_near(s, i, rng, n=24):
     """Points on sample i's quadric inside its splat ball (projected along the normal)."""
     Kq = clcsg.Quadric(s.tape.quadrics[s.quadrics[i]])

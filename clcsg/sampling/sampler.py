@@ -613,6 +613,10 @@ CHAIN_ARENA_ROWS = 1 << 18
 #: device, so it is launched for as many as it could have (up to this), and the work-groups
 #: loop over them
 CHAIN_GROUPS_PER_CU = 8
+#: work-groups of a launch at most (they loop over the level's cells): PoCL builds a second
+#: variant of a kernel the first time a launch has 65,536 work-items or more (0.75 s of the
+#: classify kernel's build, once per register count, in the middle of a run with a cold cache)
+LAUNCH_GROUPS = 1023
 #: entries of the device's clip program table (``clip_table.h``): one per this many expected
 #: samples, a power of two in [CLIP_TABLE_MIN, CLIP_TABLE_MAX] (the sponge at 0.1%: 3.06M
 #: samples, about 17k distinct programs)
@@ -850,7 +854,8 @@ class _Subdivision:
             groups = -(-most // WORK_GROUP)
             if row > 1:
                 groups = min(groups, max(self.max_groups, -(-n_in // WORK_GROUP)))
-            launch(kernel, self.ctx.queue, (max(1, groups) * WORK_GROUP,), (WORK_GROUP,),
+            groups = max(1, min(groups, LAUNCH_GROUPS))
+            launch(kernel, self.ctx.queue, (groups * WORK_GROUP,), (WORK_GROUP,),
                    self.scene.quadrics, self.frames, self.tasks, src.cells, np.uint32(src.cap_cells), out.cells,
                    np.uint32(out.cap_cells),
                    *self.samples.args(), src.arena, np.uint32(src.cap_arena), out.arena, np.uint32(out.cap_arena),
