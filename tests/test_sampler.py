@@ -311,9 +311,9 @@ def test_launches_capped_below_a_second_build_lose_nothing(cl_context, monkeypat
     sizes = []
     launch = S.launch
 
-    def recorded(knl, queue, global_size, local_size, *args):
+    def recorded(knl, queue, global_size, local_size, *args, **options):
         sizes.append(global_size[0])
-        return launch(knl, queue, global_size, local_size, *args)
+        return launch(knl, queue, global_size, local_size, *args, **options)
 
     monkeypatch.setattr(S, "launch", recorded)
     monkeypatch.setattr(S, "LAUNCH_GROUPS", 2)

@@ -284,7 +284,7 @@ def kernel(prg, name: str):
     return k[1]
 
 
-def launch(knl, queue, global_size, local_size, *args):
+def launch(knl, queue, global_size, local_size, *args, wait_for=None):
     """Enqueue ``knl`` on ``args`` (buffers and numpy scalars).  The scalars' dtypes are
     declared to pyopencl once per kernel and argument signature, so it packs them directly:
     undeclared, it tries a chain of casts on every argument of every launch, each failed one a
@@ -293,7 +293,7 @@ def launch(knl, queue, global_size, local_size, *args):
     if getattr(knl, "_clcsg_types", None) != types:
         knl.set_scalar_arg_dtypes([np.dtype(t) if issubclass(t, np.generic) else None for t in types])
         knl._clcsg_types = types
-    return knl(queue, global_size, local_size, *args)
+    return knl(queue, global_size, local_size, *args, wait_for=wait_for)
 
 
 def event_seconds(ev) -> float:
