@@ -964,17 +964,18 @@ class _Subdivision:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
             k = self._plan(n_in, n_samples, arena_bound, level)
             counters = self._chain(kernel, n_in, n_samples, k)
+            rows = counters.tolist()  # Python ints: a numpy scalar per counter read costs 10x more
             done = []
             for row in range(1, k + 1):
-                c = counters[row]
+                c = rows[row]
                 if self._overran(c, n_samples, n_in):
-                    self.skipped += int(counters[row + 1:, _SLOT["status"]].sum())
+                    self.skipped += sum(r[_SLOT["status"]] for r in rows[row + 1:])
                     self.table = self._zeroed_table(self.table)  # its entries may name rows run again
                     break
                 cells = n_in
                 n_in, n_samples = self._accept(level, c, n_in, n_samples)
                 done.append((level, cells, n_samples, n_in))
-                arena_bound = 2 * (2 * int(c[_SLOT["arena"]]) + n_in)
+                arena_bound = 2 * (2 * c[_SLOT["arena"]] + n_in)
                 level += 1
                 if n_in == 0 or level >= self.max_levels:
                     break
