@@ -5,11 +5,11 @@ and the level-3 Menger sponge at r = 1% of the bound's diagonal.
 
 Per row (one model, size and shape): samples, sampling time (the whole ``clcsg.sample`` call,
 compilation of the tape included; warm: one run at the large radius first builds the kernels
-for the tape's register count, then the least of up to ten runs), its process CPU time (all
-threads: core-seconds, which other processes on a shared machine do not inflate; the least
-of the same runs), the split
-into ``compile_s`` / ``subdivide_s`` / ``finish_s`` and the ``classify`` kernel's profiling time,
-distance queries, leaf distances per query, prune evaluations, cells decided by pruning alone,
+for the tape's register count, then the least of up to 30 runs, fewer once 8 s are spent),
+its process CPU time (all threads: core-seconds, which other processes on a shared machine do
+not inflate; the least of the same runs), the split into ``compile_s`` / ``subdivide_s`` /
+``finish_s`` and the ``classify`` kernel's profiling time, distance queries, leaf distances
+per query, prune evaluations, cells decided by pruning alone,
 unresolved cells (dropped at the floor), tape lengths per level (mean and max over the cells of
 a level; summarized as the mean over levels of the per-level mean, and the largest max), and
 the ratio to the paper: sampling time x compute units / the paper's single-core time (the
@@ -150,7 +150,7 @@ def run(quick=False, device=None):
     load = Load()
     warnings.simplefilter("ignore")
     sizes = {"medium": zoo.SIZES["medium"]} if quick else dict(zoo.SIZES)
-    repeats = 1 if quick else 10
+    repeats = 1 if quick else 30  # the least of 10 moved 20-30% between runs on the 2-core VM
     budget = 0.0 if quick else 8.0
     models, rows = [], []
     for m in zoo.MODELS:
