@@ -140,3 +140,11 @@ def test_tape_header_matches_reference(name, cl_context):
             if res[i, 0] and self_q >= 0:
                 assert np.all((a0 != a1) == (res[i, 0] < 0))
         assert same == m or real != np.float64
+        # the sampler's clip programs built in private memory from the count pass's record are
+        # the rows the written path gives
+        cl.Kernel(prg, "prune_private")(q, (m,), None, b.quadrics, b.tape, np.int32(n), np.int32(self_q),
+                                        upload(cl_context, regions), np.int32(m), bo, br)
+        both = np.zeros(m, dtype=np.int32)
+        cl.enqueue_copy(q, both, br)
+        assert np.all(both != 0), "a tape built from the count pass differs from the written one"
+        assert (both == 1).sum() >= m // 2
