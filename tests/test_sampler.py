@@ -322,6 +322,33 @@ def test_launches_capped_below_a_second_build_lose_nothing(cl_context, monkeypat
     assert_same_samples(full, capped)
 
 
+def test_a_kernel_is_launched_once_on_no_cells_before_its_first_level(cl_context, monkeypatch):
+    """PoCL builds or loads a kernel's code at its first launch in a process (up to 0.9 s on a
+    cold cache), which the ETA would take for the first level's cost: the first run of each
+    classify kernel launches it once on no cells and restarts the progress clock; later runs
+    do not, and the samples are the same."""
+    from clcsg.cl import programs
+    from clcsg.sampling import sampler as S
+
+    shape, r = SCENES["drilled_block"]
+    before = sample(shape, r, device=cl_context)
+    for _, knl in programs._kernels.values():
+        monkeypatch.delattr(knl, "_clcsg_launched", raising=False)
+    first = []
+    launch_once = S._Subdivision._first_launch
+
+    def recorded(self, kernel):
+        first.append(kernel)
+        return launch_once(self, kernel)
+
+    monkeypatch.setattr(S._Subdivision, "_first_launch", recorded)
+    again = sample(shape, r, device=cl_context)
+    twice = sample(shape, r, device=cl_context)
+    assert len(first) == 1 and first[0]._clcsg_launched
+    assert_same_samples(before, again)
+    assert_same_samples(before, twice)
+
+
 def _points_near(s, i, rng, n=24):
     """Points on sample i's quadric inside its splat ball (projected along the normal)."""
     Kq = clcsg.Quadric(s.tape.quadrics[s.quadrics[i]])

@@ -361,6 +361,10 @@ class _Progress:
         self.moved = False
         self.t0 = self.t_last = time.perf_counter()
 
+    def restart(self):
+        """Start the level loop's clock now (after one-off work the forecast must not see)."""
+        self.t0 = self.t_last = time.perf_counter()
+
     def chain(self, levels):
         """The levels of one chain, (level, cells, samples so far, children) each, done at
         once: the chain's seconds are shared among them by their work as the forecast costs
@@ -875,6 +879,27 @@ class _Subdivision:
         cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
         return counters
 
+    def _first_launch(self, kernel):
+        """Launch ``kernel`` once on no cells and wait, then restart the progress clock: PoCL
+        builds (or loads from its cache) the kernel's code at its first launch in a process,
+        up to 0.9 s on a cold cache, which the forecast would take for the first level's cost
+        per cell (the ETA 10^4x off on the first run after an install)."""
+        import pyopencl as cl
+
+        counters = np.zeros((2, len(SAMPLER_COUNTERS)), dtype=np.uint32)
+        counters_buf = upload(self.ctx, counters, writable=True)
+        src, out = self.src, self.out
+        launch(kernel, self.ctx.queue, (WORK_GROUP,), (WORK_GROUP,),
+               self.scene.quadrics, self.frames, self.tasks, src.cells, np.uint32(src.cap_cells), out.cells,
+               np.uint32(out.cap_cells),
+               *self.samples.args(), src.arena, np.uint32(src.cap_arena), out.arena, np.uint32(out.cap_arena),
+               counters_buf, np.int32(1), self.real.type(self.radius), self.real.type(self.floor), self.clip,
+               np.uint32(self.cap_clip), self.table, np.uint32(self.table_entries - 1), np.uint32(0),
+               *self.scene.colour_args())
+        cl.enqueue_copy(self.ctx.queue, counters, counters_buf)
+        kernel._clcsg_launched = True
+        self.progress.restart()
+
     def _overran(self, c, n_samples, n_in) -> bool:
         """Grow every buffer a level's counters ``c`` show it overran (keeping what the levels
         before wrote: ``n_samples`` samples, ``self.clip_used`` clip rows); True if any was.
@@ -958,6 +983,8 @@ class _Subdivision:
 
         arena_bound = self._start()
         kernel = program_kernel(self.prg, "classify")
+        if not getattr(kernel, "_clcsg_launched", False):
+            self._first_launch(kernel)
         n_in, n_samples, level = len(self.roots), 0, 0
         while n_in > 0:
             if level >= self.max_levels:
