@@ -15,15 +15,22 @@ __kernel void eval(__global const quadric_rec *qs, __global const tape_op *tape,
     bits[i] = tape_member(tape, n, qs, p, self_q);
 }
 
-/* region i: 13 reals (center, three half-axes, rho); output rows [i * (n + 1), (i + 1) * (n + 1)) */
+/* region i: 13 reals (center, three half-axes, rho) */
+inline prune_region check_region(__global const real *regions, int i)
+{
+    __global const real *r = regions + 13 * i;
+    prune_region g = {(real3)(r[0], r[1], r[2]), (real3)(r[3], r[4], r[5]), (real3)(r[6], r[7], r[8]),
+                      (real3)(r[9], r[10], r[11]), r[12]};
+    return g;
+}
+
+/* output rows [i * (n + 1), (i + 1) * (n + 1)) for region i (check_region) */
 __kernel void prune(__global const quadric_rec *qs, __global const tape_op *tape, int n, int self_q,
                     __global const real *regions, int m, __global tape_op *out, __global int *res)
 {
     int i = get_global_id(0);
     if (i >= m) return;
-    __global const real *r = regions + 13 * i;
-    prune_region g = {(real3)(r[0], r[1], r[2]), (real3)(r[3], r[4], r[5]), (real3)(r[6], r[7], r[8]),
-                      (real3)(r[9], r[10], r[11]), r[12]};
+    prune_region g = check_region(regions, i);
     uint evals = 0;
     int first, count;
     int decided_only = tape_prune(tape, n, qs, &g, self_q, 0, &first, &count, &evals);
@@ -43,9 +50,7 @@ __kernel void prune_private(__global const quadric_rec *qs, __global const tape_
 {
     int i = get_global_id(0);
     if (i >= m) return;
-    __global const real *r = regions + 13 * i;
-    prune_region g = {(real3)(r[0], r[1], r[2]), (real3)(r[3], r[4], r[5]), (real3)(r[6], r[7], r[8]),
-                      (real3)(r[9], r[10], r[11]), r[12]};
+    prune_region g = check_region(regions, i);
     uint evals = 0;
     uchar state;
     prune_memo memo;
