@@ -18,7 +18,7 @@
 #endif
 
 /* exact range of lam z^2 + 2 beta z over [a, b] */
-inline real2 quad_range(real lam, real beta, real a, real b)
+__attribute__((always_inline)) inline real2 quad_range(real lam, real beta, real a, real b)
 {
     real fa = lam * a * a + 2 * beta * a;
     real fb = lam * b * b + 2 * beta * b;
@@ -35,7 +35,7 @@ inline real2 quad_range(real lam, real beta, real a, real b)
 }
 
 /* range of |lam z + beta| over [a, b] */
-inline real2 abs_linear_range(real lam, real beta, real a, real b)
+__attribute__((always_inline)) inline real2 abs_linear_range(real lam, real beta, real a, real b)
 {
     real fa = lam * a + beta, fb = lam * b + beta;
     real hi = fmax(fabs(fa), fabs(fb));
@@ -51,7 +51,7 @@ typedef struct {
     int sheet;
 } plane_frame;
 
-inline plane_frame plane_load(__global const frame_rec *f, int k, int sheet)
+__attribute__((always_inline)) inline plane_frame plane_load(__global const frame_rec *f, int k, int sheet)
 {
     plane_frame pf;
     for (int m = 0; m < 9; ++m) pf.U[m] = f->U[m];
@@ -71,13 +71,13 @@ inline plane_frame plane_load(__global const frame_rec *f, int k, int sheet)
 }
 
 /* R(x, y) = lam_i x^2 + 2 beta_i x + lam_j y^2 + 2 beta_j y + gamma */
-inline real plane_R(const plane_frame *pf, real x, real y)
+__attribute__((always_inline)) inline real plane_R(const plane_frame *pf, real x, real y)
 {
     return pf->li * x * x + 2 * pf->bi * x + pf->lj * y * y + 2 * pf->bj * y + pf->gamma;
 }
 
 /* Height t of the heightfield at (x, y); false where it is undefined. */
-inline bool plane_height(const plane_frame *pf, real x, real y, real *t)
+__attribute__((always_inline)) inline bool plane_height(const plane_frame *pf, real x, real y, real *t)
 {
     real R = plane_R(pf, x, y);
     if (pf->lk != 0) {
@@ -91,7 +91,7 @@ inline bool plane_height(const plane_frame *pf, real x, real y, real *t)
 }
 
 /* Height where the heightfield is known to be defined (rounding may make H slightly < 0). */
-inline real plane_height_clamped(const plane_frame *pf, real x, real y)
+__attribute__((always_inline)) inline real plane_height_clamped(const plane_frame *pf, real x, real y)
 {
     real R = plane_R(pf, x, y);
     if (pf->lk != 0) return pf->sheet * sqrt(fmax(-R / pf->lk, (real)0));
@@ -106,7 +106,7 @@ typedef struct {
     real2 R, ni, nj, nk;
 } rect_bounds;
 
-inline rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
+__attribute__((always_inline)) inline rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
     rect_bounds b;
     real2 Px = quad_range(pf->li, pf->bi, x0, x1);
@@ -127,7 +127,7 @@ inline rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real 
  * quad_range or rect_bounds_of); false where the heightfield is defined nowhere on it, and
  * *whole: defined everywhere on it.  Two sheets: lam_k t^2 = -R, so t^2 lies in the range of
  * -R / lam_k cut at 0; one sheet: t = -R / (2 beta_k). */
-inline bool rect_heights(const plane_frame *pf, real2 R, real2 *t, bool *whole)
+__attribute__((always_inline)) inline bool rect_heights(const plane_frame *pf, real2 R, real2 *t, bool *whole)
 {
     *whole = true;
     if (pf->lk != 0) {
@@ -145,15 +145,15 @@ inline bool rect_heights(const plane_frame *pf, real2 R, real2 *t, bool *whole)
 
 /* Can plane k own a point of the rectangle?  (no: an in-plane normal component exceeds |n_k|
  * everywhere there) */
-inline bool rect_may_be_owned(rect_bounds b) { return !(b.ni.x > b.nk.y || b.nj.x > b.nk.y); }
+__attribute__((always_inline)) inline bool rect_may_be_owned(rect_bounds b) { return !(b.ni.x > b.nk.y || b.nj.x > b.nk.y); }
 
-inline bool sub_rect_owned(const plane_frame *pf, real x0, real x1, real y0, real y1)
+__attribute__((always_inline)) inline bool sub_rect_owned(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
     return rect_may_be_owned(rect_bounds_of(pf, x0, x1, y0, y1));
 }
 
 /* device coordinates of local (x, y, t) */
-inline real3 plane_point(const plane_frame *pf, real x, real y, real t)
+__attribute__((always_inline)) inline real3 plane_point(const plane_frame *pf, real x, real y, real t)
 {
     /* z[i] = x, z[j] = y, z[k] = t with (i, j) = (1, 2), (0, 2), (0, 1) for k = 0, 1, 2 */
     real z[3] = {pf->k == 0 ? t : x, pf->k == 0 ? x : pf->k == 1 ? t : y, pf->k == 2 ? t : y};
@@ -163,11 +163,11 @@ inline real3 plane_point(const plane_frame *pf, real x, real y, real t)
 }
 
 /* column m of U (unit principal axis u_m) */
-inline real3 plane_axis(const plane_frame *pf, int m) { return (real3)(pf->U[m], pf->U[3 + m], pf->U[6 + m]); }
+__attribute__((always_inline)) inline real3 plane_axis(const plane_frame *pf, int m) { return (real3)(pf->U[m], pf->U[3 + m], pf->U[6 + m]); }
 
 /* Distortion bounds over a rectangle: (delta_hi, delta_lo) with delta_hi = inf where the
  * heightfield may be vertical; also whether plane k may own a point of it. */
-inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, real y1, bool *owned)
+__attribute__((always_inline)) inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, real y1, bool *owned)
 {
     rect_bounds b = rect_bounds_of(pf, x0, x1, y0, y1);
     *owned = rect_may_be_owned(b);
@@ -182,7 +182,7 @@ inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, r
 
 /* Slope bounds of the heightfield over a rectangle: (max |dt/dx|, max |dt/dy|) =
  * (max |n_i|, max |n_j|) / min |n_k|, and min |n_k| itself. */
-inline real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real y1)
+__attribute__((always_inline)) inline real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
     rect_bounds b = rect_bounds_of(pf, x0, x1, y0, y1);
     real mx = b.ni.y / b.nk.x, my = b.nj.y / b.nk.x;
@@ -196,7 +196,7 @@ inline real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real 
 }
 
 /* Largest half-width a with a^2 + b^2 + (mx a + my b)^2 <= r^2 (0 if none). */
-inline real half_width(real mx, real my, real b, real r)
+__attribute__((always_inline)) inline real half_width(real mx, real my, real b, real r)
 {
     real A = 1 + mx * mx, B = mx * my * b, C = b * b * (1 + my * my) - r * r;
     real disc = B * B - A * C;
