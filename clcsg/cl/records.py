@@ -39,7 +39,8 @@ def sample_dtype(real) -> np.dtype:
 
 def frame_dtype(real) -> np.dtype:
     return np.dtype(
-        [("U", real, 9), ("center", real, 3), ("lam", real, 3), ("beta", real, 3), ("gamma", real)], align=True
+        [("U", real, 9), ("center", real, 3), ("lam", real, 3), ("beta", real, 3), ("gamma", real),
+         ("height_factor", real, 3), ("vertex", real, 3), ("vertex_value", real, 3)], align=True
     )
 
 

@@ -41,7 +41,8 @@ inline sample_src chunk_source(const plane_frame *pf, real xa, real xb, real y, 
                                sample_sink *out)
 {
     if (src.sides & SIDES_KNOWN) return src;
-    real2 Px = quad_range(pf->li, pf->bi, xa, xb), Sy = quad_range(pf->lj, pf->bj, y, yb);
+    real2 Px = quad_range(pf->li, pf->bi, pf->vi, pf->fvi, xa, xb);
+    real2 Sy = quad_range(pf->lj, pf->bj, pf->vj, pf->fvj, y, yb);
     real2 t;
     bool whole;
     if (!rect_heights(pf, (real2)(Px.x + Sy.x + pf->gamma, Px.y + Sy.y + pf->gamma), &t, &whole)) return src;

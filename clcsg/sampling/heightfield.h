@@ -17,19 +17,15 @@
 #define WORST_CASE_DISTORTION 0
 #endif
 
-/* exact range of lam z^2 + 2 beta z over [a, b] */
-__attribute__((always_inline)) inline real2 quad_range(real lam, real beta, real a, real b)
+/* exact range of lam z^2 + 2 beta z over [a, b], whose extremum (lam != 0) is fv at z = v */
+__attribute__((always_inline)) inline real2 quad_range(real lam, real beta, real v, real fv, real a, real b)
 {
     real fa = lam * a * a + 2 * beta * a;
     real fb = lam * b * b + 2 * beta * b;
     real lo = fmin(fa, fb), hi = fmax(fa, fb);
-    if (lam != 0) {
-        real v = -beta / lam;
-        if (v > a && v < b) {
-            real fv = lam * v * v + 2 * beta * v;
-            lo = fmin(lo, fv);
-            hi = fmax(hi, fv);
-        }
+    if (lam != 0 && v > a && v < b) {
+        lo = fmin(lo, fv);
+        hi = fmax(hi, fv);
     }
     return (real2)(lo, hi);
 }
@@ -43,10 +39,13 @@ __attribute__((always_inline)) inline real2 abs_linear_range(real lam, real beta
     return (real2)(lo, hi);
 }
 
+/* A quadric's frame as plane k sees it: ik the height factor of axis k (t^2 = R ik on two
+ * sheets, t = R ik on one), (vi, fvi) and (vj, fvj) the vertices of axes i and j (frame_rec). */
 typedef struct {
     real U[9];
     real3 center;
     real li, lj, lk, bi, bj, bk, gamma;
+    real ik, vi, fvi, vj, fvj;
     int i, j, k;
     int sheet;
 } plane_frame;
@@ -66,6 +65,11 @@ __attribute__((always_inline)) inline plane_frame plane_load(__global const fram
     pf.bj = f->beta[pf.j];
     pf.bk = f->beta[pf.k];
     pf.gamma = f->gamma;
+    pf.ik = f->height_factor[pf.k];
+    pf.vi = f->vertex[pf.i];
+    pf.fvi = f->vertex_value[pf.i];
+    pf.vj = f->vertex[pf.j];
+    pf.fvj = f->vertex_value[pf.j];
     pf.sheet = sheet;
     return pf;
 }
@@ -81,11 +85,11 @@ __attribute__((always_inline)) inline bool plane_height(const plane_frame *pf, r
 {
     real R = plane_R(pf, x, y);
     if (pf->lk != 0) {
-        real H = -R / pf->lk;
+        real H = R * pf->ik;
         if (H < 0) return false;
         *t = pf->sheet * sqrt(H);
     } else {
-        *t = -R / (2 * pf->bk);
+        *t = R * pf->ik;
     }
     return true;
 }
@@ -94,8 +98,8 @@ __attribute__((always_inline)) inline bool plane_height(const plane_frame *pf, r
 __attribute__((always_inline)) inline real plane_height_clamped(const plane_frame *pf, real x, real y)
 {
     real R = plane_R(pf, x, y);
-    if (pf->lk != 0) return pf->sheet * sqrt(fmax(-R / pf->lk, (real)0));
-    return -R / (2 * pf->bk);
+    if (pf->lk != 0) return pf->sheet * sqrt(fmax(R * pf->ik, (real)0));
+    return R * pf->ik;
 }
 
 /* Exact ranges over a rectangle [x0,x1] x [y0,y1] of a plane: R is
@@ -109,8 +113,8 @@ typedef struct {
 __attribute__((always_inline)) inline rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
     rect_bounds b;
-    real2 Px = quad_range(pf->li, pf->bi, x0, x1);
-    real2 Sy = quad_range(pf->lj, pf->bj, y0, y1);
+    real2 Px = quad_range(pf->li, pf->bi, pf->vi, pf->fvi, x0, x1);
+    real2 Sy = quad_range(pf->lj, pf->bj, pf->vj, pf->fvj, y0, y1);
     b.R = (real2)(Px.x + Sy.x + pf->gamma, Px.y + Sy.y + pf->gamma);
     b.ni = abs_linear_range(pf->li, pf->bi, x0, x1);
     b.nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
@@ -131,14 +135,15 @@ __attribute__((always_inline)) inline bool rect_heights(const plane_frame *pf, r
 {
     *whole = true;
     if (pf->lk != 0) {
-        real Hlo = -(pf->lk > 0 ? R.y : R.x) / pf->lk;
-        real Hhi = -(pf->lk > 0 ? R.x : R.y) / pf->lk;
+        real Hlo = (pf->lk > 0 ? R.y : R.x) * pf->ik;
+        real Hhi = (pf->lk > 0 ? R.x : R.y) * pf->ik;
         if (Hhi < 0) return false;
         *whole = Hlo >= 0;
         real a = sqrt(fmax(Hlo, (real)0)), b = sqrt(Hhi);
         *t = pf->sheet > 0 ? (real2)(a, b) : (real2)(-b, -a);
     } else {
-        *t = (real2)(fmin(-R.y / (2 * pf->bk), -R.x / (2 * pf->bk)), fmax(-R.y / (2 * pf->bk), -R.x / (2 * pf->bk)));
+        real a = R.x * pf->ik, b = R.y * pf->ik;
+        *t = (real2)(fmin(a, b), fmax(a, b));
     }
     return true;
 }

@@ -78,15 +78,12 @@ typedef struct {
 /* Slope interval of the heightfield along one in-plane axis over [a, b]: from R + lam_k t^2 = 0
  * (two sheets) dt/dx = -(lam x + beta) / (lam_k t), t in [t_lo, t_hi] of one sign; from
  * R + 2 beta_k t = 0 (one sheet) dt/dx = -(lam x + beta) / beta_k.  lam x + beta is linear, so
- * its range is its values at a and b. */
-__attribute__((always_inline)) inline real2 slope_range(const cell_geom *g, real lam, real beta, real a, real b)
+ * its range is its values at a and b; `inv` is the range of 1 / (lam_k t) (or 1 / beta_k),
+ * which both axes share. */
+__attribute__((always_inline)) inline real2 slope_range(real2 inv, real lam, real beta, real a, real b)
 {
     real u = lam * a + beta, v = lam * b + beta;
-    real2 num = (real2)(-fmax(u, v), -fmin(u, v));
-    const plane_frame *pf = &g->pf;
-    if (pf->lk == 0) return interval_mul(num, (real2)(1 / pf->bk, 1 / pf->bk));
-    real d0 = pf->lk * g->t_lo, d1 = pf->lk * g->t_hi;
-    return interval_mul(num, (real2)(1 / fmax(d0, d1), 1 / fmin(d0, d1)));
+    return interval_mul((real2)(-fmax(u, v), -fmin(u, v)), inv);
 }
 
 /* Where the heightfield is defined with a finite slope over the whole cell, give the prune
@@ -103,8 +100,15 @@ __attribute__((always_inline)) inline void patch_on_surface(const cell_geom *g, 
     r->uk = plane_axis(&g->pf, g->pf.k);
     r->hx = 0.5 * g->wx;
     r->hy = 0.5 * g->wy;
-    r->sx = slope_range(g, g->pf.li, g->pf.bi, c.x0, c.x1);
-    r->sy = slope_range(g, g->pf.lj, g->pf.bj, c.y0, c.y1);
+    real2 inv;
+    if (g->pf.lk == 0) {
+        inv = (real2)(1 / g->pf.bk, 1 / g->pf.bk);
+    } else {
+        real d0 = g->pf.lk * g->t_lo, d1 = g->pf.lk * g->t_hi;
+        inv = (real2)(1 / fmax(d0, d1), 1 / fmin(d0, d1));
+    }
+    r->sx = slope_range(inv, g->pf.li, g->pf.bi, c.x0, c.x1);
+    r->sy = slope_range(inv, g->pf.lj, g->pf.bj, c.y0, c.y1);
 }
 
 /* Fill g from the interval bounds over the cell; false: the cell holds no point of the task
@@ -131,8 +135,11 @@ __attribute__((always_inline)) inline bool cell_geometry(const task_rec *t, __gl
     g->et = g->t_hi - g->t_lo;
     g->diag = sqrt(g->wx * g->wx + g->wy * g->wy);
     g->enough = g->delta * g->diag;
-    real s_fill = sqrt((real)2) * radius / g->delta;
-    g->fill_fits = g->whole_domain && isfinite(g->delta) && (g->wx / s_fill + 1) * (g->wy / s_fill + 1) <= MAX_FILL;
+    /* (wx / s + 1) (wy / s + 1) <= MAX_FILL for the grid spacing s = sqrt 2 r / delta of fill_cell,
+     * multiplied out by s delta */
+    real s0 = sqrt((real)2) * radius;
+    g->fill_fits = g->whole_domain && isfinite(g->delta)
+                && (g->wx * g->delta + s0) * (g->wy * g->delta + s0) <= MAX_FILL * s0 * s0;
     return true;
 }
 
@@ -189,20 +196,21 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
     real cx[4] = {c.x0, c.x1, c.x0, c.x1};
     real cy[4] = {c.y0, c.y0, c.y1, c.y1};
     int best = -1;
-    real best_r = INFINITY, best_h = 0;
+    real best_r = INFINITY, best_h = 0; /* squared, then the radius */
     for (int m = 0; m < 4; ++m) {
         if (!(d[m] < 0)) continue;
         real h = plane_height_clamped(&g->pf, cx[m], cy[m]);
         real fx = fmax(cx[m] - c.x0, c.x1 - cx[m]);
         real fy = fmax(cy[m] - c.y0, c.y1 - cy[m]);
         real ft = fmax(h - g->t_lo, g->t_hi - h);
-        real r = sqrt(fx * fx + fy * fy + ft * ft);
-        if (r < best_r) {
-            best_r = r;
+        real r2 = fx * fx + fy * fy + ft * ft;
+        if (r2 < best_r) {
+            best_r = r2;
             best = m;
             best_h = h;
         }
     }
+    best_r = sqrt(best_r);
     if (best >= 0 && best_r <= radius) {
         emit_sample(out, sink_slots(out, 1), plane_point(&g->pf, cx[best], cy[best], best_h),
                     fmax(best_r, radius * (real)1e-3), src);

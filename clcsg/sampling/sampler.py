@@ -115,7 +115,9 @@ _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
 
 
 def frame_records(frames, real) -> np.ndarray:
-    """Principal frames as ``frame_rec`` records (``cl/include/layout.h``)."""
+    """Principal frames as ``frame_rec`` records (``cl/include/layout.h``), with the per-axis
+    quotients the kernels would otherwise divide out per cell: the height factor (-1 / lam,
+    or -1 / (2 beta) where lam = 0), the vertex -beta / lam of lam z^2 + 2 beta z and its value."""
     rec = np.zeros(len(frames), dtype=frame_dtype(real))
     for i, f in enumerate(frames):
         rec["U"][i] = f.U.reshape(9)
@@ -123,6 +125,17 @@ def frame_records(frames, real) -> np.ndarray:
         rec["lam"][i] = f.lam
         rec["beta"][i] = f.beta
         rec["gamma"][i] = f.gamma
+    lam, beta = rec["lam"].astype(np.float64), rec["beta"].astype(np.float64)
+    curved, sloped = lam != 0, beta != 0
+    factor = np.zeros_like(lam)
+    factor[curved] = -1.0 / lam[curved]
+    flat = ~curved & sloped
+    factor[flat] = -1.0 / (2.0 * beta[flat])
+    vertex = np.zeros_like(lam)
+    vertex[curved] = -beta[curved] / lam[curved]
+    rec["height_factor"] = factor
+    rec["vertex"] = vertex
+    rec["vertex_value"] = lam * vertex * vertex + 2.0 * beta * vertex
     return rec
 
 

@@ -91,13 +91,20 @@ typedef struct {
 
 /* Principal frame of a quadric (clcsg/compile/frames.py): x = center + U z and
  * Q = sum_m (lam_m z_m^2 + 2 beta_m z_m) + gamma.  U is row-major: U[3 * r + c], column c is
- * the principal axis u_c. */
+ * the principal axis u_c.  Per axis m, divisions the sampler's cells would repeat
+ * (sampling/heightfield.h): height_factor[m] = -1 / lam_m (the heightfield of plane m has
+ * t^2 = R height_factor), or -1 / (2 beta_m) where lam_m = 0 (t = R height_factor), 0 if both
+ * are 0; vertex[m] = -beta_m / lam_m, where lam_m z^2 + 2 beta_m z has its extremum, and
+ * vertex_value[m] that extremum (0, 0 where lam_m = 0). */
 typedef struct {
     real U[9];
     real center[3];
     real lam[3];
     real beta[3];
     real gamma;
+    real height_factor[3];
+    real vertex[3];
+    real vertex_value[3];
 } frame_rec;
 
 /* One root of the subdivision: quadric `quadric` sampled from plane `plane` (normal u_plane) on
