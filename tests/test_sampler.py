@@ -466,15 +466,17 @@ def test_float32_path_keeps_the_guarantees(name, cl_context, monkeypatch):
     assert s.packed.real == np.float32
 
 
+@pytest.mark.parametrize("few", [False, True])
 @pytest.mark.parametrize("collide", [False, True])
 @pytest.mark.parametrize("seed", range(4))
-def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed, collide, monkeypatch):
+def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed, collide, few, monkeypatch):
     """Random clip programs (lengths 0-5, drawn from few distinct rows so many repeat): each
     sample reads back its own rows, each distinct program is stored once, empty ones point at 0;
-    also when every program gets the same key."""
+    also when every program gets the same key, and merged by their bytes (few programs)."""
     from clcsg.sampling import sampler
     from clcsg.sampling.sampler import dedupe_programs
 
+    monkeypatch.setattr(sampler, "FEW_PROGRAMS", 10**6 if few else 0)
     if collide:  # every program one key: the row checks must catch it and group by bytes
         monkeypatch.setattr(sampler, "program_keys", lambda words: np.zeros(len(words), dtype=np.uint64))
         monkeypatch.setattr(sampler, "program_keys_flat",
@@ -496,12 +498,16 @@ def test_dedupe_programs_keeps_every_program_and_stores_each_once(seed, collide,
     assert stored == distinct and len(r2) == sum(len(p) for p in distinct)
 
 
-def test_dedupe_programs_merges_the_programs_samples_share():
+@pytest.mark.parametrize("few", [False, True])
+def test_dedupe_programs_merges_the_programs_samples_share(few, monkeypatch):
     """Samples that share a program (the device gives a repeated program the rows of its first
     copy) share its first row, and rows no sample names (given back, or an extra copy) lie
     between programs: each sample reads back its own rows, each distinct program is stored
-    once, and nothing else is kept."""
+    once, and nothing else is kept (merged by keys, or by bytes where the programs are few)."""
+    from clcsg.sampling import sampler
     from clcsg.sampling.sampler import dedupe_programs
+
+    monkeypatch.setattr(sampler, "FEW_PROGRAMS", 10**6 if few else 0)
 
     rng = np.random.default_rng(7)
     programs = [rng.integers(0, 2, (int(rng.integers(1, 6)), 4)) for _ in range(40)]
