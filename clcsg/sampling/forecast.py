@@ -247,15 +247,18 @@ class Forecast:
         peaks, areas = self.roots
         whole = np.floor(peaks)
         alive = (whole <= top + len(PAST_PEAK)) & (peaks >= len(self.cells) - len(PAST_PEAK))
-        if not alive.any() or areas[alive].sum() <= 0:
+        alive_area = float(areas[alive].sum()) if alive.any() else 0.0
+        if not alive_area > 0:
             return out
-        density = most / float(areas[alive].sum())
         for p in np.unique(whole[whole > top + len(PAST_PEAK)]).astype(int).tolist():
-            n = density * float(areas[whole == p].sum())
+            share = float(areas[whole == p].sum()) / alive_area
+            if not math.isfinite(most * share):  # areas too small to compare (a degenerate scene)
+                continue
+            n = most * share
             for lv in range(min(p, self.last), -1, -1):  # into the peak
                 out[lv] += n
                 n /= GROWTH_QUAD if lv <= self.quad else GROWTH_PAIR
-            n = density * float(areas[whole == p].sum())
+            n = most * share
             for lv in range(p + 1, self.last + 1):  # after it
                 k = lv - p
                 n *= (PAST_PEAK[k] if k < len(PAST_PEAK) else COLLAPSE_ONSET if k == len(PAST_PEAK)
