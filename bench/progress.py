@@ -195,8 +195,9 @@ def record_histories(path: str, runs=RUNS) -> list:
 def replay_history(run: dict, min_left: float = 0.1) -> dict:
     """Feed a recorded run (:func:`record_histories`) to a fresh
     :class:`~clcsg.sampling.forecast.Forecast` chain by chain, the chain's seconds shared by
-    its levels' work as the sampler shares them, and judge the seconds left forecast after
-    each chain over the second half of the run (:func:`judge`, with ``min_left`` of the run's
+    its levels' work as the sampler shares them, and judge the ETA it shows after each chain
+    (the seconds left forecast, or none while it extrapolates too far: ``Forecast.eta``) over
+    the second half of the run (:func:`judge`, with ``min_left`` of the run's
     seconds as the least left), and the fraction elapsed / (elapsed + forecast) held at its
     largest as the bar shows it (``final_fraction``: the last one's)."""
     from clcsg.sampling.forecast import Forecast
@@ -208,7 +209,7 @@ def replay_history(run: dict, min_left: float = 0.1) -> dict:
         t_last = t
         left = fc.seconds_left(levels[-1][3])
         shown = 1.0 if not levels[-1][3] else max(shown, min(t / (t + left), 0.999) if t + left > 0 else 0.0)
-        points.append((t, left, shown))
+        points.append((t, fc.eta(levels[-1][3], left), shown))
     out = judge(points, points[-1][0], min_left * points[-1][0])
     out["final_fraction"] = points[-1][2]
     return out

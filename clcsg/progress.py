@@ -7,7 +7,8 @@ A :class:`Reporter` shows the steps of a run one after the other: ``with rep.ste
           :data:`DELAY` (0.5 s; ``CLCSG_PROGRESS_DELAY`` overrides it), cleared when it ends;
 ``json``  one JSON object per line on stderr for every start, progress, end, warning, error
           and the summary (``{"event": "progress", "step": "sample", "done": 1200, "total":
-          5000, "unit": "cells", "elapsed": 0.8, "eta": 2.6, ...}``);
+          5000, "unit": "cells", "elapsed": 0.8, "eta": 2.6, ...}``; ``"eta": null`` while
+          the seconds left are not known);
 ``none``  nothing;
 ``auto``  ``bar`` when stderr is a terminal, else ``none`` (pipes and files stay clean).
 
@@ -91,7 +92,7 @@ class Step:
         else at the average rate of the current phase (None if unknown)."""
         if self.forecast is not None:
             left, t = self.forecast
-            return max(0.0, left - (time.perf_counter() - t))
+            return None if math.isnan(left) else max(0.0, left - (time.perf_counter() - t))
         if not self.total or self.done <= 0:
             return None
         dt = time.perf_counter() - self.t_phase
@@ -103,7 +104,7 @@ class Step:
         ETA count from now; or from ``phase``, a ``time.perf_counter()`` time it started);
         ``forecast``: the seconds left as the caller knows them, the ETA from now on (counting
         down) in place of the one from the rate, which a bar whose total is not the work left
-        cannot give; ``info``: extra fields for JSON, shown after the bar unless a
+        cannot give (NaN: not known yet, no ETA is shown); ``info``: extra fields for JSON, shown after the bar unless a
         ``note`` (text) is given for the bar.  JSON progress lines come at most every
         :data:`JSON_INTERVAL` seconds, unless ``always``."""
         if self.closed:
@@ -232,7 +233,8 @@ class Reporter:
                    if st.total else "{desc}: {n_fmt} {unit} [{elapsed}{postfix}]" if counted
                    else "{desc} [{elapsed}{postfix}]")
             # the caller's forecast in place of tqdm's ETA from the rate (Step.update)
-            shown = fmt.replace("{remaining}", tqdm.format_interval(st.eta())) if st.forecast is not None else fmt
+            eta = st.eta()
+            shown = fmt if st.forecast is None else fmt.replace("{remaining}", "?" if eta is None else tqdm.format_interval(eta))
             bar = st.bar
             if bar is None or st.bar_kind != fmt:
                 if bar is not None:

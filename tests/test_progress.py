@@ -187,6 +187,25 @@ def test_a_forecast_is_the_eta_whatever_the_rate():
         assert "<09:5" in tty.getvalue() or "<10:00" in tty.getvalue(), tty.getvalue()
 
 
+def test_an_unknown_forecast_shows_no_eta():
+    """``forecast=nan``: the ETA is not known; JSON gives null and the bar a question mark, not
+    the rate so far times the count left."""
+    buf = io.StringIO()
+    rep = Reporter("json", stream=buf)
+    with rep.step("sample", "sampling") as st:
+        st.update(done=10, total=100, forecast=math.nan, always=True)
+        assert st.eta() is None
+        st.update(done=20, total=100, forecast=5.0, always=True)
+        assert 4.0 < st.eta() <= 5.0
+    progress = [json.loads(line) for line in buf.getvalue().splitlines() if '"progress"' in line]
+    assert progress[0]["eta"] is None and 4.0 < progress[1]["eta"] <= 5.0
+    tty = Tty()
+    rep = Reporter("bar", stream=tty, delay=0.0)
+    with rep.step("sample", "sampling", unit="cells") as st:
+        st.update(done=10, total=100, forecast=math.nan)
+        assert "<?" in tty.getvalue(), tty.getvalue()
+
+
 def test_json_reporter_events():
     buf = io.StringIO()
     rep = Reporter("json", stream=buf)
@@ -274,6 +293,30 @@ def test_the_forecast_on_recorded_level_histories(run):
     judged = replay_history(run)
     assert judged["monotone"] and judged["final_fraction"] == 1.0 and judged["judged"] >= 1, judged
     assert judged["worst"] <= 2.0 and 0.5 <= judged["median_ratio"] <= 2.0, judged
+
+
+@pytest.mark.parametrize("run", _recorded_runs(), ids=lambda r: r["name"])
+def test_the_eta_is_withheld_while_the_forecast_extrapolates_far(run):
+    """Replayed chain by chain, the ETA shown is the forecast where it extrapolates at most
+    ETA_EXTRAPOLATION times the cells seen and None elsewhere; every forecast more than 4x off
+    the seconds actually left (while a tenth of the run is left, as the bench judges) was
+    withheld, and an ETA is shown before the last level."""
+    from clcsg.sampling.forecast import ETA_EXTRAPOLATION, Forecast
+
+    fc = Forecast(run["estimate"], run["quad"], run["peak"], run["last"], run["max_levels"], run["roots"])
+    end = run["chains"][-1][0]
+    t_last, shown = 0.0, 0
+    for t, levels in run["chains"][:-1]:
+        fc.add_chain(levels, t - t_last)
+        t_last = t
+        children = levels[-1][3]
+        left = fc.seconds_left(children)
+        eta = fc.eta(children, left)
+        assert (eta == left) if fc.extrapolation(children) <= ETA_EXTRAPOLATION else eta is None
+        if eta is not None and end - t >= 0.1 * end:
+            shown += 1
+            assert 0.25 <= eta / (end - t) <= 4, (t, eta, end - t)
+    assert shown >= 1
 
 
 def test_the_forecast_ends_at_the_floor_and_fits_the_costs():

@@ -57,6 +57,13 @@ as the tapes get shorter deeper down.  The first level is left out once there is
 also pays one-off costs (the program's first launch, the root tapes at full length); alone, it
 gives b less its one-off share FIRST_LEVEL and no a.
 
+**Shown.**  After the first levels of a run (a few hundred cells, their time mostly the launch)
+the forecast extrapolates cells ahead 10^2-10^5 times the cells seen so far (and the children
+queued).  On the recorded runs, where it extrapolated more than ETA_EXTRAPOLATION times, 14 of
+its 20 forecasts were more than 2x off (up to 290x); at most that, they were within 0.47-1.8x
+of the seconds actually left, the sponge's 2.8x once, 4% into its run.  So the ETA shown is
+None (unknown) until then; the bar's fraction uses the forecast all along.
+
 The constants were chosen on the level histories of ``python -m bench progress``'s runs,
 replayed through this class (``bench.progress.replay_history``; ``tests/data`` keeps a set);
 they are rules of thumb of the subdivision, not fits to a machine, SAMPLE_COST aside.
@@ -113,6 +120,9 @@ CELLS_PER_SAMPLE = 4.0
 SAMPLE_COST = 0.5
 #: the cost of a cell at the floor's level (dropped, not split) over that of a cell split
 FLOOR_COST = 0.5
+#: the most cells ahead, over the cells seen, for which the seconds left are shown as an ETA
+#: (module docstring)
+ETA_EXTRAPOLATION = 100
 #: decline per level of the samples emitted once past their peak
 SAMPLES_DECLINE = 0.5
 
@@ -350,6 +360,16 @@ class Forecast:
         else:
             levels, cells = self._work(children, known == "tail")
         return a * levels + b * cells + c * self.samples_ahead()
+
+    def extrapolation(self, children: int) -> float:
+        """The cells the levels ahead have (the collapse scenario) over the cells of the levels
+        seen and the ``children`` queued."""
+        return sum(self.cells_ahead(children)) / max(sum(self.cells) + children, 1)
+
+    def eta(self, children: int, seconds: float) -> float | None:
+        """``seconds`` (:meth:`seconds_left`) as the ETA to show, or None while the forecast
+        extrapolates more than ETA_EXTRAPOLATION times the cells seen (module docstring)."""
+        return seconds if not children or self.extrapolation(children) <= ETA_EXTRAPOLATION else None
 
     def _work(self, children: int, tail: bool) -> tuple[int, float]:
         """(levels, cells) ahead in one scenario; cells at the floor's level are dropped, not

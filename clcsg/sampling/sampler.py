@@ -345,7 +345,9 @@ class _Progress:
     100% when the last level is done.  The bar counts cells; its total is done / fraction.
     Its ETA is the forecast itself, counting down between levels (``Step.update``'s
     ``forecast``): the rate so far times the cells left would be the forecast too, but not
-    once the fraction is held (a forecast that grows would not show).  The samples so far
+    once the fraction is held (a forecast that grows would not show).  While the forecast
+    extrapolates far beyond the cells seen (``Forecast.eta``: the first levels) no ETA is
+    shown.  The samples so far
     and the expected count (:func:`clcsg.compile.bounds.estimates.expected_samples`) are
     shown next to the bar.
     """
@@ -400,6 +402,7 @@ class _Progress:
     def _show(self, level, cells, samples, children):
         elapsed = time.perf_counter() - self.t0
         left = self.forecast.seconds_left(children)
+        eta = self.forecast.eta(children, left)
         if not children:
             self.fraction = 1.0
         elif elapsed + left > 0:
@@ -410,7 +413,7 @@ class _Progress:
         self.shown = self.cells / total
         first, self.moved = not self.moved, True
         self.step.update(done=self.cells, total=total, label="sampling", unit="cells",
-                         phase=self.t0 if first else False, forecast=left if children else 0.0, level=level + 1,
+                         phase=self.t0 if first else False, forecast=math.nan if eta is None else eta, level=level + 1,
                          samples=samples, estimated=self.estimate,
                          note=f"level {level + 1}, {samples:,} samples (estimate {self.estimate:,})", always=True)
 
