@@ -204,7 +204,8 @@ OCLGRIND_UNOPTIMIZED = {"rendering/splat.cl": ["-cl-opt-disable"]}
 
 def _device_options(context, path: str) -> list[str]:
     """Build options of program ``path`` on ``context``'s device beyond the shared ones
-    (:data:`OCLGRIND_UNOPTIMIZED`; on PoCL's CPU devices ``CLCSG_PREFETCH=1``, where the
+    (on Oclgrind ``CLCSG_PLAIN_INLINE=1``, see ``cl/include/layout.h``, and
+    :data:`OCLGRIND_UNOPTIMIZED`; on PoCL's CPU devices ``CLCSG_PREFETCH=1``, where the
     kernels ask for memory ahead with clang's ``__builtin_prefetch``: OpenCL's ``prefetch()``
     does nothing there, and ``CLCSG_STREAM_STORES=1``, where the image outputs are written with
     clang's ``__builtin_nontemporal_store``)."""
@@ -212,7 +213,7 @@ def _device_options(context, path: str) -> list[str]:
 
     devices = context.ctx.devices
     if any("oclgrind" in d.platform.name.lower() for d in devices):
-        return list(OCLGRIND_UNOPTIMIZED.get(path, []))
+        return ["-DCLCSG_PLAIN_INLINE=1"] + list(OCLGRIND_UNOPTIMIZED.get(path, []))
     if all("portable computing language" in d.platform.name.lower() and d.type & cl.device_type.CPU
            for d in devices):
         return ["-DCLCSG_PREFETCH=1", "-DCLCSG_STREAM_STORES=1"]

@@ -18,7 +18,7 @@
 #endif
 
 /* exact range of lam z^2 + 2 beta z over [a, b], whose extremum (lam != 0) is fv at z = v */
-__attribute__((always_inline)) inline real2 quad_range(real lam, real beta, real v, real fv, real a, real b)
+CLCSG_INLINE real2 quad_range(real lam, real beta, real v, real fv, real a, real b)
 {
     real fa = lam * a * a + 2 * beta * a;
     real fb = lam * b * b + 2 * beta * b;
@@ -31,7 +31,7 @@ __attribute__((always_inline)) inline real2 quad_range(real lam, real beta, real
 }
 
 /* range of |lam z + beta| over [a, b] */
-__attribute__((always_inline)) inline real2 abs_linear_range(real lam, real beta, real a, real b)
+CLCSG_INLINE real2 abs_linear_range(real lam, real beta, real a, real b)
 {
     real fa = lam * a + beta, fb = lam * b + beta;
     real hi = fmax(fabs(fa), fabs(fb));
@@ -50,7 +50,7 @@ typedef struct {
     int sheet;
 } plane_frame;
 
-__attribute__((always_inline)) inline plane_frame plane_load(__global const frame_rec *f, int k, int sheet)
+CLCSG_INLINE plane_frame plane_load(__global const frame_rec *f, int k, int sheet)
 {
     plane_frame pf;
     for (int m = 0; m < 9; ++m) pf.U[m] = f->U[m];
@@ -75,13 +75,13 @@ __attribute__((always_inline)) inline plane_frame plane_load(__global const fram
 }
 
 /* R(x, y) = lam_i x^2 + 2 beta_i x + lam_j y^2 + 2 beta_j y + gamma */
-__attribute__((always_inline)) inline real plane_R(const plane_frame *pf, real x, real y)
+CLCSG_INLINE real plane_R(const plane_frame *pf, real x, real y)
 {
     return pf->li * x * x + 2 * pf->bi * x + pf->lj * y * y + 2 * pf->bj * y + pf->gamma;
 }
 
 /* Height t of the heightfield at (x, y); false where it is undefined. */
-__attribute__((always_inline)) inline bool plane_height(const plane_frame *pf, real x, real y, real *t)
+CLCSG_INLINE bool plane_height(const plane_frame *pf, real x, real y, real *t)
 {
     real R = plane_R(pf, x, y);
     if (pf->lk != 0) {
@@ -95,7 +95,7 @@ __attribute__((always_inline)) inline bool plane_height(const plane_frame *pf, r
 }
 
 /* Height where the heightfield is known to be defined (rounding may make H slightly < 0). */
-__attribute__((always_inline)) inline real plane_height_clamped(const plane_frame *pf, real x, real y)
+CLCSG_INLINE real plane_height_clamped(const plane_frame *pf, real x, real y)
 {
     real R = plane_R(pf, x, y);
     if (pf->lk != 0) return pf->sheet * sqrt(fmax(R * pf->ik, (real)0));
@@ -110,7 +110,7 @@ typedef struct {
     real2 R, ni, nj, nk;
 } rect_bounds;
 
-__attribute__((always_inline)) inline rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
+CLCSG_INLINE rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
     rect_bounds b;
     real2 Px = quad_range(pf->li, pf->bi, pf->vi, pf->fvi, x0, x1);
@@ -131,7 +131,7 @@ __attribute__((always_inline)) inline rect_bounds rect_bounds_of(const plane_fra
  * quad_range or rect_bounds_of); false where the heightfield is defined nowhere on it, and
  * *whole: defined everywhere on it.  Two sheets: lam_k t^2 = -R, so t^2 lies in the range of
  * -R / lam_k cut at 0; one sheet: t = -R / (2 beta_k). */
-__attribute__((always_inline)) inline bool rect_heights(const plane_frame *pf, real2 R, real2 *t, bool *whole)
+CLCSG_INLINE bool rect_heights(const plane_frame *pf, real2 R, real2 *t, bool *whole)
 {
     *whole = true;
     if (pf->lk != 0) {
@@ -150,15 +150,15 @@ __attribute__((always_inline)) inline bool rect_heights(const plane_frame *pf, r
 
 /* Can plane k own a point of the rectangle?  (no: an in-plane normal component exceeds |n_k|
  * everywhere there) */
-__attribute__((always_inline)) inline bool rect_may_be_owned(rect_bounds b) { return !(b.ni.x > b.nk.y || b.nj.x > b.nk.y); }
+CLCSG_INLINE bool rect_may_be_owned(rect_bounds b) { return !(b.ni.x > b.nk.y || b.nj.x > b.nk.y); }
 
-__attribute__((always_inline)) inline bool sub_rect_owned(const plane_frame *pf, real x0, real x1, real y0, real y1)
+CLCSG_INLINE bool sub_rect_owned(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
     return rect_may_be_owned(rect_bounds_of(pf, x0, x1, y0, y1));
 }
 
 /* device coordinates of local (x, y, t) */
-__attribute__((always_inline)) inline real3 plane_point(const plane_frame *pf, real x, real y, real t)
+CLCSG_INLINE real3 plane_point(const plane_frame *pf, real x, real y, real t)
 {
     /* z[i] = x, z[j] = y, z[k] = t with (i, j) = (1, 2), (0, 2), (0, 1) for k = 0, 1, 2 */
     real z[3] = {pf->k == 0 ? t : x, pf->k == 0 ? x : pf->k == 1 ? t : y, pf->k == 2 ? t : y};
@@ -168,11 +168,11 @@ __attribute__((always_inline)) inline real3 plane_point(const plane_frame *pf, r
 }
 
 /* column m of U (unit principal axis u_m) */
-__attribute__((always_inline)) inline real3 plane_axis(const plane_frame *pf, int m) { return (real3)(pf->U[m], pf->U[3 + m], pf->U[6 + m]); }
+CLCSG_INLINE real3 plane_axis(const plane_frame *pf, int m) { return (real3)(pf->U[m], pf->U[3 + m], pf->U[6 + m]); }
 
 /* Distortion bounds over a rectangle: (delta_hi, delta_lo) with delta_hi = inf where the
  * heightfield may be vertical; also whether plane k may own a point of it. */
-__attribute__((always_inline)) inline real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, real y1, bool *owned)
+CLCSG_INLINE real2 rect_distortion(const plane_frame *pf, real x0, real x1, real y0, real y1, bool *owned)
 {
     rect_bounds b = rect_bounds_of(pf, x0, x1, y0, y1);
     *owned = rect_may_be_owned(b);
@@ -187,7 +187,7 @@ __attribute__((always_inline)) inline real2 rect_distortion(const plane_frame *p
 
 /* Slope bounds of the heightfield over a rectangle: (max |dt/dx|, max |dt/dy|) =
  * (max |n_i|, max |n_j|) / min |n_k|, and min |n_k| itself. */
-__attribute__((always_inline)) inline real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real y1)
+CLCSG_INLINE real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real y1)
 {
     rect_bounds b = rect_bounds_of(pf, x0, x1, y0, y1);
     real mx = b.ni.y / b.nk.x, my = b.nj.y / b.nk.x;
@@ -201,7 +201,7 @@ __attribute__((always_inline)) inline real3 rect_slopes(const plane_frame *pf, r
 }
 
 /* Largest half-width a with a^2 + b^2 + (mx a + my b)^2 <= r^2 (0 if none). */
-__attribute__((always_inline)) inline real half_width(real mx, real my, real b, real r)
+CLCSG_INLINE real half_width(real mx, real my, real b, real r)
 {
     real A = 1 + mx * mx, B = mx * my * b, C = b * b * (1 + my * my) - r * r;
     real disc = B * B - A * C;

@@ -46,7 +46,7 @@ typedef struct {
 } cell_work;
 
 /* d_q at a point of the task's quadric, with the cell's tape */
-__attribute__((always_inline)) inline real query(__global const tape_op *tape, int n, __global const quadric_rec *qs, int q, real3 p,
+CLCSG_INLINE real query(__global const tape_op *tape, int n, __global const quadric_rec *qs, int q, real3 p,
                   cell_work *w)
 {
     ++w->queries;
@@ -54,7 +54,7 @@ __attribute__((always_inline)) inline real query(__global const tape_op *tape, i
 }
 
 /* The patch over the cell (local box [x0,x1] x [y0,y1] x [t_lo,t_hi]) as a prune region. */
-__attribute__((always_inline)) inline prune_region patch_region(const plane_frame *pf, cell_rec c, real t_lo, real t_hi, real grow)
+CLCSG_INLINE prune_region patch_region(const plane_frame *pf, cell_rec c, real t_lo, real t_hi, real grow)
 {
     return box_region(pf, c.x0, c.x1, c.y0, c.y1, t_lo, t_hi, grow);
 }
@@ -80,7 +80,7 @@ typedef struct {
  * R + 2 beta_k t = 0 (one sheet) dt/dx = -(lam x + beta) / beta_k.  lam x + beta is linear, so
  * its range is its values at a and b; `inv` is the range of 1 / (lam_k t) (or 1 / beta_k),
  * which both axes share. */
-__attribute__((always_inline)) inline real2 slope_range(real2 inv, real lam, real beta, real a, real b)
+CLCSG_INLINE real2 slope_range(real2 inv, real lam, real beta, real a, real b)
 {
     real u = lam * a + beta, v = lam * b + beta;
     return interval_mul((real2)(-fmax(u, v), -fmin(u, v)), inv);
@@ -88,7 +88,7 @@ __attribute__((always_inline)) inline real2 slope_range(real2 inv, real lam, rea
 
 /* Where the heightfield is defined with a finite slope over the whole cell, give the prune
  * region the patch itself (the mean value test of leaf_over_patch); otherwise leave it off. */
-__attribute__((always_inline)) inline void patch_on_surface(const cell_geom *g, cell_rec c, prune_region *r)
+CLCSG_INLINE void patch_on_surface(const cell_geom *g, cell_rec c, prune_region *r)
 {
     real xm = 0.5 * (c.x0 + c.x1), ym = 0.5 * (c.y0 + c.y1);
     if (!g->whole_domain || !isfinite(g->delta)) return;
@@ -114,7 +114,7 @@ __attribute__((always_inline)) inline void patch_on_surface(const cell_geom *g, 
 /* Fill g from the interval bounds over the cell; false: the cell holds no point of the task
  * (the heightfield is undefined over it, plane k owns none of it, or it lies outside the
  * task's box). */
-__attribute__((always_inline)) inline bool cell_geometry(const task_rec *t, __global const frame_rec *frames, cell_rec c, real radius, cell_geom *g)
+CLCSG_INLINE bool cell_geometry(const task_rec *t, __global const frame_rec *frames, cell_rec c, real radius, cell_geom *g)
 {
     g->pf = plane_load(frames + t->quadric, t->plane, t->sheet);
     const plane_frame *pf = &g->pf;
@@ -148,7 +148,7 @@ __attribute__((always_inline)) inline bool cell_geometry(const task_rec *t, __gl
  * larger cell: still conservative.  An inherited value was taken at the same point of the
  * same heightfield, so the height is defined there and is not computed again (try_single
  * computes the one point it emits). */
-__attribute__((always_inline)) inline void corner_distances(const cell_geom *g, cell_rec c, __global const tape_op *tape, int n,
+CLCSG_INLINE void corner_distances(const cell_geom *g, cell_rec c, __global const tape_op *tape, int n,
                              __global const quadric_rec *qs, int q, real d[4], cell_work *w)
 {
     real cx[4] = {c.x0, c.x1, c.x0, c.x1};
@@ -166,7 +166,7 @@ __attribute__((always_inline)) inline void corner_distances(const cell_geom *g, 
 /* +1: the discs of positive distance cover the cell (one disc of radius |d| / delta reaching
  * the far corner, or four each reaching its quarter): no surface; -1: the same with negative
  * distances: all surface; 0: undecided. */
-__attribute__((always_inline)) inline int corner_cover(const cell_geom *g, const real d[4])
+CLCSG_INLINE int corner_cover(const cell_geom *g, const real d[4])
 {
     bool all_pos = true, all_neg = true, one_neg = false;
     real min_abs = INFINITY;
@@ -229,7 +229,7 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
 }
 
 /* d_q at the point (x, y) of the plane, NaN where the heightfield is undefined */
-__attribute__((always_inline)) inline real query_at(const cell_geom *g, real x, real y, __global const tape_op *tape, int n,
+CLCSG_INLINE real query_at(const cell_geom *g, real x, real y, __global const tape_op *tape, int n,
                      __global const quadric_rec *qs, int q, cell_work *w)
 {
     real h;

@@ -9,6 +9,16 @@
 #ifndef CLCSG_LAYOUT_H
 #define CLCSG_LAYOUT_H
 
+/* Small helpers of the per-cell and per-leaf paths that LLVM would leave as calls, their
+ * structs passed through memory.  Oclgrind's interpreter has no implementation of the scope
+ * intrinsic the inliner emits for struct arguments and results (CLCSG_PLAIN_INLINE, set by
+ * clcsg/cl/programs.py there): plain inline. */
+#ifdef CLCSG_PLAIN_INLINE
+#define CLCSG_INLINE inline
+#else
+#define CLCSG_INLINE __attribute__((always_inline)) inline
+#endif
+
 #ifdef CLCSG_DOUBLE
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double real;

@@ -59,7 +59,7 @@ typedef struct {
         }                                                                 \
     } while (0)
 
-__attribute__((always_inline)) inline real literal_distance(__global const quadric_rec *qs, int q, int sign, real3 p)
+CLCSG_INLINE real literal_distance(__global const quadric_rec *qs, int q, int sign, real3 p)
 {
     /* d(-Q, p) = -d(Q, p) */
     return sign * quadric_distance(quadric_load(qs, q), qs[q].lam_min, qs[q].lam_max, p);
@@ -89,7 +89,7 @@ inline real2 tape_eval(__global const tape_op *t, int n, __global const quadric_
 
 /* d_q(p) = min(max(f-, -f+), max(-f-, f+)): negative iff p (on quadric q) is on the CSG
  * surface, |d_q| a radius on q within which that classification holds. */
-__attribute__((always_inline)) inline real surface_distance(real2 f) { return fmin(fmax(f.x, -f.y), fmax(-f.x, f.y)); }
+CLCSG_INLINE real surface_distance(real2 f) { return fmin(fmax(f.x, -f.y), fmax(-f.x, f.y)); }
 
 /* Membership, two bits: bit 0 on the negative side of self_q, bit 1 on the positive side
  * (both equal without substitution).  Closed solids: Q = 0 counts as inside. */
@@ -199,9 +199,9 @@ typedef struct {
     real pl;        /* 1 + |pc| + |a0| + |a1| + |a2| (on_patch regions; 1-norms) */
 } prune_consts;
 
-__attribute__((always_inline)) inline real norm1(real3 v) { return fabs(v.x) + fabs(v.y) + fabs(v.z); }
+CLCSG_INLINE real norm1(real3 v) { return fabs(v.x) + fabs(v.y) + fabs(v.z); }
 
-__attribute__((always_inline)) inline prune_consts prune_consts_of(const prune_region *g)
+CLCSG_INLINE prune_consts prune_consts_of(const prune_region *g)
 {
     prune_consts k;
     real axes = norm1(g->a0) + norm1(g->a1) + norm1(g->a2);
@@ -232,7 +232,7 @@ inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, con
 /* interval product and the interval of grad Q . u over the box (c + sum_m u_m a_m): the gradient
  * 2 (A p + w) is linear in p, so grad Q . u = 2 ((A u) . p + w . u) has the exact range
  * value(c) +- 2 sum_m |(A u) . a_m| */
-__attribute__((always_inline)) inline real2 interval_mul(real2 a, real2 b)
+CLCSG_INLINE real2 interval_mul(real2 a, real2 b)
 {
     real p0 = a.x * b.x, p1 = a.x * b.y, p2 = a.y * b.x, p3 = a.y * b.y;
     return (real2)(fmin(fmin(p0, p1), fmin(p2, p3)), fmax(fmax(p0, p1), fmax(p2, p3)));
@@ -372,7 +372,7 @@ inline uchar prune_forward(__global const tape_op *t, int n, __global const quad
 
 /* The decision of a root state: +1 both sides known and equal (no surface of self_q in the
  * region), -1 known and different (all of self_q in it is surface), 0 otherwise. */
-__attribute__((always_inline)) inline int prune_decision(uchar s)
+CLCSG_INLINE int prune_decision(uchar s)
 {
     return (ST_MINUS(s) == ST_LIVE || ST_PLUS(s) == ST_LIVE) ? 0 : ST_MINUS(s) == ST_PLUS(s) ? 1 : -1;
 }
