@@ -54,8 +54,9 @@ cost of emitting and finishing a sample against classifying a cell (0.2-0.8 on t
 runs; one parameter, since the early levels, with few cells and many samples, cannot separate
 the two), and b fitted to the levels seen, weighted DECAY^age so it follows the cost per cell
 as the tapes get shorter deeper down.  The first level is left out once there is another: it
-also pays one-off costs (the program's first launch, the root tapes at full length); alone, it
-gives b less its one-off share FIRST_LEVEL and no a.
+also pays one-off costs (the root tapes at full length; the program's first launch, which
+builds its code, runs before the level loop's clock starts); alone, it gives b less its
+one-off share FIRST_LEVEL and no a.
 
 **Shown.**  After the first levels of a run (a few hundred cells, their time mostly the launch)
 the forecast extrapolates cells ahead 10^2-10^5 times the cells seen so far (and the children
@@ -111,9 +112,10 @@ TAIL_MIN, TAIL_MAX = 0.9, 1.2
 #: the most a level costs whatever its cells (the launch and the counter read; the cheapest
 #: level seen, at most this, seconds)
 LEVEL_COST = 0.002
-#: the first level's cost per cell over a later level's (the program's first launch, the root
-#: tapes at full length: 2.4-3.4 on the 2,500-hole plate)
-FIRST_LEVEL = 3.0
+#: the first level's cost per cell over a later level's (the root tapes at full length: 1.3-1.4
+#: on the 2,500-hole plate, whose first chain is one level; 2.4-3.4 while the first level also
+#: built the program's code)
+FIRST_LEVEL = 1.5
 #: the most cells a run has per expected sample (the bench runs: 0.04-1.6)
 CELLS_PER_SAMPLE = 4.0
 #: the cost of a sample emitted over that of a cell classified (fits per recorded run: 0.2-0.8)
