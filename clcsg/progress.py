@@ -104,9 +104,9 @@ class Step:
         ETA count from now; or from ``phase``, a ``time.perf_counter()`` time it started);
         ``forecast``: the seconds left as the caller knows them, the ETA from now on (counting
         down) in place of the one from the rate, which a bar whose total is not the work left
-        cannot give (NaN: not known yet, no ETA is shown); ``info``: extra fields for JSON, shown after the bar unless a
-        ``note`` (text) is given for the bar.  JSON progress lines come at most every
-        :data:`JSON_INTERVAL` seconds, unless ``always``."""
+        cannot give (NaN: not known yet, no ETA is shown); ``info``: extra fields for JSON,
+        shown after the bar unless a ``note`` (text) is given for the bar.  JSON progress
+        lines come at most every :data:`JSON_INTERVAL` seconds, unless ``always``."""
         if self.closed:
             return
         if phase:
@@ -234,7 +234,8 @@ class Reporter:
                    else "{desc} [{elapsed}{postfix}]")
             # the caller's forecast in place of tqdm's ETA from the rate (Step.update)
             eta = st.eta()
-            shown = fmt if st.forecast is None else fmt.replace("{remaining}", "?" if eta is None else tqdm.format_interval(eta))
+            remaining = "?" if eta is None else tqdm.format_interval(eta)
+            shown = fmt if st.forecast is None else fmt.replace("{remaining}", remaining)
             bar = st.bar
             if bar is None or st.bar_kind != fmt:
                 if bar is not None:
