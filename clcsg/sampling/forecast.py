@@ -61,7 +61,7 @@ one-off share FIRST_LEVEL and no a.
 **Shown.**  After the first levels of a run (a few hundred cells, their time mostly the launch)
 the forecast extrapolates cells ahead 10^2-10^5 times the cells seen so far (and the children
 queued).  On the recorded runs, where it extrapolated more than ETA_EXTRAPOLATION times, 14 of
-its 20 forecasts were more than 2x off (up to 290x); at most that, they were within 0.47-1.8x
+its 20 forecasts were more than 2x off (up to 290x); at most that, they were within 0.54-1.8x
 of the seconds actually left, the sponge's 2.8x once, 4% into its run.  So the ETA shown is
 None (unknown) until then; the bar's fraction uses the forecast all along.
 
