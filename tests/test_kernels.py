@@ -69,6 +69,42 @@ def test_quadric_header_matches_reference(name, cl_context):
     assert np.mean(np.isfinite(got) == np.isfinite(ref)) > 0.999
 
 
+@pytest.mark.parametrize("name", sorted(QUADRICS))
+def test_distance_at_least_is_the_quotients_comparison(name, cl_context):
+    """quadric_distance_at_least (the pruning's leaf test, without the square root and the
+    division) answers |quadric_distance| >= R wherever R is not within 1e-6 of the distance,
+    for reaches from 0 to twice the distance (and a few much larger)."""
+    real = real_dtype(cl_context)
+    qd = QUADRICS[name]
+    tape = clcsg.Scene(clcsg.quadric(qd.matrix) & clcsg.box(4)).compile()
+    p = pack(tape, real, origin=np.zeros(3))
+    qi = next(i for i in range(tape.n_quadrics) if np.allclose(np.abs(tape.quadrics[i]), np.abs(qd.canonical()[0].matrix)))
+    K = Quadric(p.local_matrices[qi])
+    rng = np.random.default_rng(11)
+    n = 4096
+    pts = rng.uniform(-2, 2, (n, 3))
+    d = np.abs(K.distance(pts))
+    scale = rng.uniform(0, 2, n)
+    scale[::16] = 1e3
+    reach = np.where(np.isfinite(d), d * scale, rng.uniform(0, 4, n))
+    b = SceneBuffers(cl_context, p)
+    prg = build(cl_context, "cl/quadric_check.cl", real=real)
+    mf = cl.mem_flags
+    bp = cl.Buffer(cl_context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts.astype(real))
+    br = cl.Buffer(cl_context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=reach.astype(real))
+    dist, bd = _out(cl_context, n, real)
+    got, bg = _out(cl_context, n, np.int32)
+    cl.Kernel(prg, "distance_at_least")(cl_context.queue, (n,), None, b.quadrics, np.int32(qi), bp, br, np.int32(n),
+                                        bd, bg)
+    cl.enqueue_copy(cl_context.queue, dist, bd)
+    cl.enqueue_copy(cl_context.queue, got, bg)
+    r = reach.astype(real)
+    clear = np.abs(np.abs(dist) - r) > (1e-6 if real == np.float64 else 1e-3) * np.maximum(r, 1e-12)
+    want = np.abs(dist) >= r
+    assert clear.mean() > 0.9
+    np.testing.assert_array_equal(got[clear].astype(bool), want[clear])
+
+
 TAPE_SCENES = {
     "drilled_block": clcsg.box(2) - clcsg.cylinder(3, 0.5) - clcsg.cylinder(3, 0.5, axis=(1, 0, 0)),
     "spheres_and_boxes": (clcsg.sphere(1) | clcsg.box(1, center=(0.8, 0, 0))) & ~clcsg.box((0.5, 3, 3)).rotate((0, 0, 1), 30),

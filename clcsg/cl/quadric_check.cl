@@ -22,3 +22,17 @@ __kernel void eval(__global const quadric_rec *qs, int qi, __global const real *
     roots[2 * i] = k > 0 ? t1 : NAN;
     roots[2 * i + 1] = k > 1 ? t2 : NAN;
 }
+
+/* at_least[i] = quadric_distance_at_least(q, p_i, R_i) and dist[i] = quadric_distance(q, p_i):
+ * the comparison without the quotient against the quotient */
+__kernel void distance_at_least(__global const quadric_rec *qs, int qi, __global const real *pts,
+                                __global const real *reach, int n, __global real *dist, __global int *at_least)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    quadric q = quadric_load(qs, qi);
+    real3 p = (real3)(pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]);
+    real f;
+    dist[i] = quadric_distance(q, qs[qi].lam_min, qs[qi].lam_max, p);
+    at_least[i] = quadric_distance_at_least(q, qs[qi].lam_min, qs[qi].lam_max, p, reach[i], &f);
+}

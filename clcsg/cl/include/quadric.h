@@ -118,4 +118,24 @@ inline real quadric_distance(quadric q, real lam_min, real lam_max, real3 p)
     return inside ? -t : t;
 }
 
+/* Is |quadric_distance(q, p)| >= R?  The same bound without its square root and division:
+ * with a = |f|, t = 2 a / (g + sqrt(D)), D = g^2 + 4 lam a, t >= R iff
+ * u = 2 a - R g >= R sqrt(D), i.e. u >= 0 and u^2 >= R^2 D (a / g >= R where lam = 0; any R
+ * where D < 0, t infinite).  R is a region's reach with its rounding slack, which covers the
+ * rounding of either form; an overflow (u not finite) answers no, as the quotient's NaN did. */
+inline bool quadric_distance_at_least(quadric q, real lam_min, real lam_max, real3 p, real R, real *f)
+{
+    *f = quadric_value(q, p);
+    if (R <= 0) return true;
+    if (*f == 0) return false;
+    real g = 2 * length(quadric_Ap(q, p) + quadric_minus_b(q));
+    real lam = *f < 0 ? lam_max : -lam_min;
+    real a = fabs(*f);
+    if (lam == 0) return a >= R * g;
+    real disc = g * g + 4 * lam * a;
+    if (disc < 0) return true;
+    real u = 2 * a - R * g;
+    return u >= 0 && isfinite(u * u) && u * u >= R * R * disc;
+}
+
 #endif

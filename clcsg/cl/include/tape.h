@@ -224,9 +224,12 @@ inline int leaf_over_region(__global const quadric_rec *qs, int q, int sign, con
         real spread = fabs(dot(gr, g->a0)) + fabs(dot(gr, g->a1)) + fabs(dot(gr, g->a2)) + (g->rho + slack) * length(gr);
         return v > spread ? ST_F : v < -spread ? ST_T : ST_LIVE;
     }
-    real d = literal_distance(qs, q, sign, g->c);
-    real reach = g->rho + k->half_diag + slack;
-    return d >= reach ? ST_F : d <= -reach ? ST_T : ST_LIVE;
+    /* |d| >= reach decides the leaf; its sign is that of sign Q(c) */
+    real f;
+    if (!quadric_distance_at_least(quadric_load(qs, q), qs[q].lam_min, qs[q].lam_max, g->c,
+                                   g->rho + k->half_diag + slack, &f))
+        return ST_LIVE;
+    return sign * f >= 0 ? ST_F : ST_T;
 }
 
 /* interval product and the interval of grad Q . u over the box (c + sum_m u_m a_m): the gradient
