@@ -29,14 +29,20 @@ QUADRICS = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(QUADRICS))
-def test_quadric_header_matches_reference(name, cl_context):
+def _packed_quadric(name, cl_context):
+    """(real, the packed scene of QUADRICS[name] cut by a box, its index there, its reference
+    in the packed local frame)."""
     real = real_dtype(cl_context)
     qd = QUADRICS[name]
     tape = clcsg.Scene(clcsg.quadric(qd.matrix) & clcsg.box(4)).compile()
     p = pack(tape, real, origin=np.zeros(3))
     qi = next(i for i in range(tape.n_quadrics) if np.allclose(np.abs(tape.quadrics[i]), np.abs(qd.canonical()[0].matrix)))
-    K = Quadric(p.local_matrices[qi])
+    return real, p, qi, Quadric(p.local_matrices[qi])
+
+
+@pytest.mark.parametrize("name", sorted(QUADRICS))
+def test_quadric_header_matches_reference(name, cl_context):
+    real, p, qi, K = _packed_quadric(name, cl_context)
     rng = np.random.default_rng(7)
     n = 4096
     pts = rng.uniform(-2, 2, (n, 3))
@@ -74,12 +80,7 @@ def test_distance_at_least_is_the_quotients_comparison(name, cl_context):
     """quadric_distance_at_least (the pruning's leaf test, without the square root and the
     division) answers |quadric_distance| >= R wherever R is not within 1e-6 of the distance,
     for reaches from 0 to twice the distance (and a few much larger)."""
-    real = real_dtype(cl_context)
-    qd = QUADRICS[name]
-    tape = clcsg.Scene(clcsg.quadric(qd.matrix) & clcsg.box(4)).compile()
-    p = pack(tape, real, origin=np.zeros(3))
-    qi = next(i for i in range(tape.n_quadrics) if np.allclose(np.abs(tape.quadrics[i]), np.abs(qd.canonical()[0].matrix)))
-    K = Quadric(p.local_matrices[qi])
+    real, p, qi, K = _packed_quadric(name, cl_context)
     rng = np.random.default_rng(11)
     n = 4096
     pts = rng.uniform(-2, 2, (n, 3))
