@@ -50,28 +50,28 @@ typedef struct {
     int sheet;
 } plane_frame;
 
-CLCSG_INLINE plane_frame plane_load(__global const frame_rec *f, int k, int sheet)
+/* Fill *pf in place (returned by value, the copy into cell_geom's frame made the compiler store
+ * it in 8-byte pieces and read them back 32 bytes at a time: a stalled store forwarding per cell) */
+CLCSG_INLINE void plane_load(plane_frame *pf, __global const frame_rec *f, int k, int sheet)
 {
-    plane_frame pf;
-    for (int m = 0; m < 9; ++m) pf.U[m] = f->U[m];
-    pf.center = (real3)(f->center[0], f->center[1], f->center[2]);
-    pf.k = k;
-    pf.i = k == 0 ? 1 : 0;
-    pf.j = k == 2 ? 1 : 2;
-    pf.li = f->lam[pf.i];
-    pf.lj = f->lam[pf.j];
-    pf.lk = f->lam[pf.k];
-    pf.bi = f->beta[pf.i];
-    pf.bj = f->beta[pf.j];
-    pf.bk = f->beta[pf.k];
-    pf.gamma = f->gamma;
-    pf.ik = f->height_factor[pf.k];
-    pf.vi = f->vertex[pf.i];
-    pf.fvi = f->vertex_value[pf.i];
-    pf.vj = f->vertex[pf.j];
-    pf.fvj = f->vertex_value[pf.j];
-    pf.sheet = sheet;
-    return pf;
+    for (int m = 0; m < 9; ++m) pf->U[m] = f->U[m];
+    pf->center = (real3)(f->center[0], f->center[1], f->center[2]);
+    pf->k = k;
+    pf->i = k == 0 ? 1 : 0;
+    pf->j = k == 2 ? 1 : 2;
+    pf->li = f->lam[pf->i];
+    pf->lj = f->lam[pf->j];
+    pf->lk = f->lam[pf->k];
+    pf->bi = f->beta[pf->i];
+    pf->bj = f->beta[pf->j];
+    pf->bk = f->beta[pf->k];
+    pf->gamma = f->gamma;
+    pf->ik = f->height_factor[pf->k];
+    pf->vi = f->vertex[pf->i];
+    pf->fvi = f->vertex_value[pf->i];
+    pf->vj = f->vertex[pf->j];
+    pf->fvj = f->vertex_value[pf->j];
+    pf->sheet = sheet;
 }
 
 /* R(x, y) = lam_i x^2 + 2 beta_i x + lam_j y^2 + 2 beta_j y + gamma */

@@ -68,11 +68,13 @@ CLCSG_INLINE prune_region patch_region(const plane_frame *pf, cell_rec c, real t
 #define OUT_DECIDED_FILL 6
 
 /* What the exact interval bounds say about a cell's patch: its height range [t_lo, t_hi],
- * the distortion bound delta (|dp| <= delta |d(x, y)| over the cell) and what it needs. */
+ * the distortion bound delta (|dp| <= delta |d(x, y)| over the cell) and what it needs, as
+ * squares (delta2, diag2 and enough2 = (delta diag)^2: no square root or division per cell for
+ * the corner discs; fill_fits takes the one root a fill needs). */
 typedef struct {
     plane_frame pf;
-    real t_lo, t_hi, delta, enough, wx, wy, et, diag;
-    bool whole_domain, fill_fits;
+    real t_lo, t_hi, delta2, enough2, wx, wy, et, diag2;
+    bool whole_domain;
 } cell_geom;
 
 /* Slope interval of the heightfield along one in-plane axis over [a, b]: from R + lam_k t^2 = 0
@@ -91,7 +93,7 @@ CLCSG_INLINE real2 slope_range(real2 inv, real lam, real beta, real a, real b)
 CLCSG_INLINE void patch_on_surface(const cell_geom *g, cell_rec c, prune_region *r)
 {
     real xm = 0.5 * (c.x0 + c.x1), ym = 0.5 * (c.y0 + c.y1);
-    if (!g->whole_domain || !isfinite(g->delta)) return;
+    if (!g->whole_domain || !isfinite(g->delta2)) return;
     if (g->pf.lk != 0 && !(g->t_lo > 0 || g->t_hi < 0)) return;
     r->on_patch = 1;
     r->pc = plane_point(&g->pf, xm, ym, plane_height_clamped(&g->pf, xm, ym));
@@ -116,7 +118,7 @@ CLCSG_INLINE void patch_on_surface(const cell_geom *g, cell_rec c, prune_region 
  * task's box). */
 CLCSG_INLINE bool cell_geometry(const task_rec *t, __global const frame_rec *frames, cell_rec c, real radius, cell_geom *g)
 {
-    g->pf = plane_load(frames + t->quadric, t->plane, t->sheet);
+    plane_load(&g->pf, frames + t->quadric, t->plane, t->sheet);
     const plane_frame *pf = &g->pf;
     rect_bounds rb = rect_bounds_of(pf, c.x0, c.x1, c.y0, c.y1);
     real2 t_range;
@@ -126,21 +128,26 @@ CLCSG_INLINE bool cell_geometry(const task_rec *t, __global const frame_rec *fra
     if (!rect_may_be_owned(rb)) return false;
     if (g->t_hi < t->zlo[pf->k] || g->t_lo > t->zhi[pf->k]) return false;
     real ni_hi = rb.ni.y, nj_hi = rb.nj.y, nk_lo = rb.nk.x, nk_hi = rb.nk.y;
-    g->delta = nk_lo > 0 ? sqrt(ni_hi * ni_hi + nj_hi * nj_hi + nk_hi * nk_hi) / nk_lo : INFINITY;
+    g->delta2 = nk_lo > 0 ? (ni_hi * ni_hi + nj_hi * nj_hi + nk_hi * nk_hi) / (nk_lo * nk_lo) : INFINITY;
 #if WORST_CASE_DISTORTION
-    g->delta = fmax(g->delta, sqrt((real)3));
+    g->delta2 = fmax(g->delta2, (real)3);
 #endif
     g->wx = c.x1 - c.x0;
     g->wy = c.y1 - c.y0;
     g->et = g->t_hi - g->t_lo;
-    g->diag = sqrt(g->wx * g->wx + g->wy * g->wy);
-    g->enough = g->delta * g->diag;
-    /* (wx / s + 1) (wy / s + 1) <= MAX_FILL for the grid spacing s = sqrt 2 r / delta of fill_cell,
-     * multiplied out by s delta */
-    real s0 = sqrt((real)2) * radius;
-    g->fill_fits = g->whole_domain && isfinite(g->delta)
-                && (g->wx * g->delta + s0) * (g->wy * g->delta + s0) <= MAX_FILL * s0 * s0;
+    g->diag2 = g->wx * g->wx + g->wy * g->wy;
+    g->enough2 = g->delta2 * g->diag2;
     return true;
+}
+
+/* May the cell be filled at once: the heightfield is defined over all of it with a finite
+ * distortion bound, and (wx / s + 1) (wy / s + 1) <= MAX_FILL for the grid spacing
+ * s = sqrt 2 r / delta of fill_cell (multiplied out by s delta). */
+CLCSG_INLINE bool fill_fits(const cell_geom *g, real radius)
+{
+    if (!g->whole_domain || !isfinite(g->delta2)) return false;
+    real delta = sqrt(g->delta2), s0 = sqrt((real)2) * radius;
+    return (g->wx * delta + s0) * (g->wy * delta + s0) <= MAX_FILL * s0 * s0;
 }
 
 /* d_q at the four corners (x0,y0), (x1,y0), (x0,y1), (x1,y1); NaN where the heightfield is
@@ -169,7 +176,7 @@ CLCSG_INLINE void corner_distances(const cell_geom *g, cell_rec c, __global cons
 CLCSG_INLINE int corner_cover(const cell_geom *g, const real d[4])
 {
     bool all_pos = true, all_neg = true, one_neg = false;
-    real min_abs = INFINITY;
+    real min_sq = INFINITY; /* the least d^2: the discs compare squares (cell_geom) */
     for (int m = 0; m < 4; ++m) {
         if (isnan(d[m])) {
             all_pos = all_neg = false;
@@ -177,12 +184,14 @@ CLCSG_INLINE int corner_cover(const cell_geom *g, const real d[4])
         }
         all_pos = all_pos && d[m] > 0;
         all_neg = all_neg && d[m] < 0;
-        min_abs = fmin(min_abs, fabs(d[m]));
-        if (d[m] > 0 && d[m] >= g->enough) return 1;
-        if (d[m] < 0 && -d[m] >= g->enough) one_neg = true;
+        real sq = d[m] * d[m];
+        min_sq = fmin(min_sq, sq);
+        if (d[m] > 0 && sq >= g->enough2) return 1;
+        if (d[m] < 0 && sq >= g->enough2) one_neg = true;
     }
-    if (all_pos && min_abs >= 0.5 * g->enough) return 1;
-    if (one_neg || (all_neg && min_abs >= 0.5 * g->enough)) return -1;
+    /* min |d| >= enough / 2 */
+    if (all_pos && 4 * min_sq >= g->enough2) return 1;
+    if (one_neg || (all_neg && 4 * min_sq >= g->enough2)) return -1;
     return 0;
 }
 
@@ -216,11 +225,11 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
                     fmax(best_r, radius * (real)1e-3), src);
         return true;
     }
-    real center_r = 0.5 * g->diag, h;
+    real center_r2 = 0.25 * g->diag2, h; /* squared */
     real mx = 0.5 * (c.x0 + c.x1), my = 0.5 * (c.y0 + c.y1);
-    if (!(center_r <= radius) || !plane_height(&g->pf, mx, my, &h)) return false;
+    if (!(center_r2 <= radius * radius) || !plane_height(&g->pf, mx, my, &h)) return false;
     real ft = fmax(h - g->t_lo, g->t_hi - h);
-    real r = sqrt(center_r * center_r + ft * ft);
+    real r = sqrt(center_r2 + ft * ft);
     if (r > radius) return false;
     real3 pc = plane_point(&g->pf, mx, my, h);
     if (!(query(tape, n, qs, q, pc, w) < 0)) return false;
@@ -251,7 +260,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
                        uint cap_cells, __global tape_op *arena_out, uint cap_arena,
                        __global volatile uint *counters, cell_work *w)
 {
-    bool quad = g->diag > QUAD_SPLIT_DIAG * radius && fmin(g->wx, g->wy) >= (real)0.5 * fmax(g->wx, g->wy);
+    bool quad = g->diag2 > (real)(QUAD_SPLIT_DIAG * QUAD_SPLIT_DIAG) * radius * radius && fmin(g->wx, g->wy) >= (real)0.5 * fmax(g->wx, g->wy);
     uint k = quad ? 4u : 2u;
     uint slot = atomic_add(&counters[SC_CELLS], k);
     prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
@@ -398,7 +407,7 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
         tape_prune_rows_memo(tape, n, qs, &patch, t.quadric, &state, &w->evals, &leaves);
         int decided = prune_decision(state);
         if (decided > 0 || !(state & ST_SELF)) return OUT_DECIDED_DISCARD;
-        if (decided < 0 && g.fill_fits) {
+        if (decided < 0 && fill_fits(&g, radius)) {
             fill_cell(&g.pf, c, radius, fill_source(&g, c, src, radius, out, w), out);
             return OUT_DECIDED_FILL;
         }
@@ -414,11 +423,11 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
     /* fill: the corner discs of negative distance cover the cell and the heightfield is
      * defined everywhere: a grid with spacing s <= sqrt 2 r / delta puts every point of the
      * cell within r / delta (2-D), hence within r (3-D), of a sample */
-    if (cover < 0 && g.fill_fits) {
+    if (cover < 0 && fill_fits(&g, radius)) {
         fill_cell(&g.pf, c, radius, fill_source(&g, c, src, radius, out, w), out);
         return OUT_FILLED;
     }
-    if (sqrt(g.wx * g.wx + g.wy * g.wy + g.et * g.et) < floor_size) return OUT_UNRESOLVED;
+    if (g.diag2 + g.et * g.et < floor_size * floor_size) return OUT_UNRESOLVED;
     split_cell(&g, c, d, tape, n, qs, t.quadric, radius, cells_out, cap_cells, arena_out, cap_arena, counters, w);
     return OUT_SPLIT;
 }
