@@ -204,17 +204,22 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
 {
     real cx[4] = {c.x0, c.x1, c.x0, c.x1};
     real cy[4] = {c.y0, c.y0, c.y1, c.y1};
+    /* a corner's splat reaches the far side of the cell, sqrt(diag^2 + ft^2) >= diag, the
+     * centre's half of it: most cells are too large for either, and need no height */
+    real r2 = radius * radius;
+    if (0.25 * g->diag2 > r2) return false;
+    bool corners = g->diag2 <= r2 * (1 + (real)1e-9);
     int best = -1;
     real best_r = INFINITY, best_h = 0; /* squared, then the radius */
     for (int m = 0; m < 4; ++m) {
-        if (!(d[m] < 0)) continue;
+        if (!corners || !(d[m] < 0)) continue;
         real h = plane_height_clamped(&g->pf, cx[m], cy[m]);
         real fx = fmax(cx[m] - c.x0, c.x1 - cx[m]);
         real fy = fmax(cy[m] - c.y0, c.y1 - cy[m]);
         real ft = fmax(h - g->t_lo, g->t_hi - h);
-        real r2 = fx * fx + fy * fy + ft * ft;
-        if (r2 < best_r) {
-            best_r = r2;
+        real m2 = fx * fx + fy * fy + ft * ft;
+        if (m2 < best_r) {
+            best_r = m2;
             best = m;
             best_h = h;
         }
@@ -227,7 +232,7 @@ inline bool try_single(const cell_geom *g, cell_rec c, const real d[4],
     }
     real center_r2 = 0.25 * g->diag2, h; /* squared */
     real mx = 0.5 * (c.x0 + c.x1), my = 0.5 * (c.y0 + c.y1);
-    if (!(center_r2 <= radius * radius) || !plane_height(&g->pf, mx, my, &h)) return false;
+    if (!plane_height(&g->pf, mx, my, &h)) return false;
     real ft = fmax(h - g->t_lo, g->t_hi - h);
     real r = sqrt(center_r2 + ft * ft);
     if (r > radius) return false;
