@@ -251,6 +251,14 @@ CLCSG_INLINE real query_at(const cell_geom *g, real x, real y, __global const ta
     return query(tape, n, qs, q, plane_point(&g->pf, x, y, h), w);
 }
 
+/* A split hands a short tape (COPY_TAPE_ROWS rows at most) of a small cell (diagonal^2 below
+ * COPY_TAPE_DIAG2 radii^2) to its children as it is: their patches grown by the radius are
+ * hardly smaller than the cell's, so pruning it again shortened few tapes (none of the zoo's cells or
+ * samples changed) and cost 2% of the lens's and the Steinmetz solid's time.  Long tapes (a
+ * cell among thousands of primitives) are still pruned: the arena holds what pruning keeps. */
+#define COPY_TAPE_ROWS 16
+#define COPY_TAPE_DIAG2 8
+
 /* Split along the longest edge, or along both edges (four children) while the cell is
  * roughly square and large against the radius (QUAD_SPLIT_DIAG radii): such a cell's children
  * would be split across the other edge at the next level anyway, and a level costs a launch
@@ -273,12 +281,19 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     int first, count;
     prune_memo memo; /* the count's leaf states, replayed by the write */
     memo.mode = 1;
-    int rows = tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
+    bool copy = n <= COPY_TAPE_ROWS && g->diag2 < (real)COPY_TAPE_DIAG2 * radius * radius;
+    int rows = copy ? n : tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
     /* four children get the tape twice, a copy per pair: a tape serves at most two cells */
     uint copies = quad ? 2u : 1u;
     uint base = atomic_add(&counters[SC_ARENA], copies * (uint)rows);
     if (slot + k > cap_cells || base + copies * (uint)rows > cap_arena) return; /* overflow: the level re-runs */
-    tape_write_pruned(tape, n, rows, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
+    if (copy) {
+        for (int m = 0; m < n; ++m) arena_out[base + m] = tape[m];
+        first = 0;
+        count = n;
+    } else {
+        tape_write_pruned(tape, n, rows, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
+    }
     w->tapes_written += copies;
     cell_rec a = c;
     a.level = c.level + 1;
