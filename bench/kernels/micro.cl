@@ -65,7 +65,8 @@ inline real point_distortion(const plane_frame *pf, real x, real y)
         int qi = gid % nq;                                                                     \
         quadric q = quadric_load(qs, qi);                                                      \
         real lam_min = qs[qi].lam_min, lam_max = qs[qi].lam_max;                               \
-        plane_frame pf = plane_load(frames + qi, (gid / nq) % 3, (gid & 1) ? 1 : -1);          \
+        plane_frame pf;                                                                        \
+        plane_load(&pf, frames + qi, (gid / nq) % 3, (gid & 1) ? 1 : -1);                      \
         real3 p = seed_point((uint)gid);                                                       \
         real3 dir = normalize(seed_point((uint)gid + 0x9e3779b9u) + (real3)(0, 0, 1e-3));     \
         real3 p0 = p, step = eps * dir.zxy;                                                    \
