@@ -253,9 +253,10 @@ CLCSG_INLINE real query_at(const cell_geom *g, real x, real y, __global const ta
 
 /* A split hands a short tape (COPY_TAPE_ROWS rows at most) of a small cell (diagonal^2 below
  * COPY_TAPE_DIAG2 radii^2) to its children as it is: their patches grown by the radius are
- * hardly smaller than the cell's, so pruning it again shortened few tapes (none of the zoo's cells or
- * samples changed) and cost 2% of the lens's and the Steinmetz solid's time.  Long tapes (a
- * cell among thousands of primitives) are still pruned: the arena holds what pruning keeps. */
+ * hardly smaller than the cell's, so pruning it again shortened few tapes (none of the zoo's
+ * cells or samples changed) and cost 2% of the lens's and the Steinmetz solid's time.  Long
+ * tapes (a cell among thousands of primitives) are still pruned: the arena holds what pruning
+ * keeps. */
 #define COPY_TAPE_ROWS 16
 #define COPY_TAPE_DIAG2 8
 
@@ -273,16 +274,20 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
                        uint cap_cells, __global tape_op *arena_out, uint cap_arena,
                        __global volatile uint *counters, cell_work *w)
 {
-    bool quad = g->diag2 > (real)(QUAD_SPLIT_DIAG * QUAD_SPLIT_DIAG) * radius * radius && fmin(g->wx, g->wy) >= (real)0.5 * fmax(g->wx, g->wy);
+    bool quad = g->diag2 > (real)(QUAD_SPLIT_DIAG * QUAD_SPLIT_DIAG) * radius * radius
+             && fmin(g->wx, g->wy) >= (real)0.5 * fmax(g->wx, g->wy);
     uint k = quad ? 4u : 2u;
     uint slot = atomic_add(&counters[SC_CELLS], k);
-    prune_region grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
+    bool copy = n <= COPY_TAPE_ROWS && g->diag2 < (real)COPY_TAPE_DIAG2 * radius * radius;
+    prune_region grown;
     uchar state;
-    int first, count;
+    int first, count, rows = n;
     prune_memo memo; /* the count's leaf states, replayed by the write */
     memo.mode = 1;
-    bool copy = n <= COPY_TAPE_ROWS && g->diag2 < (real)COPY_TAPE_DIAG2 * radius * radius;
-    int rows = copy ? n : tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
+    if (!copy) {
+        grown = patch_region(&g->pf, c, g->t_lo, g->t_hi, radius);
+        rows = tape_prune_rows_memo(tape, n, qs, &grown, q, &state, &w->evals, &memo);
+    }
     /* four children get the tape twice, a copy per pair: a tape serves at most two cells */
     uint copies = quad ? 2u : 1u;
     uint base = atomic_add(&counters[SC_ARENA], copies * (uint)rows);
