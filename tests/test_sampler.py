@@ -167,6 +167,13 @@ def _check(shape, radius, cl_context, normal_form="tree", n_lines=20000):
     assert on_q.max() <= 1e-5 * size, f"sample off its quadric by {on_q.max():.3g}"
     assert on_csg.all(), f"{(~on_csg).sum()} samples off the CSG surface, e.g. {s.positions[~on_csg][:3].tolist()}"
     assert np.all(np.isfinite(s.normals)) and np.allclose(np.linalg.norm(s.normals, axis=1), 1.0)
+    # the outward normal is the sign times the unit gradient of the sample's quadric (float64)
+    g = 2 * np.einsum("nij,nj->ni", Q, np.c_[s.positions, np.ones(len(s))])[:, :3]
+    gl = np.linalg.norm(g, axis=1)
+    regular = gl > 1e-6 * np.abs(Q).reshape(len(Q), -1).max(axis=1) * (1 + np.linalg.norm(s.positions, axis=1))
+    assert regular.mean() > 0.9
+    want = s.signs[regular, None] * g[regular] / gl[regular, None]
+    assert np.abs(s.normals[regular] - want).max() <= 1e3 * np.finfo(s.packed.real).eps
     assert np.all((s.radii > 0) & (s.radii <= radius * (1 + 1e-12)))
     # the primitive whose boundary holds the sample (where no rounding-level change decides it)
     exact = T.primitive_at(shape, s.positions, Q)
