@@ -31,8 +31,27 @@ inline prune_region box_region(const plane_frame *pf, real x0, real x1, real y0,
 }
 
 /* samples a row of a fill decides at once: the cell's tape is pruned over the box of up to
- * this many of them grown by their splat radius (which holds all their balls) */
+ * this many of them grown by their splat radius (which holds all their balls); a chunk of two
+ * or more whose sides that decides is emitted in the eight lanes of emit_row8 */
 #define FILL_CHUNK 8
+#if FILL_CHUNK > 8
+#error "FILL_CHUNK: a chunk is emitted in at most eight lanes"
+#endif
+
+/* Positions of a row's samples at x = x0 + (a + 1/2) sx, a = a0..a0+n-1 (n <= 8), and y
+ * (plane_point of plane_height_clamped in lanes), then emit_known8; false: nothing written. */
+inline bool emit_row8(const plane_frame *pf, sample_sink *out, uint slot, int n, real x0, int a0, real sx, real y,
+                      real need, sample_src src)
+{
+    real8 x = x0 + (convert_real8((int8)(a0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7)) + (real)0.5) * sx;
+    real8 R = pf->li * x * x + 2 * pf->bi * x + (pf->lj * y * y + 2 * pf->bj * y + pf->gamma);
+    real8 t = pf->lk != 0 ? pf->sheet * sqrt(fmax(R * pf->ik, (real8)0)) : R * pf->ik;
+    real8 yv = (real8)(y);
+    real8 z0 = pf->k == 0 ? t : x, z1 = pf->k == 0 ? x : pf->k == 1 ? t : yv, z2 = pf->k == 2 ? t : yv;
+    return emit_known8(out, slot, n, pf->center.x + (pf->U[0] * z0 + pf->U[1] * z1 + pf->U[2] * z2),
+                       pf->center.y + (pf->U[3] * z0 + pf->U[4] * z1 + pf->U[5] * z2),
+                       pf->center.z + (pf->U[6] * z0 + pf->U[7] * z1 + pf->U[8] * z2), need, src);
+}
 
 /* The source of a row's samples in [xa, xb] x [y, yb] with splat radius `need`: with their
  * sides where the tape is decided over the chunk's box grown by `need`, so that none of them
@@ -99,6 +118,9 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
                 int a1 = min(nx, a0 + FILL_CHUNK);
                 sample_src chunk = a1 - a0 > 1 ? chunk_source(pf, x0 + a0 * sx, x0 + a1 * sx, y, yb, need, src, out)
                                                : src;
+                if (a1 - a0 > 1 && (chunk.sides & SIDES_KNOWN) && base + a1 <= out->cap
+                    && emit_row8(pf, out, base + a0, a1 - a0, x0, a0, sx, cy, need, chunk))
+                    continue;
                 for (int a = a0; a < a1; ++a) {
                     real cx = x0 + (a + (real)0.5) * sx;
                     emit_sample(out, base + a, plane_point(pf, cx, cy, plane_height_clamped(pf, cx, cy)), need, chunk);

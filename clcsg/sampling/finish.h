@@ -185,6 +185,48 @@ inline void finish_sample(sample_sink *k, uint slot, real3 p, real radius, sampl
     SAMPLE_INT(k, SI_PRIMITIVE, slot) = primitive_at(PRIMITIVE_TABLE_ARGS, k->qs, src.quadric, p);
 }
 
+/* Samples 0..n-1 (n <= 8) of the lanes (px, py, pz), slots slot..slot+n-1 (below the capacity),
+ * whose sides src knows and whose quadric has one owning primitive: emit_sample's columns with
+ * their arithmetic in lanes.  False (nothing written) where a sample's gradient vanishes or
+ * overflows (emit_sample's fallback for it). */
+inline bool emit_known8(sample_sink *k, uint slot, int n, real8 px, real8 py, real8 pz, real radius, sample_src src)
+{
+    owner_rec o = k->owners[src.quadric];
+    if (o.count != 1) return false;
+    quadric Q = quadric_load(k->qs, src.quadric);
+    real s = (src.sides & 1) ? 2 : -2; /* the sign times grad Q's 2 */
+    real8 gx = s * (Q.xx * px + Q.xy * py + Q.xz * pz + Q.xw);
+    real8 gy = s * (Q.xy * px + Q.yy * py + Q.yz * pz + Q.yw);
+    real8 gz = s * (Q.xz * px + Q.yz * py + Q.zz * pz + Q.zw);
+    real8 g2 = gx * gx + gy * gy + gz * gz;
+    realmask8 used = convert_realmask8((int8)(0, 1, 2, 3, 4, 5, 6, 7) < (int8)(n));
+    if (any(used & (!(g2 >= (real8)REAL_MIN) | isinf(g2)))) return false;
+    real8 inv = 1 / sqrt(g2);
+    real lane[6][8];
+    vstore8(px, 0, lane[0]);
+    vstore8(py, 0, lane[1]);
+    vstore8(pz, 0, lane[2]);
+    vstore8(gx * inv, 0, lane[3]);
+    vstore8(gy * inv, 0, lane[4]);
+    vstore8(gz * inv, 0, lane[5]);
+    __global real *pos = SAMPLE_REAL(k, SR_POS, 3, slot), *normal = SAMPLE_REAL(k, SR_NORMAL, 3, slot);
+    __global real *radii = SAMPLE_REAL(k, SR_RADIUS, 1, slot);
+    int sign = (src.sides & 1) ? 1 : -1, prim = k->owner_list[o.first];
+    for (int l = 0; l < n; ++l) {
+        for (int c = 0; c < 3; ++c) {
+            pos[3 * l + c] = lane[c][l];
+            normal[3 * l + c] = lane[3 + c][l];
+        }
+        radii[l] = radius;
+        SAMPLE_INT(k, SI_QUADRIC, slot + l) = src.quadric;
+        SAMPLE_INT(k, SI_CLIP_FIRST, slot + l) = 0;
+        SAMPLE_INT(k, SI_CLIP_COUNT, slot + l) = 0;
+        SAMPLE_INT(k, SI_SIGN, slot + l) = sign;
+        SAMPLE_INT(k, SI_PRIMITIVE, slot + l) = prim;
+    }
+    return true;
+}
+
 /* Sample `slot` at p with splat radius `radius`: its columns, finished (nothing past the
  * capacity: the level runs again). */
 inline void emit_sample(sample_sink *k, uint slot, real3 p, real radius, sample_src src)
