@@ -186,13 +186,12 @@ inline void finish_sample(sample_sink *k, uint slot, real3 p, real radius, sampl
 }
 
 /* Samples 0..n-1 (n <= 8) of the lanes (px, py, pz), slots slot..slot+n-1 (below the capacity),
- * whose sides src knows and whose quadric has one owning primitive: emit_sample's columns with
- * their arithmetic in lanes.  False (nothing written) where a sample's gradient vanishes or
- * overflows (emit_sample's fallback for it). */
+ * whose sides src knows: emit_sample's columns with their arithmetic in lanes (the primitive of
+ * a quadric that several own is looked up per sample).  False (nothing written) where a
+ * sample's gradient vanishes or overflows (emit_sample's fallback for it). */
 inline bool emit_known8(sample_sink *k, uint slot, int n, real8 px, real8 py, real8 pz, real radius, sample_src src)
 {
     owner_rec o = k->owners[src.quadric];
-    if (o.count != 1) return false;
     quadric Q = quadric_load(k->qs, src.quadric);
     real s = (src.sides & 1) ? 2 : -2; /* the sign times grad Q's 2 */
     real8 gx = s * (Q.xx * px + Q.xy * py + Q.xz * pz + Q.xw);
@@ -211,8 +210,11 @@ inline bool emit_known8(sample_sink *k, uint slot, int n, real8 px, real8 py, re
     vstore8(gz * inv, 0, lane[5]);
     __global real *pos = SAMPLE_REAL(k, SR_POS, 3, slot), *normal = SAMPLE_REAL(k, SR_NORMAL, 3, slot);
     __global real *radii = SAMPLE_REAL(k, SR_RADIUS, 1, slot);
-    int sign = (src.sides & 1) ? 1 : -1, prim = k->owner_list[o.first];
+    int sign = (src.sides & 1) ? 1 : -1, prim = o.count ? k->owner_list[o.first] : -1;
     for (int l = 0; l < n; ++l) {
+        if (o.count > 1)
+            prim = primitive_at(k->owners, k->owner_list, k->prims, k->prim_lits, k->prim_box, k->inst_tape,
+                                k->inst_rows, k->qs, src.quadric, (real3)(lane[0][l], lane[1][l], lane[2][l]));
         for (int c = 0; c < 3; ++c) {
             pos[3 * l + c] = lane[c][l];
             normal[3 * l + c] = lane[3 + c][l];
