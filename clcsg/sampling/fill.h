@@ -32,7 +32,7 @@ inline prune_region box_region(const plane_frame *pf, real x0, real x1, real y0,
 
 /* samples a row of a fill decides at once: the cell's tape is pruned over the box of up to
  * this many of them grown by their splat radius (which holds all their balls); a chunk of two
- * or more whose sides that decides is emitted in the eight lanes of emit_row8 */
+ * or more samples whose sides this pruning decides is emitted in the eight lanes of emit_row8 */
 #define FILL_CHUNK 8
 #if FILL_CHUNK > 8
 #error "FILL_CHUNK: a chunk is emitted in at most eight lanes"
