@@ -96,6 +96,19 @@ def test_round_trip_keeps_graph_dnf_and_membership(shape, bound, seed):
         assert text.count(json.dumps({"ref": name})[1:-1]) >= 2
 
 
+def test_a_scene_of_a_file_name_says_how_to_load_it():
+    """Scene(shape) takes a Shape: a file name (or anything else) is refused at once with a
+    one-line UsageError (a file name with the call that reads it), not a traceback from deep in
+    the compiler."""
+    from clcsg.errors import UsageError
+
+    with pytest.raises(UsageError, match=r"not str 'examples/menger3.csg'; a scene file is read with clcsg.load"):
+        Scene("examples/menger3.csg")
+    with pytest.raises(UsageError, match="must be a clcsg Shape, not NoneType"):
+        Scene(None)
+    assert len(Scene(solids.sphere(1.0)).compile().quadrics) == 1
+
+
 def test_round_trip_through_files(tmp_path):
     hole = solids.cylinder(3.0, 0.25, color=(0.9, 0.2, 0.1))
     part = solids.box(2.0, color=(0.3, 0.5, 0.8, 0.5)) - hole - hole.rotate((1, 0, 0), 90) - hole.rotate((0, 1, 0), 90)

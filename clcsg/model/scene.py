@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import UsageError
 from .csg import Shape
 
 
@@ -20,6 +21,12 @@ class Scene:
     bound: np.ndarray | None = None  # (2, 3) lo, hi corners, or None
     source: str = "scene"  # file name or description, used in error messages
     _tapes: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        if not isinstance(self.shape, Shape):
+            hint = "; a scene file is read with clcsg.load(path)" if isinstance(self.shape, (str, bytes)) else ""
+            raise UsageError(f"Scene: the shape must be a clcsg Shape, not {type(self.shape).__name__} "
+                             f"{self.shape!r:.60}{hint}")
 
     def compile(self, normal_form: str = "tree", term_limit: int | None = None):
         """The scene's :class:`~clcsg.compile.tape.Tape`: the CSG tree itself (``"tree"``, the
