@@ -329,6 +329,38 @@ def test_launches_capped_below_a_second_build_lose_nothing(cl_context, monkeypat
     assert_same_samples(full, capped)
 
 
+def test_a_cpu_launch_has_a_few_work_groups_per_compute_unit(cl_context, monkeypatch):
+    """On a CPU device a launch gets at most CPU_GROUPS_PER_CU work-groups per compute unit
+    (each loops over the level's cells); the samples equal those of wider launches, and a GPU
+    keeps LAUNCH_GROUPS."""
+    from dataclasses import replace
+
+    from clcsg.sampling import sampler as S
+
+    assert S.launch_groups(replace(cl_context.info, type="gpu", compute_units=2)) == S.LAUNCH_GROUPS
+    cap = S.launch_groups(replace(cl_context.info, type="cpu", compute_units=2))
+    assert cap == 2 * S.CPU_GROUPS_PER_CU
+    shape, r = SCENES["drilled_block"]
+    sizes = []
+    launch = S.launch
+
+    def recorded(knl, queue, global_size, local_size, *args, **options):
+        sizes.append(global_size[0] // local_size[0])
+        return launch(knl, queue, global_size, local_size, *args, **options)
+
+    monkeypatch.setattr(S, "launch", recorded)
+    capped = sample(shape, r, device=cl_context)
+    most = S.launch_groups(cl_context.info)
+    assert max(sizes) <= most
+    if cl_context.info.type == "cpu":
+        assert max(capped.stats["cells_per_level"]) > most * S.WORK_GROUP
+    sizes.clear()
+    monkeypatch.setattr(S, "CPU_GROUPS_PER_CU", S.LAUNCH_GROUPS)
+    wide = sample(shape, r, device=cl_context)
+    assert max(sizes) > most or cl_context.info.type != "cpu"
+    assert_same_samples(wide, capped)
+
+
 def test_a_kernel_is_launched_once_on_no_cells_before_its_first_level(cl_context, monkeypatch):
     """PoCL builds or loads a kernel's code at its first launch in a process (up to 0.9 s on a
     cold cache), which the ETA would take for the first level's cost: the first run of each
