@@ -361,6 +361,45 @@ def test_a_cpu_launch_has_a_few_work_groups_per_compute_unit(cl_context, monkeyp
     assert_same_samples(wide, capped)
 
 
+def test_host_transfers_are_waited_for_together(cl_context, monkeypatch):
+    """pyopencl waits for a host transfer at once when its event is dropped (a round trip to the
+    device's threads each, about as much CPU time as a blocking read): a sampling call keeps
+    the events of its non-blocking transfers (the root cells and tapes, the samples, the clip
+    rows) until a blocking read or the queue's finish has waited for them all."""
+    import pyopencl as cl
+
+    syncs, made, early = [0], [], []
+
+    class Tracked:
+        def __init__(self, event):
+            self.event, self.sync = event, syncs[0]
+            made.append(1)
+
+        def __del__(self):
+            if syncs[0] == self.sync:
+                early.append(1)
+
+    copy, finish = cl.enqueue_copy, cl.CommandQueue.finish
+
+    def recorded(queue, dest, src, **options):
+        host = isinstance(dest, np.ndarray) or isinstance(src, np.ndarray)
+        if host and options.get("is_blocking", True):
+            syncs[0] += 1
+        event = copy(queue, dest, src, **options)
+        return Tracked(event) if host and not options.get("is_blocking", True) else event
+
+    def finished(queue):
+        syncs[0] += 1
+        return finish(queue)
+
+    monkeypatch.setattr(cl, "enqueue_copy", recorded)
+    monkeypatch.setattr(cl.CommandQueue, "finish", finished)
+    shape, r = SCENES["drilled_block"]
+    s = sample(shape, r, device=cl_context)
+    assert len(s) > 0 and len(s.clip_ops) > 0
+    assert len(made) >= 4 and not early
+
+
 def test_a_kernel_is_launched_once_on_no_cells_before_its_first_level(cl_context, monkeypatch):
     """PoCL builds or loads a kernel's code at its first launch in a process (up to 0.9 s on a
     cold cache), which the ETA would take for the first level's cost: the first run of each

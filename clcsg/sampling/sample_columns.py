@@ -82,12 +82,12 @@ class SampleColumns:
                 data[dst:dst + w * n_used] = host[src:src + w * n_used]
         return upload(self.ctx, data, writable=True)
 
-    def read(self, n: int) -> dict:
+    def read(self, n: int, transfers: list) -> dict:
         """The first ``n`` entries of every field, {name: (n, width) or (n,) array}, enqueued
-        without waiting: the caller finishes the queue before using them.  Adjacent regions of
-        one width are read by one rectangular copy into one array (each copy is a round trip
-        to the device's threads: eight of them cost the lens 0.35 ms), whose rows are the
-        fields' arrays."""
+        without waiting: their events go to ``transfers``, which the caller keeps until it has
+        finished the queue (pyopencl waits for a dropped one at once).  Adjacent regions of one
+        width are read by one rectangular copy into one array, whose rows are the fields'
+        arrays."""
         import pyopencl as cl
 
         out = {}
@@ -96,9 +96,10 @@ class SampleColumns:
                 block = np.empty((len(names), n, width), dtype=dtype)
                 if n:
                     row = width * dtype.itemsize
-                    cl.enqueue_copy(self.ctx.queue, block, buf, buffer_origin=(offset * self.cap * dtype.itemsize, 0),
-                                    host_origin=(0, 0), region=(n * row, len(names)),
-                                    buffer_pitches=(self.cap * row,), host_pitches=(n * row,), is_blocking=False)
+                    transfers.append(cl.enqueue_copy(
+                        self.ctx.queue, block, buf, buffer_origin=(offset * self.cap * dtype.itemsize, 0),
+                        host_origin=(0, 0), region=(n * row, len(names)), buffer_pitches=(self.cap * row,),
+                        host_pitches=(n * row,), is_blocking=False))
                 for k, name in enumerate(names):
                     out[name] = block[k] if width > 1 else block[k, :, 0]
         return out

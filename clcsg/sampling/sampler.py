@@ -733,6 +733,11 @@ class _Subdivision:
         self.totals = {k: 0 for k in _SUMMED}
         self.grown = {"cells": 0, "samples": 0, "arena": 0, "clip": 0}
         self.arena_peak = 0
+        # the events of host transfers not waited for yet: pyopencl waits for a transfer's
+        # event when it is dropped (it holds the host array), a round trip to the device's
+        # threads each (about 35 us of CPU time, as much as a blocking read); kept until the
+        # queue is known to be done with them
+        self.transfers = []
 
     def _buffer(self, nbytes, what):
         """A device buffer for a level's outputs (read by the next level).  On Oclgrind it is
@@ -757,7 +762,8 @@ class _Subdivision:
             return upload(self.ctx, data, writable=True, what=what)
         buf = pool_of(self.ctx).take(capacity * records.dtype.itemsize, what)
         if len(records):
-            cl.enqueue_copy(self.ctx.queue, buf, np.ascontiguousarray(records))
+            self.transfers.append(cl.enqueue_copy(self.ctx.queue, buf, np.ascontiguousarray(records),
+                                                  is_blocking=False))
         return buf
 
     def _replace(self, old, nbytes, what):
@@ -1023,6 +1029,7 @@ class _Subdivision:
                 raise RuntimeError(f"sampler did not finish in {self.max_levels} levels ({n_in} cells left)")
             k = self._plan(n_in, n_samples, arena_bound, level)
             counters = self._chain(kernel, n_in, n_samples, k)
+            self.transfers.clear()  # done: the counters were read after them on an in-order queue
             rows = counters.tolist()  # Python ints: a numpy scalar per counter read costs 10x more
             done = []
             for row in range(1, k + 1):
@@ -1044,11 +1051,12 @@ class _Subdivision:
         self.n_samples = n_samples
         # the reads are waited for at once (each blocking read is a round trip to the
         # device's threads)
-        self.raw = self.samples.read(n_samples)
+        self.raw = self.samples.read(n_samples, self.transfers)
         self.clip_rows = np.zeros(self.clip_used, dtype=self.scene.packed.tape.dtype)
         if self.clip_used:
-            cl.enqueue_copy(self.ctx.queue, self.clip_rows, self.clip, is_blocking=False)
+            self.transfers.append(cl.enqueue_copy(self.ctx.queue, self.clip_rows, self.clip, is_blocking=False))
         self.ctx.queue.finish()
+        self.transfers.clear()
         self.totals["buffer_growths"] = {k: v for k, v in self.grown.items() if k != "clip"}
         self.totals["chains"] = self.chains
         self.totals["levels_skipped"] = self.skipped
