@@ -87,9 +87,11 @@ def _run(scene, points, device, kernel_name: str, out_dtype):
     for lo in range(0, len(pts), CHUNK):
         chunk = np.ascontiguousarray(pts[lo:lo + CHUNK] - packed.origin, dtype=real)
         m = len(chunk)
-        cl.enqueue_copy(ctx.queue, pbuf, chunk)
+        # kept until the blocking read: pyopencl waits for a dropped transfer's event at once
+        written = cl.enqueue_copy(ctx.queue, pbuf, chunk, is_blocking=False)
         k(ctx.queue, (m,), None, buffers.quadrics, buffers.tape, np.int32(len(tape.ops)), pbuf, np.int32(m), obuf)
         cl.enqueue_copy(ctx.queue, result[lo:lo + m], obuf)
+        del written
     ctx.queue.finish()
     return result.reshape(shape)
 
