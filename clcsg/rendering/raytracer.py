@@ -244,11 +244,10 @@ def trace(context, tape, camera, shading: Shading | None = None, precision="auto
     arena, qlist, tile_z, slabs = bufs
     ev = kernel(prg, "raytrace")(q, *pixel_range(-(-W // RAY_LANES), H), scene.quadrics, arena, qlist, cull_buf,
                                  *bound, tile_z, slabs, *scene.colour_args(), view_buf, *outs)
-    # waited for at once (a dropped event of a host transfer is waited for by pyopencl)
+    # kept until the finish: pyopencl waits for a dropped host transfer's event at once
     reads = [cl.enqueue_copy(q, a, b, wait_for=[ev], is_blocking=False)
              for a, b in zip((depth, ids, prims, rgba), outs)]
     q.finish()
-    del reads
     t_end = time.perf_counter()
     prune_s = sum(event_seconds(e) for e in prune_events)
     stats = {

@@ -158,15 +158,13 @@ def rasterize(context, samples, camera, shading=None, precision="auto", surface_
         fb, albedo,
         np.int32(n_prims), *outs, wait_for=events[-1:] + table_events)
     wanted = set(read) | {"ids", "rgba"}
-    # waited for at once: pyopencl waits for a host transfer whose event is dropped (a round
-    # trip to the device's threads per read)
+    # kept until the finish: pyopencl waits for a dropped host transfer's event at once
     reads = [cl.enqueue_copy(q, a, b, wait_for=[ev_resolve], is_blocking=False)
              for name, a, b in zip(OUTPUTS, (depth, ids, prims, rgba), outs) if name in wanted]
     depth = depth if "depth" in wanted else None
     prims = prims if "primitives" in wanted else None
     reads.append(cl.enqueue_copy(q, counters, cnt_buf, wait_for=events[-1:], is_blocking=False))
     q.finish()
-    del reads
     t_end = time.perf_counter()
 
     covered = int((ids >= 0).sum())
