@@ -508,15 +508,24 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
     uint n_cells = skip ? 0 : prev[SC_CELLS];
     sample_sink out = {sample_reals, sample_ints, cap_samples, running, clip, cap_clip, qs, frames,
                        PRIMITIVE_TABLE_ARGS, 0, 0, 0, clip_table, clip_table_mask, launch};
-    /* the work-item's sums over its cells, in registers until the work-group adds them up */
-    cell_work w = {0, 0, 0, 0};
+    /* the work-item's sums over its cells, in registers until the work-group adds them up.
+     * A cell's work counts come back in a cell_work of its own, added here: one cell_work for
+     * all the work-item's cells, its address passed down, lost all but about 1 in WORK_GROUP
+     * of its counts under PoCL 3.0's loop vectorizer on an AVX-512 CPU (distance queries 152
+     * of 10,080 on the drilled block; the samples were the same) */
+    uint queries = 0, leaves = 0, evals = 0, tapes_written = 0;
     uint discarded = 0, filled = 0, single = 0, split = 0, unresolved = 0, decided = 0, rows = 0, rows_max = 0;
     for (uint start = get_group_id(0) * WORK_GROUP; start < n_cells; start += get_num_groups(0) * WORK_GROUP) {
         uint gid = start + lid;
         if (gid >= n_cells) continue;
         cell_rec c = cells_in[gid];
+        cell_work w = {0, 0, 0, 0};
         int o = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, arena_in, arena_out, cap_arena, mine,
                               radius, floor_size, &out, &w);
+        queries += w.queries;
+        leaves += w.leaves;
+        evals += w.evals;
+        tapes_written += w.tapes_written;
         discarded += o == OUT_DISCARDED || o == OUT_DECIDED_DISCARD;
         filled += o == OUT_FILLED || o == OUT_DECIDED_FILL;
         single += o == OUT_SINGLE;
@@ -526,8 +535,8 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
         rows += (uint)c.tape_count;
         rows_max = max(rows_max, (uint)c.tape_count);
     }
-    uint mine_sums[WG_SUMS] = {discarded, filled, single, split, unresolved, decided, w.queries, w.leaves, w.evals,
-                               w.tapes_written, rows, out.evals, out.emitted, out.clip_rows};
+    uint mine_sums[WG_SUMS] = {discarded, filled, single, split, unresolved, decided, queries, leaves, evals,
+                               tapes_written, rows, out.evals, out.emitted, out.clip_rows};
     for (int k = 0; k < WG_SUMS; ++k) sums[k][lid] = mine_sums[k];
     tape_max[lid] = rows_max;
     barrier(CLK_LOCAL_MEM_FENCE);
