@@ -509,10 +509,10 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
     sample_sink out = {sample_reals, sample_ints, cap_samples, running, clip, cap_clip, qs, frames,
                        PRIMITIVE_TABLE_ARGS, 0, 0, 0, clip_table, clip_table_mask, launch};
     /* the work-item's sums over its cells, in registers until the work-group adds them up.
-     * A cell's work counts come back in a cell_work of its own, added here: one cell_work for
-     * all the work-item's cells, its address passed down, lost all but about 1 in WORK_GROUP
-     * of its counts under PoCL 3.0's loop vectorizer on an AVX-512 CPU (distance queries 152
-     * of 10,080 on the drilled block; the samples were the same) */
+     * Each cell counts its work in a cell_work of its own, added to the sums here.  A single
+     * cell_work for all of a work-item's cells, whose address went down the calls, kept about
+     * 1 in WORK_GROUP of its counts under PoCL 3.0's loop vectorizer on an AVX-512 CPU (the
+     * drilled block: 152 distance queries of 10,080; the samples were right) */
     uint queries = 0, leaves = 0, evals = 0, tapes_written = 0;
     uint discarded = 0, filled = 0, single = 0, split = 0, unresolved = 0, decided = 0, rows = 0, rows_max = 0;
     for (uint start = get_group_id(0) * WORK_GROUP; start < n_cells; start += get_num_groups(0) * WORK_GROUP) {
