@@ -291,8 +291,28 @@ def test_work_counters_count_every_cell(name, cl_context):
     vectorizing compiler."""
     shape, r = SCENES[name]
     st = sample(shape, r, device=cl_context).stats
-    assert st["split"] <= st["tapes_written"] <= 2 * st["split"]
+    written = st["split"] - st["split_in_place"]
+    assert 0 < st["split_in_place"] < st["split"]
+    assert written <= st["tapes_written"] <= 2 * written
     assert 0 < st["distance_queries"] <= st["leaf_distances"]
+
+
+@pytest.mark.parametrize("name", ["drilled_block", "sharp_tips", "rounded_cube", "shared_surface"])
+def test_splits_in_place_give_the_samples_of_splits_written_out(name, cl_context, monkeypatch):
+    """A small cell whose tape is handed on as it is, split in place (its halves classified by
+    the same work-item), gives the samples, clip programs and work that writing its halves out
+    for the next level gives; only the levels, chains and tapes written are fewer."""
+    import clcsg.sampling.sampler as sampler
+
+    shape, r = SCENES[name]
+    here = sample(shape, r, device=cl_context)
+    monkeypatch.setattr(sampler, "SPLIT_HERE_DEPTH", 1)
+    out = sample(shape, r, device=cl_context)
+    assert out.stats["split_in_place"] == 0 < here.stats["split_in_place"]
+    assert_same_samples(here, out, ("distance_queries", "leaf_distances", "unresolved", "filled", "single",
+                                    "discarded", "split", "prune_evaluations", "pruned_decided"))
+    assert here.stats["levels"] < out.stats["levels"]
+    assert here.stats["tapes_written"] < out.stats["tapes_written"]
 
 
 @pytest.mark.parametrize("name", ["drilled_block", "shared_surface"])

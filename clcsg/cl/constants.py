@@ -16,7 +16,7 @@ OP_NAMES = ("LEAF", "AND", "OR", "COPY", "CONST")
 #: counters of the sampler's classify kernel, in slot order
 SAMPLER_COUNTERS = (
     "cells", "samples", "distance_queries", "leaf_distances", "unresolved", "discarded", "filled",
-    "single", "split", "prune_evaluations", "pruned_decided", "tape_rows", "tape_max", "tapes_written",
+    "single", "split", "split_in_place", "prune_evaluations", "pruned_decided", "tape_rows", "tape_max", "tapes_written",
     "arena", "clip_rows", "finish_prune_evaluations", "status",
 )
 

@@ -1,7 +1,8 @@
 /* Adaptive subdivision sampler on the CSG tape (paper section 4.2 with eq. 22 generalized to
  * the tree; the driver is clcsg/sampling/sampler.py, which states the guarantee).
  *
- * One launch per level (levels run in chains: see the kernel), one cell per work-item.  The
+ * One launch per level (levels run in chains: see the kernel), one cell per work-item, which
+ * also classifies the halves of the small cells it splits in place (split_cell).  The
  * cell's tape is pruned over the cell's patch with the task's quadric substituted; if both
  * sides come out constant the patch is decided without a distance query (equal: no surface,
  * discard; different: all surface, fill).  Otherwise d_q(p) at the corners decides: discard, fill,
@@ -14,9 +15,9 @@
  * written only below the capacity; the counters keep counting, so the host sees an overflow,
  * grows the buffer and re-runs the level.
  *
- * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, SPLIT_AT(_Y), MAX_FILL (largest
- * grid a cell may emit at once; larger cells are split instead).  Counter slots SC_* come from
- * clcsg/cl/constants.py.
+ * Build options: -DCLCSG_DOUBLE, TAPE_REGS, WORST_CASE_DISTORTION, SPLIT_AT(_Y), QUAD_SPLIT_DIAG,
+ * HERE_DEPTH, WORK_GROUP, MAX_FILL (largest grid a cell may emit at once; larger cells are split
+ * instead).  Counter slots SC_* come from clcsg/cl/constants.py.
  */
 #include "tape.h"
 #include "fill.h"
@@ -66,6 +67,7 @@ CLCSG_INLINE prune_region patch_region(const plane_frame *pf, cell_rec c, real t
 #define OUT_UNRESOLVED 4
 #define OUT_DECIDED_DISCARD 5
 #define OUT_DECIDED_FILL 6
+#define OUT_SPLIT_HERE 7 /* split in place (split_cell) */
 
 /* What the exact interval bounds say about a cell's patch: its height range [t_lo, t_hi],
  * the distortion bound delta (|dp| <= delta |d(x, y)| over the cell) and what it needs, as
@@ -259,6 +261,40 @@ CLCSG_INLINE real query_at(const cell_geom *g, real x, real y, __global const ta
  * keeps. */
 #define COPY_TAPE_ROWS 16
 #define COPY_TAPE_DIAG2 8
+/* HERE_DEPTH: the cells a work-item holds for the cells it splits in place (split_cell; from
+ * the driver, sampler.py); a split with no room left writes its halves out as any other */
+#ifndef HERE_DEPTH
+#error "HERE_DEPTH: from the driver (sampler.py)"
+#endif
+
+/* The two halves of cell c across its longer edge (at SPLIT_AT / SPLIT_AT_Y of it): *a and *b
+ * start as copies of *a (level and tape set by the caller); the new corners, shared by both,
+ * are evaluated with the tape `tape` the halves get; the others are the cell's. */
+CLCSG_INLINE void split_halves(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
+                               __global const quadric_rec *qs, int q, cell_rec *a, cell_rec *b, cell_work *w)
+{
+    *b = *a;
+    real e0, e1;
+    if (g->wx >= g->wy) {
+        real mid = c.x0 + (real)SPLIT_AT * g->wx;
+        a->x1 = b->x0 = mid;
+        e0 = query_at(g, mid, c.y0, tape, n, qs, q, w);
+        e1 = query_at(g, mid, c.y1, tape, n, qs, q, w);
+        a->d[1] = e0; a->d[3] = e1; /* a = [x0, mid]: new right corners */
+        b->d[0] = e0; b->d[2] = e1; /* b = [mid, x1]: new left corners */
+        a->d[0] = d[0]; a->d[2] = d[2];
+        b->d[1] = d[1]; b->d[3] = d[3];
+    } else {
+        real mid = c.y0 + (real)SPLIT_AT_Y * g->wy;
+        a->y1 = b->y0 = mid;
+        e0 = query_at(g, c.x0, mid, tape, n, qs, q, w);
+        e1 = query_at(g, c.x1, mid, tape, n, qs, q, w);
+        a->d[2] = e0; a->d[3] = e1; /* a = [y0, mid]: new top corners */
+        b->d[0] = e0; b->d[1] = e1; /* b = [mid, y1]: new bottom corners */
+        a->d[0] = d[0]; a->d[1] = d[1];
+        b->d[2] = d[2]; b->d[3] = d[3];
+    }
+}
 
 /* Split along the longest edge, or along both edges (four children) while the cell is
  * roughly square and large against the radius (QUAD_SPLIT_DIAG radii): such a cell's children
@@ -268,17 +304,32 @@ CLCSG_INLINE real query_at(const cell_geom *g, real x, real y, __global const ta
  * counted first and written with exactly that many rows into arena_out (the write replays the
  * count's leaf states).  The new corners, shared by the children, are evaluated here once
  * with the children's tape, just written: exact over the whole patch as the cell's tape is,
- * and shorter. */
-inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
+ * and shorter.
+ *
+ * A cell whose tape is handed on as it is (COPY_TAPE_ROWS, COPY_TAPE_DIAG2) is split in place
+ * where `room` allows: its two halves go to `here` with the cell's own tape in arena_in, and
+ * the caller classifies them in this launch.  They are the cells the next level would get
+ * (the same corners, the same tape), so the samples are the same; what is saved is writing
+ * them and their tape copy, two atomics, reading them back, and the launches of the levels
+ * that only such cells reach (the cells along edges and contacts that go down towards the
+ * floor).  True: split in place. */
+inline bool split_cell(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
                        __global const quadric_rec *qs, int q, real radius, __global cell_rec *cells_out,
                        uint cap_cells, __global tape_op *arena_out, uint cap_arena,
-                       __global volatile uint *counters, cell_work *w)
+                       __global volatile uint *counters, bool room, cell_rec *here, cell_work *w)
 {
     bool quad = g->diag2 > (real)(QUAD_SPLIT_DIAG * QUAD_SPLIT_DIAG) * radius * radius
              && fmin(g->wx, g->wy) >= (real)0.5 * fmax(g->wx, g->wy);
+    bool copy = n <= COPY_TAPE_ROWS && g->diag2 < (real)COPY_TAPE_DIAG2 * radius * radius;
+    cell_rec a = c;
+    a.level = c.level + 1;
+    if (copy && !quad && room) {
+        split_halves(g, c, d, tape, n, qs, q, &a, &here[1], w);
+        here[0] = a;
+        return true;
+    }
     uint k = quad ? 4u : 2u;
     uint slot = atomic_add(&counters[SC_CELLS], k);
-    bool copy = n <= COPY_TAPE_ROWS && g->diag2 < (real)COPY_TAPE_DIAG2 * radius * radius;
     prune_region grown;
     uchar state;
     int first, count, rows = n;
@@ -291,7 +342,7 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
     /* four children get the tape twice, a copy per pair: a tape serves at most two cells */
     uint copies = quad ? 2u : 1u;
     uint base = atomic_add(&counters[SC_ARENA], copies * (uint)rows);
-    if (slot + k > cap_cells || base + copies * (uint)rows > cap_arena) return; /* overflow: the level re-runs */
+    if (slot + k > cap_cells || base + copies * (uint)rows > cap_arena) return false; /* overflow: the level re-runs */
     if (copy) {
         for (int m = 0; m < n; ++m) arena_out[base + m] = tape[m];
         first = 0;
@@ -300,8 +351,6 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
         tape_write_pruned(tape, n, rows, qs, &grown, q, state, arena_out + base, &first, &count, &w->evals, &memo);
     }
     w->tapes_written += copies;
-    cell_rec a = c;
-    a.level = c.level + 1;
     a.tape_first = (int)base + first;
     a.tape_count = count;
     tape = arena_out + a.tape_first;
@@ -328,31 +377,13 @@ inline void split_cell(const cell_geom *g, cell_rec c, const real d[4], __global
                 b.tape_first = (int)base + j * rows + first;
                 cells_out[slot + 2 * j + i] = b;
             }
-        return;
+        return false;
     }
-    cell_rec b = a;
-    real e0, e1;
-    if (g->wx >= g->wy) {
-        real mid = c.x0 + (real)SPLIT_AT * g->wx;
-        a.x1 = b.x0 = mid;
-        e0 = query_at(g, mid, c.y0, tape, n, qs, q, w);
-        e1 = query_at(g, mid, c.y1, tape, n, qs, q, w);
-        a.d[1] = e0; a.d[3] = e1; /* a = [x0, mid]: new right corners */
-        b.d[0] = e0; b.d[2] = e1; /* b = [mid, x1]: new left corners */
-        a.d[0] = d[0]; a.d[2] = d[2];
-        b.d[1] = d[1]; b.d[3] = d[3];
-    } else {
-        real mid = c.y0 + (real)SPLIT_AT_Y * g->wy;
-        a.y1 = b.y0 = mid;
-        e0 = query_at(g, c.x0, mid, tape, n, qs, q, w);
-        e1 = query_at(g, c.x1, mid, tape, n, qs, q, w);
-        a.d[2] = e0; a.d[3] = e1; /* a = [y0, mid]: new top corners */
-        b.d[0] = e0; b.d[1] = e1; /* b = [mid, y1]: new bottom corners */
-        a.d[0] = d[0]; a.d[1] = d[1];
-        b.d[2] = d[2]; b.d[3] = d[3];
-    }
+    cell_rec b;
+    split_halves(g, c, d, tape, n, qs, q, &a, &b, w);
     cells_out[slot] = a;
     cells_out[slot + 1] = b;
+    return false;
 }
 
 /* A cell with no corner on the surface: its live leaves may only be faces where solids meet,
@@ -402,7 +433,8 @@ inline sample_src fill_source(const cell_geom *g, cell_rec c, sample_src src, re
 int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const frame_rec *frames,
                   __global const task_rec *tasks, __global cell_rec *cells_out, uint cap_cells,
                   __global const tape_op *arena_in, __global tape_op *arena_out, uint cap_arena,
-                  __global volatile uint *counters, real radius, real floor_size, sample_sink *out, cell_work *w)
+                  __global volatile uint *counters, real radius, real floor_size, sample_sink *out, bool room,
+                  cell_rec *here, cell_work *w)
 {
     task_rec t = tasks[c.task];
     cell_geom g;
@@ -453,8 +485,10 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
         return OUT_FILLED;
     }
     if (g.diag2 + g.et * g.et < floor_size * floor_size) return OUT_UNRESOLVED;
-    split_cell(&g, c, d, tape, n, qs, t.quadric, radius, cells_out, cap_cells, arena_out, cap_arena, counters, w);
-    return OUT_SPLIT;
+    return split_cell(&g, c, d, tape, n, qs, t.quadric, radius, cells_out, cap_cells, arena_out, cap_arena, counters,
+                      room, here, w)
+               ? OUT_SPLIT_HERE
+               : OUT_SPLIT;
 }
 
 #ifndef WORK_GROUP
@@ -463,10 +497,10 @@ int classify_cell(cell_rec c, __global const quadric_rec *qs, __global const fra
 
 /* the per-cell statistics summed over a work-group before one atomic per counter (an atomic
  * per cell and counter contends between the compute units) */
-#define WG_SUMS 14
-constant int WG_SLOT[WG_SUMS] = {SC_DISCARDED, SC_FILLED, SC_SINGLE, SC_SPLIT, SC_UNRESOLVED, SC_PRUNED_DECIDED,
-                                 SC_DISTANCE_QUERIES, SC_LEAF_DISTANCES, SC_PRUNE_EVALUATIONS, SC_TAPES_WRITTEN,
-                                 SC_TAPE_ROWS, SC_FINISH_PRUNE_EVALUATIONS, SC_SAMPLES, SC_CLIP_ROWS};
+#define WG_SUMS 15
+constant int WG_SLOT[WG_SUMS] = {SC_DISCARDED, SC_FILLED, SC_SINGLE, SC_SPLIT, SC_SPLIT_IN_PLACE, SC_UNRESOLVED,
+                                 SC_PRUNED_DECIDED, SC_DISTANCE_QUERIES, SC_LEAF_DISTANCES, SC_PRUNE_EVALUATIONS,
+                                 SC_TAPES_WRITTEN, SC_TAPE_ROWS, SC_FINISH_PRUNE_EVALUATIONS, SC_SAMPLES, SC_CLIP_ROWS};
 
 /* One level: a cell per work-item (classify_cell); its samples are finished as they are
  * emitted (finish.h), into the sample columns, while its tape is at hand.
@@ -514,29 +548,37 @@ void classify(__global const quadric_rec *qs, __global const frame_rec *frames,
      * 1 in WORK_GROUP of its counts under PoCL 3.0's loop vectorizer on an AVX-512 CPU (the
      * drilled block: 152 distance queries of 10,080; the samples were right) */
     uint queries = 0, leaves = 0, evals = 0, tapes_written = 0;
-    uint discarded = 0, filled = 0, single = 0, split = 0, unresolved = 0, decided = 0, rows = 0, rows_max = 0;
+    uint discarded = 0, filled = 0, single = 0, split = 0, split_here = 0, unresolved = 0, decided = 0, rows = 0, rows_max = 0;
     for (uint start = get_group_id(0) * WORK_GROUP; start < n_cells; start += get_num_groups(0) * WORK_GROUP) {
         uint gid = start + lid;
         if (gid >= n_cells) continue;
-        cell_rec c = cells_in[gid];
-        cell_work w = {0, 0, 0, 0};
-        int o = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, arena_in, arena_out, cap_arena, mine,
-                              radius, floor_size, &out, &w);
-        queries += w.queries;
-        leaves += w.leaves;
-        evals += w.evals;
-        tapes_written += w.tapes_written;
-        discarded += o == OUT_DISCARDED || o == OUT_DECIDED_DISCARD;
-        filled += o == OUT_FILLED || o == OUT_DECIDED_FILL;
-        single += o == OUT_SINGLE;
-        split += o == OUT_SPLIT;
-        unresolved += o == OUT_UNRESOLVED;
-        decided += o == OUT_DECIDED_DISCARD || o == OUT_DECIDED_FILL;
-        rows += (uint)c.tape_count;
-        rows_max = max(rows_max, (uint)c.tape_count);
+        /* the cell, then the halves of the cells split in place, depth first */
+        cell_rec stack[HERE_DEPTH];
+        int top = 0;
+        stack[top++] = cells_in[gid];
+        rows += (uint)stack[0].tape_count; /* the level's own cells: the host divides by them */
+        rows_max = max(rows_max, (uint)stack[0].tape_count);
+        while (top > 0) {
+            cell_rec c = stack[--top];
+            cell_work w = {0, 0, 0, 0};
+            int o = classify_cell(c, qs, frames, tasks, cells_out, cap_cells, arena_in, arena_out, cap_arena, mine,
+                                  radius, floor_size, &out, top + 2 <= HERE_DEPTH, stack + top, &w);
+            top += o == OUT_SPLIT_HERE ? 2 : 0;
+            queries += w.queries;
+            leaves += w.leaves;
+            evals += w.evals;
+            tapes_written += w.tapes_written;
+            discarded += o == OUT_DISCARDED || o == OUT_DECIDED_DISCARD;
+            filled += o == OUT_FILLED || o == OUT_DECIDED_FILL;
+            single += o == OUT_SINGLE;
+            split += o == OUT_SPLIT || o == OUT_SPLIT_HERE;
+            split_here += o == OUT_SPLIT_HERE;
+            unresolved += o == OUT_UNRESOLVED;
+            decided += o == OUT_DECIDED_DISCARD || o == OUT_DECIDED_FILL;
+        }
     }
-    uint mine_sums[WG_SUMS] = {discarded, filled, single, split, unresolved, decided, queries, leaves, evals,
-                               tapes_written, rows, out.evals, out.emitted, out.clip_rows};
+    uint mine_sums[WG_SUMS] = {discarded, filled, single, split, split_here, unresolved, decided, queries, leaves,
+                               evals, tapes_written, rows, out.evals, out.emitted, out.clip_rows};
     for (int k = 0; k < WG_SUMS; ++k) sums[k][lid] = mine_sums[k];
     tape_max[lid] = rows_max;
     barrier(CLK_LOCAL_MEM_FENCE);

@@ -106,11 +106,11 @@ from .forecast import Forecast, level_bounds, peak_levels
 
 #: fixed work-group size: PoCL compiles a kernel variant per local size, so letting the
 #: runtime pick one per launch size would recompile at every level
-WORK_GROUP = 64  # > the 15 statistics classify sums per work-group (sampler.cl)
+WORK_GROUP = 64  # > the 16 statistics classify sums per work-group (sampler.cl)
 
 #: counters summed over levels into the stats (the others are per-level positions)
 SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
-           "prune_evaluations", "pruned_decided", "tapes_written", "finish_prune_evaluations")
+           "split_in_place", "prune_evaluations", "pruned_decided", "tapes_written", "finish_prune_evaluations")
 _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
 
 
@@ -331,6 +331,11 @@ SPLIT_LARGER = 1 - min(SPLIT_AT, SPLIT_AT_Y)
 QUAD_SPLIT_DIAG = 3.0
 #: most children of a split
 MAX_CHILDREN = 4
+#: cells a work-item of the classify kernel holds for the small cells it splits in place (the
+#: build option HERE_DEPTH of sampler.cl): its depth-first walk needs one more per level below
+#: its first cell, and from a cell whose tape is handed on as it is (a diagonal under sqrt 8
+#: radii) to the default floor (r / 10) are about 2 log2(sqrt 8 / 0.1) = 10 levels; 1: none
+SPLIT_HERE_DEPTH = 16
 
 
 class _Progress:
@@ -536,7 +541,7 @@ def _machinery(ctx, packed, real, distortion, frames_rec, tasks, roots, radius, 
     """The program, buffers and driver of one run (:class:`_Subdivision`)."""
     defines = {"WORST_CASE_DISTORTION": 0 if distortion else 1, "TAPE_REGS": packed.n_regs, "SPLIT_AT": SPLIT_AT,
                "SPLIT_AT_Y": SPLIT_AT_Y,
-               "QUAD_SPLIT_DIAG": QUAD_SPLIT_DIAG, "WORK_GROUP": WORK_GROUP}
+               "QUAD_SPLIT_DIAG": QUAD_SPLIT_DIAG, "WORK_GROUP": WORK_GROUP, "HERE_DEPTH": SPLIT_HERE_DEPTH}
     prg = build(ctx, "sampling/sampler.cl", defines, real)
     sub = _Subdivision(ctx, prg, SceneBuffers(ctx, packed), frames_rec, tasks, roots, radius, floor, capacity,
                        expected, progress, max_levels, root_rows)
@@ -951,6 +956,7 @@ class _Subdivision:
         out = self.out
         over = False
         done = sum(int(c[_SLOT[k]]) for k in ("discarded", "filled", "single", "split", "unresolved"))
+        done -= 2 * int(c[_SLOT["split_in_place"]])  # the halves of cells split in place
         scale = max(1.0, n_in / max(done, 1))
         if c[_SLOT["cells"]] > out.cap_cells:
             out.cap_cells = _grow(out.cap_cells, int(c[_SLOT["cells"]]))
