@@ -689,6 +689,11 @@ class _Subdivision:
     start and before a level runs again); equal programs still stored twice are merged at the
     end (:func:`dedupe_programs`).
 
+    A work-item also classifies the halves of the small cells it splits in place (up to
+    :data:`SPLIT_HERE_DEPTH` at a time, ``sampler.cl``): they never reach a buffer, so the
+    bounds below, which count the cells a level writes, hold as they are; their outcomes are
+    counted with the level's, and ``split_in_place`` counts such splits.
+
     Levels run in chains of up to :data:`CHAIN_LEVELS`, launched one after another, and their
     counters are read once per chain (``sampler.cl``).  Buffers are sized before a chain to
     what its levels can write at most, so a level runs once: a cell has at most
