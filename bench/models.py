@@ -5,7 +5,7 @@ and the level-3 Menger sponge at r = 1% of the bound's diagonal.
 
 Per row (one model, size and shape): samples, sampling time (the whole ``clcsg.sample`` call,
 compilation of the tape included; warm: one run at the large radius first builds the kernels
-for the tape's register count, then the least of up to 30 runs, fewer once 8 s are spent),
+for the tape's register count, then the least of up to 100 runs, fewer once 8 s are spent),
 its process CPU time (all threads: core-seconds, which other processes on a shared machine do
 not inflate; the least of the same runs), the split into ``compile_s`` / ``subdivide_s`` /
 ``finish_s`` and the ``classify`` kernel's profiling time, distance queries, leaf distances
@@ -150,7 +150,9 @@ def run(quick=False, device=None):
     load = Load()
     warnings.simplefilter("ignore")
     sizes = {"medium": zoo.SIZES["medium"]} if quick else dict(zoo.SIZES)
-    repeats = 1 if quick else 30  # the least of 10 moved 20-30% between runs on the 2-core VM
+    # the least of 10 moved 20-30% between runs on the 2-core VM, the least of 30 still 10-15%
+    # (the lens: 4.69-5.29 ms of CPU); the budget keeps the slow rows short
+    repeats = 1 if quick else 100
     budget = 0.0 if quick else 8.0
     models, rows = [], []
     for m in zoo.MODELS:

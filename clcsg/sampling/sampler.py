@@ -592,6 +592,9 @@ def _run_stats(sub, samples, ctx, timings) -> dict:
         clip_rows_written=int(sub.clip_used),
         clipped_samples=int((samples.clip_count > 0).sum()),
         levels=len(lv),
+        # every cell classified, the halves of cells split in place too (cells_per_level counts
+        # the cells each level read from its buffer)
+        cells=sum(sub.totals[k] for k in ("discarded", "filled", "single", "split", "unresolved")),
         cells_per_level=[v["cells"] for v in lv],
         tape_mean_per_level=[v["tape_mean"] for v in lv],
         tape_max_per_level=[v["tape_max"] for v in lv],
@@ -611,7 +614,7 @@ def scene_context(device):
 
 def _empty(radius, tape, packed, stats) -> Samples:
     stats.update({k: 0 for k in _SUMMED})
-    stats.update(samples=0, clip_rows=0, clip_rows_written=0, clipped_samples=0, levels=0, cells_per_level=[],
+    stats.update(samples=0, clip_rows=0, clip_rows_written=0, clipped_samples=0, levels=0, cells=0, cells_per_level=[],
                  total_s=0.0)
     return Samples.empty(radius, tape, packed, stats)
 
