@@ -1,8 +1,10 @@
 """The level loop's forecast of the seconds left (the sampling bar's ETA), from the levels seen.
 
 Pure arithmetic on the level history, no OpenCL and no clock: :class:`Forecast` is fed, level
-by level, the cells the level had, the samples emitted so far, the children it queued and the
-seconds it took, and answers the seconds left.  The sampler's progress (``_Progress`` in
+by level, the cells the level classified (the halves of the small cells it split in place
+included: they are the cells the levels below would have had, so the history keeps the shape
+described here, with fewer levels at its end), the samples emitted so far, the children it
+queued and the seconds it took, and answers the seconds left.  The sampler's progress (``_Progress`` in
 :mod:`clcsg.sampling.sampler`) turns that into the bar's fraction; tests and ``python -m bench
 progress`` replay recorded histories through it.
 

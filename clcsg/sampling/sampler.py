@@ -112,6 +112,8 @@ WORK_GROUP = 64  # > the 16 statistics classify sums per work-group (sampler.cl)
 SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
            "split_in_place", "prune_evaluations", "pruned_decided", "tapes_written", "finish_prune_evaluations")
 _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
+#: the counters of a cell's outcome: their sum is the cells a level classified
+_OUTCOMES = ("discarded", "filled", "single", "split", "unresolved")
 
 
 def frame_records(frames, real) -> np.ndarray:
@@ -347,7 +349,9 @@ class _Progress:
     a + b (cells + samples), the expected sample count as the samples still to come while the
     emission grows).  The fraction shown is elapsed / (elapsed + forecast), elapsed counted
     from the start of the level loop, and the largest seen so far: it never goes back, and is
-    100% when the last level is done.  The bar counts cells; its total is done / fraction.
+    100% when the last level is done.  The bar counts the cells classified (those a level read
+    and the halves of those it split in place: the work of the levels they would have made);
+    its total is done / fraction.
     Its ETA is the forecast itself, counting down between levels (``Step.update``'s
     ``forecast``): the rate so far times the cells left would be the forecast too, but not
     once the fraction is held (a forecast that grows would not show).  While the forecast
@@ -594,7 +598,7 @@ def _run_stats(sub, samples, ctx, timings) -> dict:
         levels=len(lv),
         # every cell classified, the halves of cells split in place too (cells_per_level counts
         # the cells each level read from its buffer)
-        cells=sum(sub.totals[k] for k in ("discarded", "filled", "single", "split", "unresolved")),
+        cells=sum(sub.totals[k] for k in _OUTCOMES),
         cells_per_level=[v["cells"] for v in lv],
         tape_mean_per_level=[v["tape_mean"] for v in lv],
         tape_max_per_level=[v["tape_max"] for v in lv],
@@ -963,7 +967,7 @@ class _Subdivision:
         rows = self.scene.packed.tape.itemsize
         out = self.out
         over = False
-        done = sum(int(c[_SLOT[k]]) for k in ("discarded", "filled", "single", "split", "unresolved"))
+        done = sum(int(c[_SLOT[k]]) for k in _OUTCOMES)
         done -= 2 * int(c[_SLOT["split_in_place"]])  # the halves of cells split in place
         scale = max(1.0, n_in / max(done, 1))
         if c[_SLOT["cells"]] > out.cap_cells:
@@ -1054,7 +1058,9 @@ class _Subdivision:
                     self.skipped += sum(r[_SLOT["status"]] for r in rows[row + 1:])
                     self.table = self._zeroed_table(self.table)  # its entries may name rows run again
                     break
-                cells = n_in
+                # the progress counts every cell the level classified: the halves of the cells
+                # it split in place are the work the levels after it would have had
+                cells = sum(c[_SLOT[k]] for k in _OUTCOMES)
                 n_in, n_samples = self._accept(level, c, n_in, n_samples)
                 done.append((level, cells, n_samples, n_in))
                 arena_bound = 2 * (2 * c[_SLOT["arena"]] + n_in)
