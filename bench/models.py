@@ -15,6 +15,10 @@ a level; summarized as the mean over levels of the per-level mean, and the large
 the ratio to the paper: sampling time x compute units / the paper's single-core time (the
 paper's Table 2 column, one 4.8 GHz core), and the same with CPU time.
 
+On PoCL's CPU device (not with ``--quick``) the medium tree rows of the zoo are timed again
+in a child process with one PoCL worker thread (``one_thread`` in the JSON): the paper's
+single core, without the contention of two threads.
+
 Splat sizes are relative to the model: radius = diagonal of the scene bound times 1/50
 (large), 1/150 (medium), 1/500 (small).  The everyday parts and the sponge use 1/100.  Where
 the DNF does not fit (``clcsg.errors.LimitError``: the term limit, or the sampler's buffers)
@@ -28,7 +32,10 @@ medium size only, one timed run per row (after the warm-up).
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
 import time
 import warnings
 
@@ -174,18 +181,67 @@ def run(quick=False, device=None):
         info["source"] = os.path.relpath(path, os.path.dirname(zoo.EXAMPLES_DIR))
         models.append(info)
         rows += rr
+    one = None if quick or not is_pocl_cpu(ctx) else one_thread(device, repeats, budget)
     env = load.into(environment(ctx))
     payload = {
         "environment": env, "quick": bool(quick), "method": " ".join(__doc__.split()),
         "sizes": sizes, "part_radius_over_diagonal": zoo.PART_RADIUS, "models": models, "rows": rows,
         "paper": "Trettner & Kobbelt 2021, Table 2: sampling on one 4.8 GHz core",
         "targets": targets(rows, env["compute_units"]),
+        "one_thread": one,
     }
     path = write("models", payload)
     print()
     print(table(payload))
+    if one and "error" not in one:
+        print("\nOne PoCL thread, medium tree, CPU time / the paper: "
+              + ", ".join(f"{k} {v['cpu_ratio_to_paper']:.2f}x" for k, v in one.items()))
+    elif one:
+        print(f"\nOne PoCL thread: {one['error']}")
     print(f"\nwritten to {path}")
     return payload
+
+
+def is_pocl_cpu(ctx) -> bool:
+    """PoCL's CPU device, whose worker threads ``POCL_MAX_PTHREAD_COUNT`` caps."""
+    return ctx.info.type == "cpu" and "portable computing language" in ctx.info.platform.lower()
+
+
+def one_thread_cpu(device=None, repeats=100, budget=8.0, names=None) -> dict:
+    """{zoo model: {"cpu_s", "cpu_ratio_to_paper"}}: the least process CPU time of a medium tree
+    call in this process, as :func:`run` times it.  Meant for a process whose PoCL runs one
+    worker thread (:func:`one_thread`)."""
+    ctx = get_context(device)
+    warnings.simplefilter("ignore")
+    out = {}
+    for m in zoo.MODELS:
+        if names is not None and m.name not in names:
+            continue
+        scene = clcsg.Scene(m.build(), source=m.name)
+        radius = zoo.SIZES["medium"] * diagonal(scene.compile("tree").bound)
+        ts = time_sampling(scene, radius, ctx, repeats=repeats, budget=budget, warm=True)
+        paper_s = 1e-3 * zoo.paper_row(m.name, "medium")["sampling_ms"]
+        out[m.name] = {"cpu_s": ts["cpu_s"], "cpu_ratio_to_paper": ts["cpu_s"] / paper_s, "runs": ts["runs"]}
+    return out
+
+
+def one_thread(device, repeats, budget, names=None) -> dict:
+    """:func:`one_thread_cpu` in a child process with one PoCL worker thread
+    (``POCL_MAX_PTHREAD_COUNT=1``, read when PoCL loads): the paper's setting, one core, without
+    the two threads' contention for the output counters and the cells the other wrote, which
+    moves the least CPU time of 100 calls by 5-10% between runs (the machine's own speed still
+    drifts: the lens's least took 4.13-4.20 ms one evening hour and 4.8-5.0 ms the next).
+    ``{"error": ...}`` if the child failed."""
+    code = ("import json, sys; from bench.models import one_thread_cpu; "
+            "print(json.dumps(one_thread_cpu(*json.loads(sys.argv[1]))))")
+    args = json.dumps([device, repeats, budget, names])
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, POCL_MAX_PTHREAD_COUNT="1")
+    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p])
+    done = subprocess.run([sys.executable, "-c", code, args], env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        return {"error": (done.stderr.strip().splitlines() or ["failed"])[-1]}
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def targets(rows, cu) -> dict:

@@ -136,6 +136,18 @@ def test_models_rows_have_both_shapes(cl_context):
     json.dumps(rows, default=common._json_default)
 
 
+def test_models_times_the_zoo_on_one_pocl_thread(cl_context):
+    """The one-thread pass runs in a child process (PoCL reads its thread count when it loads)
+    and gives each model's least CPU time and its ratio to the paper's single core."""
+    if not models.is_pocl_cpu(cl_context):
+        pytest.skip("one PoCL thread: PoCL's CPU device only")
+    one = models.one_thread(None, 1, 0.0, names=["lens"])
+    assert set(one) == {"lens"}, one
+    lens = one["lens"]
+    assert lens["runs"] == 1 and lens["cpu_s"] > 0
+    assert lens["cpu_ratio_to_paper"] == pytest.approx(lens["cpu_s"] / (1e-3 * zoo.paper_row("lens", "medium")["sampling_ms"]))
+
+
 def test_models_records_the_dnf_limit(cl_context):
     """A part whose DNF passes the term limit gets a tree row and a 'dnf: term limit' row."""
     scene = clcsg.load(zoo.example_path("rook", "csg"))
