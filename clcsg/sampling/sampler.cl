@@ -267,9 +267,10 @@ CLCSG_INLINE real query_at(const cell_geom *g, real x, real y, __global const ta
 #error "HERE_DEPTH: from the driver (sampler.py)"
 #endif
 
-/* The two halves of cell c across its longer edge (at SPLIT_AT / SPLIT_AT_Y of it): *a and *b
- * start as copies of *a (level and tape set by the caller); the new corners, shared by both,
- * are evaluated with the tape `tape` the halves get; the others are the cell's. */
+/* The two halves of cell c across its longer edge (at SPLIT_AT / SPLIT_AT_Y of it) into *a
+ * and *b: *a comes with the halves' level and tape set, and *b starts as a copy of it.  The two
+ * new corners, which both halves share, are evaluated with the halves' tape `tape`; the other
+ * corners are the cell's. */
 CLCSG_INLINE void split_halves(const cell_geom *g, cell_rec c, const real d[4], __global const tape_op *tape, int n,
                                __global const quadric_rec *qs, int q, cell_rec *a, cell_rec *b, cell_work *w)
 {
