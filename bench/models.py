@@ -45,7 +45,7 @@ from clcsg.cl.device import get_context
 from clcsg.errors import LimitError
 
 from . import zoo
-from .common import Load, diagonal, environment, fmt, sampling_record, time_sampling, write
+from .common import Load, diagonal, environment, environment_for_runs, fmt, sampling_record, time_sampling, write
 
 SHAPES = ("tree", "dnf")
 
@@ -235,9 +235,10 @@ def one_thread(device, repeats, budget, names=None) -> dict:
     code = ("import json, sys; from bench.models import one_thread_cpu; "
             "print(json.dumps(one_thread_cpu(*json.loads(sys.argv[1]))))")
     args = json.dumps([device, repeats, budget, names])
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ, POCL_MAX_PTHREAD_COUNT="1")
-    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in [os.environ.get("PYTHONPATH")] if p])
+    env = environment_for_runs()  # this clcsg first on the path
+    bench_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = os.pathsep.join([bench_root, env["PYTHONPATH"]])
+    env["POCL_MAX_PTHREAD_COUNT"] = "1"
     done = subprocess.run([sys.executable, "-c", code, args], env=env, capture_output=True, text=True)
     if done.returncode != 0:
         return {"error": (done.stderr.strip().splitlines() or ["failed"])[-1]}
