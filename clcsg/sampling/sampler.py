@@ -999,14 +999,25 @@ class _Subdivision:
         """The first level's buffers: the input side with the root cells and the root tapes,
         the output side, the samples and the clip rows; returns level 1's arena bound.  Sized
         arenas hold the default capacity, or exactly what level 1 reads and writes at most where
-        that is more (a scene of thousands of primitives has long root tapes)."""
+        that is more (a scene of thousands of primitives has long root tapes).
+
+        Sized sides start with the chain budgets (:data:`CHAIN_CELLS` cells,
+        :data:`CHAIN_ARENA_ROWS` rows): the input side is written by every chain's even levels
+        but cannot be grown while it holds a chain's input, so at the default capacity it cut
+        the chains short (at 1/150 of the diagonal the zoo's models took 3, 5, 4, 5, 4 and 8
+        chains, now 2, 4, 3, 4, 4 and 8).  Not on
+        Oclgrind, where every buffer is uploaded from host memory (:meth:`_buffer`)."""
         tape = self.scene.packed.tape
         bound = 2 * (int(self.roots["tape_count"].sum()) + len(self.roots))
+        if not self.zeroed and self.sized["arena"]:
+            self.cap_arena = max(self.cap_arena, min(CHAIN_ARENA_ROWS, self.arena_budget // tape.itemsize))
         cap_in = max(self.cap_arena, len(self.root_rows))
         cap_out = self.cap_arena
         if self.sized["arena"] and bound <= self.arena_budget / tape.itemsize:
             cap_out = max(bound, cap_out)
         cap_cells = max(self.cap_cells, MAX_CHILDREN * len(self.roots)) if self.sized["cells"] else self.cap_cells
+        if not self.zeroed and self.sized["cells"]:
+            cap_cells = max(cap_cells, CHAIN_CELLS)
         self.src = _Side(self._holding(self.roots, cap_cells, "cell"), max(cap_cells, len(self.roots)),
                          self._holding(np.ascontiguousarray(self.root_rows, dtype=tape.dtype), cap_in, "tape arena"),
                          cap_in)
