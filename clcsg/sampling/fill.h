@@ -86,11 +86,12 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
 {
     real2 ni = abs_linear_range(pf->li, pf->bi, x0, x1);
     real2 nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
+    real2 Px = quad_range(pf->li, pf->bi, pf->vi, pf->fvi, x0, x1); /* the rows' own x range */
     real y = y0;
     real hy = y1 - y0;
     while (y < y1) {
         hy = fmin(y1 - y, 2 * hy);
-        real3 m = rect_slopes(pf, x0, x1, y, y + hy);
+        real3 m = row_slopes(pf, Px, ni, y, y + hy);
         /* the best aspect for these slopes: with t = tan(angle) the area rho^2 cs sn,
          * rho = r / sqrt(1 + e^2), e = mx cs + my sn, is r^2 t / (A + 2 mx my t + C t^2) with
          * A = 1 + mx^2, C = 1 + my^2, whose maximum is at A = C t^2: cs = sqrt(C / (A + C)),
@@ -101,7 +102,7 @@ void fill_block(const plane_frame *pf, real x0, real x1, real y0, real y1, real 
         real best_b = fmax(radius * sn / sqrt(1 + e_best * e_best), (real)0);
         if (hy > 2 * best_b) {
             hy = 2 * best_b;
-            m = rect_slopes(pf, x0, x1, y, y + hy);
+            m = row_slopes(pf, Px, ni, y, y + hy);
         }
         real yb = y + hy >= y1 ? y1 : y + hy;
         real sx = 2 * half_width(m.x, m.y, 0.5 * hy, radius);

@@ -110,13 +110,14 @@ typedef struct {
     real2 R, ni, nj, nk;
 } rect_bounds;
 
-CLCSG_INLINE rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
+/* rect_bounds_of over [x0,x1] x [y0,y1] from its x parts over [x0,x1] (Px: quad_range, ni:
+ * abs_linear_range), which the rows of a fill share */
+CLCSG_INLINE rect_bounds row_bounds_of(const plane_frame *pf, real2 Px, real2 ni, real y0, real y1)
 {
     rect_bounds b;
-    real2 Px = quad_range(pf->li, pf->bi, pf->vi, pf->fvi, x0, x1);
     real2 Sy = quad_range(pf->lj, pf->bj, pf->vj, pf->fvj, y0, y1);
     b.R = (real2)(Px.x + Sy.x + pf->gamma, Px.y + Sy.y + pf->gamma);
-    b.ni = abs_linear_range(pf->li, pf->bi, x0, x1);
+    b.ni = ni;
     b.nj = abs_linear_range(pf->lj, pf->bj, y0, y1);
     if (pf->lk != 0) {
         real a = -pf->lk * b.R.x, c = -pf->lk * b.R.y; /* -lam_k R = (lam_k t)^2 */
@@ -125,6 +126,12 @@ CLCSG_INLINE rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1,
         b.nk = (real2)(fabs(pf->bk), fabs(pf->bk));
     }
     return b;
+}
+
+CLCSG_INLINE rect_bounds rect_bounds_of(const plane_frame *pf, real x0, real x1, real y0, real y1)
+{
+    return row_bounds_of(pf, quad_range(pf->li, pf->bi, pf->vi, pf->fvi, x0, x1),
+                         abs_linear_range(pf->li, pf->bi, x0, x1), y0, y1);
 }
 
 /* The height range (t_lo, t_hi) of the task's sheet over a rectangle whose R range is R (from
@@ -185,11 +192,12 @@ CLCSG_INLINE real2 rect_distortion(const plane_frame *pf, real x0, real x1, real
     return (real2)(hi, lo);
 }
 
-/* Slope bounds of the heightfield over a rectangle: (max |dt/dx|, max |dt/dy|) =
- * (max |n_i|, max |n_j|) / min |n_k|, and min |n_k| itself. */
-CLCSG_INLINE real3 rect_slopes(const plane_frame *pf, real x0, real x1, real y0, real y1)
+/* Slope bounds of the heightfield over a row [x0,x1] x [y0,y1] of a fill, from its x parts
+ * (row_bounds_of): (max |dt/dx|, max |dt/dy|) = (max |n_i|, max |n_j|) / min |n_k|, and
+ * min |n_k| itself. */
+CLCSG_INLINE real3 row_slopes(const plane_frame *pf, real2 Px, real2 ni, real y0, real y1)
 {
-    rect_bounds b = rect_bounds_of(pf, x0, x1, y0, y1);
+    rect_bounds b = row_bounds_of(pf, Px, ni, y0, y1);
     real mx = b.ni.y / b.nk.x, my = b.nj.y / b.nk.x;
 #if WORST_CASE_DISTORTION
     /* the paper's isotropic bound |dp| <= delta |d| with delta >= sqrt 3: equal slopes
