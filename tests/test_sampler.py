@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import math
 import os
+import subprocess
+import sys
+import textwrap
 import types
 import warnings
 
@@ -317,6 +320,50 @@ def test_splits_in_place_give_the_samples_of_splits_written_out(name, cl_context
     assert runs[1].stats["split_in_place"] == 0 < runs[3].stats["split_in_place"] < here.stats["split_in_place"]
     assert here.stats["levels"] < runs[1].stats["levels"]
     assert here.stats["tapes_written"] < runs[3].stats["tapes_written"] < runs[1].stats["tapes_written"]
+
+
+@pytest.mark.parametrize("name", ["sphere_union", "cylinder"])
+def test_a_small_scene_takes_as_few_chains_as_its_levels_allow(name, cl_context):
+    """Both sides start with room for the chain budgets: a chain is cut short only where its
+    worst case exceeds them, never by the side holding its input (which a chain cannot grow),
+    so a scene this small takes one chain per CHAIN_LEVELS levels (7 levels in 2 chains; with
+    the input side at its default size, 4 and 3)."""
+    import clcsg.sampling.sampler as sampler
+
+    shape, r = SCENES[name]
+    s = sample(shape, r / 4, device=cl_context)
+    assert s.stats["levels"] > sampler.CHAIN_LEVELS + 1
+    assert s.stats["chains"] == math.ceil(s.stats["levels"] / sampler.CHAIN_LEVELS)
+
+
+def test_a_run_stopped_before_its_first_chain_leaves_the_queue_working(cl_context):
+    """The root uploads and the clip table's zeroing wait behind the first chain's gate; a run
+    that stops before that chain still opens it, and the next run on the queue finishes.  In a
+    child process: with the gate left shut, dropping the stopped run's upload events (which
+    pyopencl waits for) would hang the process."""
+    code = textwrap.dedent("""
+        import warnings
+        warnings.simplefilter("ignore")
+        import clcsg
+        from clcsg.cl.device import get_context
+        ctx = get_context()
+        shape = clcsg.box(2) & clcsg.sphere(1.3)
+        first = clcsg.sample(shape, 0.1, device=ctx, progress=False)  # the kernel's first launch
+        try:
+            clcsg.sample(shape, 0.1, device=ctx, progress=False, max_levels=0)
+            raise SystemExit("max_levels=0 did not stop the run")
+        except RuntimeError as e:
+            assert "did not finish in 0 levels" in str(e), e
+        again = clcsg.sample(shape, 0.1, device=ctx, progress=False)
+        print(len(first), len(again))
+    """)
+    try:
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    except subprocess.TimeoutExpired:
+        pytest.fail("a run waits for the commands of a run that stopped")
+    assert r.returncode == 0, r.stderr
+    n_first, n_again = map(int, r.stdout.split())
+    assert n_first == n_again > 0
 
 
 @pytest.mark.parametrize("name", ["drilled_block", "shared_surface"])
