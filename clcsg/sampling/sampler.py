@@ -366,7 +366,7 @@ class _Progress:
         self.estimate = int(estimate)
         peak = last = levels = None
         quad = 0.0
-        shown = self.reporter.mode != "none"  # else nothing is forecast (see chain)
+        self.visible = shown = self.reporter.mode != "none"  # else nothing is forecast (see chain)
         if shown and roots is not None and len(roots) and radius and floor:
             wx, wy = roots["x1"] - roots["x0"], roots["y1"] - roots["y0"]
             diag = np.hypot(wx, wy)
@@ -631,6 +631,11 @@ def _grow(cap, needed):
 #: trip to the device's threads (about 40 us of the 2-core CPU's time per level, 13 levels on
 #: the lens)
 CHAIN_LEVELS = 4
+#: most levels of a chain after the first while progress is shown: the bar moves, and its ETA
+#: is forecast, once per chain, and a run long enough to watch has few levels after its first
+#: chain (the lens at 0.03% of the diagonal, 0.4 s: two chains gave no ETA in the second half
+#: of the run); a counter read costs about 0.1 ms
+SHOWN_CHAIN_LEVELS = 1
 #: the clip rows per cell a chain is given room for, over the most a level wrote lately
 CLIP_MARGIN = 2
 #: clip rows written so far up to which the clip buffer is grown for a whole chain (a copy of
@@ -841,7 +846,8 @@ class _Subdivision:
             arenas.append(2 * (2 * arenas[-1] + cells[-2]))
         self._grow_side(self.out, max([cells[0]] + [c for c in cells if c <= cells_budget]),
                         max([arenas[0]] + [a for a in arenas if a <= arena_budget]))
-        k_max = max(1, min(CHAIN_LEVELS, self.max_levels - level))
+        longest = CHAIN_LEVELS if level == 0 or not self.progress.visible else SHOWN_CHAIN_LEVELS
+        k_max = max(1, min(longest, self.max_levels - level))
         k = 1
         while k < k_max:
             side = self.src if k % 2 else self.out
