@@ -71,9 +71,13 @@ def test_a_terminal_shows_bars_and_the_summary(tmp_path):
     assert rc == 0, out
     frames = [f for f in re.split(r"[\r\n]+", out) if f.strip()]
     bars = [f for f in frames if f.startswith("sampling: ") and "%|" in f and "level" in f]
-    # the bar moves once per chain of levels (the counters are read once per chain)
-    chains = json.loads((tmp_path / "s.json").read_text())["chains"]
+    # the bar moves once per chain of levels (the counters are read once per chain); while it
+    # is shown, the chains after the first are one level long
+    stats = json.loads((tmp_path / "s.json").read_text())
+    chains = stats["chains"]
     assert chains >= 3 and len(bars) == chains, out[-2000:]
+    shown = [int(re.search(r", level (\d+),", bar).group(1)) for bar in bars]
+    assert shown == list(range(shown[0], stats["levels"] + 1)), shown
     # done / total in cells with an ETA and the samples so far against the estimate
     for bar in bars:
         assert re.search(r"\d+%\|.*\| [\d.]+[kMG]?/[\d.]+[kMG]? cells \[\d\d:\d\d<\d\d:\d\d, level \d+, [\d,]+ samples "
