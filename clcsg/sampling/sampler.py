@@ -1031,9 +1031,9 @@ class _Subdivision:
         Sized sides start with the chain budgets (:data:`CHAIN_CELLS` cells,
         :data:`CHAIN_ARENA_ROWS` rows): the input side is written by every chain's even levels
         but cannot be grown while it holds a chain's input, so at the default capacity it cut
-        the chains short (at 1/150 of the diagonal the zoo's models took 3, 5, 4, 5, 4 and 8
-        chains, now 2, 4, 3, 4, 4 and 8).  Not on
-        Oclgrind, where every buffer is uploaded from host memory (:meth:`_buffer`)."""
+        the chains short (at 1/150 of the diagonal the zoo's models took 3, 5, 4, 5, 4 and 9
+        chains, now 2, 4, 3, 4, 4 and 8).  Not on Oclgrind, where every buffer is uploaded from
+        host memory (:meth:`_buffer`)."""
         tape = self.scene.packed.tape
         bound = 2 * (int(self.roots["tape_count"].sum()) + len(self.roots))
         if not self.zeroed and self.sized["arena"]:
