@@ -336,6 +336,25 @@ def test_a_small_scene_takes_as_few_chains_as_its_levels_allow(name, cl_context)
     assert s.stats["chains"] == math.ceil(s.stats["levels"] / sampler.CHAIN_LEVELS)
 
 
+def test_the_arguments_a_chain_sets_again_are_the_ones_the_kernel_names_there():
+    """The launches of a chain after its first set only the arguments that change (relaunch);
+    their indices in sampler.py must be those of classify's parameters in sampler.cl."""
+    import re
+    from importlib import resources
+
+    import clcsg.sampling.sampler as sampler
+
+    source = resources.files("clcsg.sampling").joinpath("sampler.cl").read_text()
+    params = re.search(r"void classify\((.*?)\)\s*\{", source, re.S).group(1)
+    names = [re.findall(r"\w+", p)[-1] for p in params.split(",")]
+    expected = {sampler._ARG_CELLS_IN: "cells_in", sampler._ARG_CELLS_IN + 1: "cap_cells_in",
+                sampler._ARG_CELLS_OUT: "cells_out", sampler._ARG_CELLS_OUT + 1: "cap_cells",
+                sampler._ARG_ARENA_IN: "arena_in", sampler._ARG_ARENA_IN + 1: "cap_arena_in",
+                sampler._ARG_ARENA_OUT: "arena_out", sampler._ARG_ARENA_OUT + 1: "cap_arena",
+                sampler._ARG_ROW: "row", sampler._ARG_LAUNCH: "launch"}
+    assert {i: names[i] for i in expected} == expected
+
+
 def test_a_run_stopped_before_its_first_chain_leaves_the_queue_working(cl_context):
     """The root uploads and the clip table's zeroing wait behind the first chain's gate; a run
     that stops before that chain still opens it, and the next run on the queue finishes.  In a

@@ -297,6 +297,22 @@ def launch(knl, queue, global_size, local_size, *args, wait_for=None):
     return knl(queue, global_size, local_size, *args, wait_for=wait_for)
 
 
+def relaunch(knl, queue, global_size, local_size, changed: dict, wait_for=None):
+    """Enqueue ``knl`` again with the arguments of its last launch (:func:`launch`) but those
+    in ``changed`` ({index: buffer or numpy scalar}): a chain of levels swaps a few buffers and
+    counts its rows, and setting its 30-odd arguments anew cost about 20 us per launch.  The
+    arguments stay set on the kernel object, so a kernel shared by threads needs the same care
+    as with :func:`launch` (pyopencl's call sets and enqueues in two steps as well).  A numpy
+    scalar goes in by its bytes, as pyopencl's own call passes it (``set_arg`` tries a chain
+    of conversions first: 12 us per scalar)."""
+    import pyopencl as cl
+
+    by_bytes = getattr(knl, "_set_arg_buf", knl.set_arg)
+    for i, value in changed.items():
+        (by_bytes if isinstance(value, np.generic) else knl.set_arg)(i, value)
+    return cl.enqueue_nd_range_kernel(queue, knl, global_size, local_size, wait_for=wait_for)
+
+
 def event_seconds(ev) -> float:
     try:
         return (ev.profile.end - ev.profile.start) * 1e-9

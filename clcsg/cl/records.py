@@ -11,6 +11,7 @@ world origin.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -52,6 +53,7 @@ def task_dtype(real) -> np.dtype:
     )
 
 
+@lru_cache(maxsize=8)  # made per sampling call, 20 us each
 def cell_dtype(real) -> np.dtype:
     return np.dtype(
         [("x0", real), ("y0", real), ("x1", real), ("y1", real), ("d", real, 4), ("task", np.int32),

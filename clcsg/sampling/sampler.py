@@ -81,6 +81,7 @@ Menger sponge at 0.1% of its diagonal writes 0.47M rows, not 14.3M).
 from __future__ import annotations
 
 import math
+import operator
 import time
 import warnings
 
@@ -88,7 +89,7 @@ import numpy as np
 
 from ..cl import device as _device
 from ..cl.constants import CLIP_ENTRY_WORDS, SAMPLER_COUNTERS
-from ..cl.programs import build, kernel as program_kernel, launch
+from ..cl.programs import build, kernel as program_kernel, launch, relaunch
 from ..cl.buffer_pool import pool_of
 from ..cl.memory import check_allocation, upload
 from ..cl.records import SceneBuffers, cell_dtype, frame_dtype, pack, tape_rows, task_dtype
@@ -112,8 +113,15 @@ WORK_GROUP = 64  # > the 16 statistics classify sums per work-group (sampler.cl)
 SUMMED_STATS = _SUMMED = ("distance_queries", "leaf_distances", "unresolved", "discarded", "filled", "single", "split",
            "split_in_place", "prune_evaluations", "pruned_decided", "tapes_written", "finish_prune_evaluations")
 _SLOT = {name: k for k, name in enumerate(SAMPLER_COUNTERS)}
+#: argument indices of sampler.cl's classify that change between the launches of a chain
+#: (each a buffer followed by its capacity)
+_ARG_CELLS_IN, _ARG_CELLS_OUT, _ARG_ARENA_IN, _ARG_ARENA_OUT, _ARG_ROW, _ARG_LAUNCH = 3, 5, 10, 12, 15, 22
 #: the counters of a cell's outcome: their sum is the cells a level classified
 _OUTCOMES = ("discarded", "filled", "single", "split", "unresolved")
+#: a level's counter row (a list) -> the counts of its outcomes, and (name, slot) of the summed
+#: counters: the per-level bookkeeping indexes by slot (a call's 7 levels, 0.1 ms by name)
+_outcome_counts = operator.itemgetter(*(_SLOT[k] for k in _OUTCOMES))
+_SUMMED_SLOTS = tuple((name, _SLOT[name]) for name in _SUMMED)
 
 
 def frame_records(frames, real) -> np.ndarray:
@@ -375,10 +383,11 @@ class _Progress:
                 # level from the root cells of its peak (Forecast.peak_at)
                 quad, peak, last = level_bounds(float(diag.max()), radius, floor, SPLIT_LARGER, QUAD_SPLIT_DIAG)
                 levels = (peak_levels(diag, radius, SPLIT_LARGER, QUAD_SPLIT_DIAG), wx * wy)
-        self.forecast = Forecast(self.estimate, quad, peak, last, max_levels, levels)
+        self.forecast = Forecast(self.estimate, quad, peak, last, max_levels, levels) if shown else None
         outer = self.reporter.active()
         self.own = outer is None or outer.name != "sample"
-        self.step = self.reporter.step("sample", "sampling") if self.own else outer
+        # a step of its own that nothing would show is not made (a call's 0.08 ms)
+        self.step = None if self.own and not shown else self.reporter.step("sample", "sampling") if self.own else outer
         self.cells = 0
         self.fraction = 0.0
         self.shown = 0.0
@@ -427,6 +436,8 @@ class _Progress:
                          note=f"level {level + 1}, {samples:,} samples (estimate {self.estimate:,})", always=True)
 
     def done(self):
+        if self.step is None:
+            return
         self.step.update(total=self.cells, label="sampling: clip programs", note="")
         if self.own:
             self.step.close()
@@ -594,7 +605,7 @@ def _run_stats(sub, samples, ctx, timings) -> dict:
         samples=len(samples),
         clip_rows=int(len(samples.clip_ops)),
         clip_rows_written=int(sub.clip_used),
-        clipped_samples=int((samples.clip_count > 0).sum()),
+        clipped_samples=int(np.count_nonzero(samples.clip_count)),
         levels=len(lv),
         # every cell classified, the halves of cells split in place too (cells_per_level counts
         # the cells each level read from its buffer)
@@ -943,18 +954,26 @@ class _Subdivision:
         try:
             for row in range(1, k + 1):
                 self.launches += 1
-                table = (self.table, np.uint32(self.table_entries - 1), np.uint32(self.launches))
                 groups = -(-most // WORK_GROUP)
                 if row > 1:
                     groups = min(groups, max(self.max_groups, -(-n_in // WORK_GROUP)))
                 groups = max(1, min(groups, self.launch_groups))
-                launch(kernel, self.ctx.queue, (groups * WORK_GROUP,), (WORK_GROUP,),
-                       self.scene.quadrics, self.frames, self.tasks, src.cells, np.uint32(src.cap_cells), out.cells,
-                       np.uint32(out.cap_cells),
-                       *self.samples.args(), src.arena, np.uint32(src.cap_arena), out.arena, np.uint32(out.cap_arena),
-                       counters_buf, np.int32(row), self.real.type(self.radius), self.real.type(self.floor), self.clip,
-                       np.uint32(self.cap_clip), *table, *self.scene.colour_args(),
-                       wait_for=[gate] if row == 1 else None)
+                size = (groups * WORK_GROUP,), (WORK_GROUP,)
+                if row == 1:
+                    launch(kernel, self.ctx.queue, *size,
+                           self.scene.quadrics, self.frames, self.tasks, src.cells, np.uint32(src.cap_cells),
+                           out.cells, np.uint32(out.cap_cells), *self.samples.args(), src.arena,
+                           np.uint32(src.cap_arena), out.arena, np.uint32(out.cap_arena), counters_buf, np.int32(row),
+                           self.real.type(self.radius), self.real.type(self.floor), self.clip, np.uint32(self.cap_clip),
+                           self.table, np.uint32(self.table_entries - 1), np.uint32(self.launches),
+                           *self.scene.colour_args(), wait_for=[gate])
+                else:  # the sides swapped, the next row and launch; nothing grows within a chain
+                    relaunch(kernel, self.ctx.queue, *size, {
+                        _ARG_CELLS_IN: src.cells, _ARG_CELLS_IN + 1: np.uint32(src.cap_cells),
+                        _ARG_CELLS_OUT: out.cells, _ARG_CELLS_OUT + 1: np.uint32(out.cap_cells),
+                        _ARG_ARENA_IN: src.arena, _ARG_ARENA_IN + 1: np.uint32(src.cap_arena),
+                        _ARG_ARENA_OUT: out.arena, _ARG_ARENA_OUT + 1: np.uint32(out.cap_arena),
+                        _ARG_ROW: np.int32(row), _ARG_LAUNCH: np.uint32(self.launches)})
                 src, out = out, src
                 most = min(MAX_CHILDREN * most, src.cap_cells)
         finally:
@@ -991,10 +1010,14 @@ class _Subdivision:
         work-groups that started after skipped theirs): what it wrote is scaled by its
         ``n_in`` cells over those it classified (a level of the sponge ran four times, the
         buffer doubled each time, when grown by what the counts said)."""
-        rows = self.scene.packed.tape.itemsize
         out = self.out
+        if (c[_SLOT["cells"]] <= out.cap_cells and n_samples + c[_SLOT["samples"]] <= self.cap_samples
+                and c[_SLOT["arena"]] <= out.cap_arena and self.clip_used + c[_SLOT["clip_rows"]] <= self.cap_clip
+                and not c[_SLOT["status"]]):
+            return False
+        rows = self.scene.packed.tape.itemsize
         over = False
-        done = sum(int(c[_SLOT[k]]) for k in _OUTCOMES)
+        done = sum(_outcome_counts(c))
         done -= 2 * int(c[_SLOT["split_in_place"]])  # the halves of cells split in place
         scale = max(1.0, n_in / max(done, 1))
         if c[_SLOT["cells"]] > out.cap_cells:
@@ -1060,8 +1083,9 @@ class _Subdivision:
         swap the sides; returns its children and the samples so far."""
         n_cells_out = int(c[_SLOT["cells"]])
         n_samples_out = n_samples + int(c[_SLOT["samples"]])
-        for name in _SUMMED:
-            self.totals[name] += int(c[_SLOT[name]])
+        totals = self.totals
+        for name, slot in _SUMMED_SLOTS:
+            totals[name] += c[slot]
         arena_rows = int(c[_SLOT["arena"]])
         self.levels.append({
             "cells": n_in, "children": n_cells_out, "samples": n_samples_out - n_samples,
@@ -1107,7 +1131,7 @@ class _Subdivision:
                     break
                 # the progress counts every cell the level classified: the halves of the cells
                 # it split in place are the work the levels after it would have had
-                cells = sum(c[_SLOT[k]] for k in _OUTCOMES)
+                cells = sum(_outcome_counts(c))
                 n_in, n_samples = self._accept(level, c, n_in, n_samples)
                 done.append((level, cells, n_samples, n_in))
                 arena_bound = 2 * (2 * c[_SLOT["arena"]] + n_in)
@@ -1142,7 +1166,8 @@ class _Subdivision:
         first, count, ops = dedupe_programs(clip_ops, raw["clip_first"], raw["clip_count"])
         positions = raw["pos"].astype(np.float64, copy=False)
         for k in range(3):  # by column: numpy broadcasts the (3,) origin row by row (4x slower)
-            positions[:, k] += packed.origin[k]
+            if packed.origin[k] != 0:  # a centred scene's (the lens: 0.1 ms of a 5 ms call)
+                positions[:, k] += packed.origin[k]
         return Samples(
             positions=positions,
             normals=raw["normal"].astype(np.float64, copy=False),
@@ -1232,7 +1257,7 @@ def dedupe_programs(rows, first, count):
     moved[starts] = new_at
     new_first = np.zeros(len(first), dtype=np.int32)
     new_first[live] = moved[shared]
-    return new_first, count.astype(np.int32), out
+    return new_first, count.astype(np.int32, copy=False), out
 
 
 def _dedupe_few(rows, starts, counts):
