@@ -173,7 +173,10 @@ def time_sampling(scene, radius, ctx, repeats=3, budget=20.0, normal_form="tree"
     least of each is the closest to the call's own cost, and the two may come from different
     runs), the ``classify`` kernel's time in the fastest run (samples are finished in it),
     ``first_s`` (the warm-up run, kernel builds included), ``runs`` and ``samples`` (the Samples
-    of the fastest run)."""
+    of the fastest run).  ``cpu_p10_s`` is the 10th percentile of the calls' CPU times (the
+    least of 10 calls or fewer): a rare call is counted far below its work on this virtual
+    machine (the lens in 2.7 ms of CPU on one PoCL thread, where its kernels alone take 3.5 ms
+    and 4,500 other calls took 4.7 ms or more), and the least takes such a call for the cost."""
     import clcsg
 
     warnings.simplefilter("ignore")
@@ -183,7 +186,7 @@ def time_sampling(scene, radius, ctx, repeats=3, budget=20.0, normal_form="tree"
         clcsg.sample(scene, radius, device=ctx, normal_form=normal_form, progress=False, **kw)
         first_s = time.perf_counter() - t0
     best = None
-    least_cpu_s = float("inf")
+    cpu_times = []
     spent = 0.0
     runs = 0
     for _ in range(max(1, repeats)):
@@ -192,13 +195,15 @@ def time_sampling(scene, radius, ctx, repeats=3, budget=20.0, normal_form="tree"
             s = clcsg.sample(scene, radius, device=ctx, normal_form=normal_form, progress=False, **kw)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         runs += 1
-        least_cpu_s = min(least_cpu_s, cpu)
+        cpu_times.append(cpu)
         if best is None or wall < best["seconds"]:
             best = {"seconds": wall, "classify_kernel_s": kernel_seconds(log, "classify"), "samples": s}
         spent += wall
         if spent > budget:
             break
-    best["cpu_s"] = least_cpu_s
+    cpu_times.sort()
+    best["cpu_s"] = cpu_times[0]
+    best["cpu_p10_s"] = cpu_times[len(cpu_times) // 10]
     best["runs"] = runs
     best["first_s"] = first_s
     return best
@@ -214,6 +219,7 @@ def sampling_record(ts: dict, cu: int) -> dict:
         "samples": st.get("samples"),
         "sampling_s": ts["seconds"],
         "sampling_cpu_s": ts["cpu_s"],
+        "sampling_cpu_p10_s": ts["cpu_p10_s"],
         "sampling_s_times_cu": ts["seconds"] * cu,
         "first_run_s": ts["first_s"],
         "runs": ts["runs"],
