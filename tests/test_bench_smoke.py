@@ -145,6 +145,17 @@ def test_models_times_the_zoo_on_one_pocl_thread(cl_context):
     lens = one["lens"]
     assert lens["runs"] == 1 and lens["cpu_s"] > 0
     assert lens["cpu_ratio_to_paper"] == pytest.approx(lens["cpu_s"] / (1e-3 * zoo.paper_row("lens", "medium")["sampling_ms"]))
+    assert lens["cpu_p10_s"] == lens["cpu_s"]  # one call: its own 10th percentile
+    assert lens["cpu_p10_ratio_to_paper"] == pytest.approx(lens["cpu_ratio_to_paper"])
+
+
+def test_timing_gives_the_least_and_the_tenth_percentile_cpu_time(cl_context):
+    """Of twenty calls, the least CPU time and the third least (the 10th percentile), in order."""
+    m = next(m for m in zoo.MODELS if m.name == "lens")
+    scene = clcsg.Scene(m.build(), source=m.name)
+    ts = common.time_sampling(scene, 0.1, cl_context, repeats=20, budget=60.0)
+    assert ts["runs"] == 20
+    assert 0 < ts["cpu_s"] <= ts["cpu_p10_s"]
 
 
 def test_models_records_the_dnf_limit(cl_context):
