@@ -386,8 +386,12 @@ class _Progress:
         self.forecast = Forecast(self.estimate, quad, peak, last, max_levels, levels) if shown else None
         outer = self.reporter.active()
         self.own = outer is None or outer.name != "sample"
-        # a step of its own that nothing would show is not made (a call's 0.08 ms)
-        self.step = None if self.own and not shown else self.reporter.step("sample", "sampling") if self.own else outer
+        if not self.own:
+            self.step = outer
+        elif shown:
+            self.step = self.reporter.step("sample", "sampling")
+        else:  # a step of its own that nothing would show is not made (a call's 0.08 ms)
+            self.step = None
         self.cells = 0
         self.fraction = 0.0
         self.shown = 0.0
