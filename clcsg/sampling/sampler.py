@@ -1015,31 +1015,33 @@ class _Subdivision:
         ``n_in`` cells over those it classified (a level of the sponge ran four times, the
         buffer doubled each time, when grown by what the counts said)."""
         out = self.out
-        if (c[_SLOT["cells"]] <= out.cap_cells and n_samples + c[_SLOT["samples"]] <= self.cap_samples
-                and c[_SLOT["arena"]] <= out.cap_arena and self.clip_used + c[_SLOT["clip_rows"]] <= self.cap_clip
-                and not c[_SLOT["status"]]):
+        cells_over = c[_SLOT["cells"]] > out.cap_cells
+        samples_over = n_samples + c[_SLOT["samples"]] > self.cap_samples
+        arena_over = c[_SLOT["arena"]] > out.cap_arena
+        clip_over = self.clip_used + c[_SLOT["clip_rows"]] > self.cap_clip
+        if not (cells_over or samples_over or arena_over or clip_over or c[_SLOT["status"]]):
             return False
         rows = self.scene.packed.tape.itemsize
         over = False
         done = sum(_outcome_counts(c))
         done -= 2 * int(c[_SLOT["split_in_place"]])  # the halves of cells split in place
         scale = max(1.0, n_in / max(done, 1))
-        if c[_SLOT["cells"]] > out.cap_cells:
+        if cells_over:
             out.cap_cells = _grow(out.cap_cells, int(c[_SLOT["cells"]]))
             out.cells = self._replace(out.cells, out.cap_cells * self.cdt.itemsize, "cell")
             self.grown["cells"] += 1
             over = True
-        if n_samples + c[_SLOT["samples"]] > self.cap_samples:
+        if samples_over:
             self.cap_samples = _grow(self.cap_samples, n_samples + int(scale * int(c[_SLOT["samples"]])))
             self.samples.grow(n_samples, self.cap_samples)
             self.grown["samples"] += 1
             over = True
-        if c[_SLOT["arena"]] > out.cap_arena:
+        if arena_over:
             out.cap_arena = _grow(out.cap_arena, int(c[_SLOT["arena"]]))
             out.arena = self._replace(out.arena, out.cap_arena * rows, "tape arena")
             self.grown["arena"] += 1
             over = True
-        if self.clip_used + c[_SLOT["clip_rows"]] > self.cap_clip:
+        if clip_over:
             new_cap = _grow(self.cap_clip, self.clip_used + int(scale * int(c[_SLOT["clip_rows"]])))
             self.clip = self._grown_copy(self.clip, self.clip_used * rows, new_cap * rows, "clip")
             self.cap_clip = new_cap
